@@ -1,0 +1,317 @@
+"""The paper's bank of three joint state-parameter EKFs in switching mode (§IV, Fig. 1, Table I).
+
+Each filter i estimates z together with its own subset of the scaled parameters (Table I); the
+other parameters are held at their latest estimates.  All filters share one model: z and every u.
+
+Schedule "all" (default), per sample k:  for i = 1, 2, 3 in turn, filter i predicts z from the
+shared z(k-1) with the *current* shared parameters (which already hold the updates of filters
+< i at this sample), predicts its covariance, updates with the force f(k), and writes its
+parameter estimates into the shared model; the shared z(k) is the last filter's posterior.
+
+Schedule "rotate": filter (k mod 3) alone updates at sample k; one prediction (with the
+sensitivities to every identified parameter) serves all three, and the two idle filters only
+propagate their covariances.
+
+Everything runs on a batch axis: element b of every array is an independent run.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .config import EstimatorConfig
+from .ekf import Matrix, joseph_update, positive_definite, predict_covariance
+from .fmath import Array, Real
+from .model import (Theta, ScaledParams, clamp_depth, depth_terms, output, output_du,
+                    output_dz, smooth_sign, steady_state_z)
+from .params import FILTER_SUBSETS, IDX, MODEL_PARAMS, PARAM_NAMES
+from .rk3 import rk3_step
+
+# Status bits of one sample (the C library uses the same values)
+STATUS_INIT = 1 << 0            # first sample: nothing to predict from, estimate not yet updated
+STATUS_REJECTED = 1 << 1        # the sample was invalid and ignored; outputs hold
+STATUS_GATED = 1 << 2           # a filter's innovation failed the gate; its update was skipped
+STATUS_FILTER_RESET = 1 << 3    # a filter lost positive-definiteness / finiteness and was reset
+STATUS_GAP = 1 << 4             # time gap > dt_max: z restarted at its steady state
+STATUS_OUT_OF_TISSUE = 1 << 5   # depth <= 0: z held at 0
+STATUS_CLIPPED = 1 << 6         # a scaled parameter hit |u| = u_max
+STATUS_FLOORED = 1 << 7         # a variance was raised to its floor
+STATUS_SIGN_UNCERTAIN = 1 << 8  # R inflated: the smooth sign may disagree with the motion
+STATUS_NAMES = ("init", "rejected", "gated", "filter_reset", "gap", "out_of_tissue", "clipped",
+                "floored", "sign_uncertain")
+
+# Counters of rejected samples, by cause
+REJECT_NONFINITE, REJECT_RANGE, REJECT_TIME = 0, 1, 2
+
+
+@dataclass
+class StepOutput:
+    force_hat: Array     # posterior force estimate, N
+    z: Array             # posterior internal state
+    innovation: Array    # first filter's one-step-ahead innovation f - h(prior), N
+    nis: Array           # its normalised innovation squared
+    status: Array        # uint32 bit set (STATUS_*)
+    params: Array        # (n_identified, batch) physical estimates
+    params_sd: Array     # (n_identified, batch) standard deviations
+
+
+class FilterBank:
+    """The bank for a batch of runs.  ``nominal``: per-run list of the seven start values."""
+
+    def __init__(self, R: Real, cfg: EstimatorConfig, nominal: list[list[float]]) -> None:
+        cfg.validate()
+        self.R, self.cfg = R, cfg
+        self.batch = len(nominal)
+        self.identified = MODEL_PARAMS[cfg.model]
+        self.subsets = FILTER_SUBSETS[cfg.model]
+        if cfg.model == 1:
+            # Model I: beta is the fixed normalising constant beta0 of the configuration
+            nominal = [row[:IDX["beta"]] + [cfg.beta0] + row[IDX["beta"] + 1:] for row in nominal]
+        # per-parameter nominal arrays: nominal[b][j] -> column j over b
+        cols = list(zip(*nominal))
+        self.scaled = _BatchScaled(R, cols, self.batch)
+        self.c = _Constants(R, cfg)
+        self.reset()
+
+    # ------------------------------------------------------------------------------------
+    def reset(self) -> None:
+        R, B = self.R, self.batch
+        self.u = [R.full(B, 0.0) for _ in PARAM_NAMES]
+        self.th = self.scaled.theta(self.u)
+        self.z = R.full(B, 0.0)
+        self.P = [self._p0(len(s) + 1) for s in self.subsets]
+        self.initialised = np.zeros(B, dtype=bool)
+        self.t_prev = np.zeros(B, dtype=np.int64)
+        self.l_prev = R.full(B, 0.0)
+        self.k = np.zeros(B, dtype=np.int64)   # accepted samples since reset (rotation index)
+        self.rejects = np.zeros((3, B), dtype=np.int64)
+        self.gated_run = [np.zeros(B, dtype=np.int64) for _ in self.subsets]
+        self.last = StepOutput(R.full(B, 0.0), R.full(B, 0.0), R.full(B, 0.0), R.full(B, 0.0),
+                               np.zeros(B, dtype=np.uint32),
+                               R.arr(np.zeros((len(self.identified), B))),
+                               R.arr(np.zeros((len(self.identified), B))))
+
+    def _p0(self, n: int) -> Matrix:
+        R, B, c = self.R, self.batch, self.c
+        P: Matrix = [[R.full(B, 0.0) for _ in range(n)] for _ in range(n)]
+        P[0][0] = R.full(B, 0.0) + c.p0_z
+        for i in range(1, n):
+            P[i][i] = R.full(B, 0.0) + c.p0_u
+        return P
+
+    # ------------------------------------------------------------------------------------
+    def step(self, t_us: Array, depth: Array, velocity: Array, force: Array) -> StepOutput:
+        """One sample: time in integer microseconds, depth mm, velocity mm/s, force N."""
+        R, c = self.R, self.c
+        t_us = np.asarray(t_us, dtype=np.int64)
+        l_in = np.asarray(depth, dtype=R.dtype)
+        v = np.asarray(velocity, dtype=R.dtype)
+        y = np.asarray(force, dtype=R.dtype)
+        with np.errstate(all="ignore"):
+            finite = np.isfinite(l_in) & np.isfinite(v) & np.isfinite(y)
+            in_range = ((l_in >= c.depth_min) & (l_in <= c.depth_max) & (np.abs(v) <= c.speed_max)
+                        & (np.abs(y) <= c.force_max))
+            later = ~self.initialised | (t_us > self.t_prev)
+            valid = finite & in_range & later
+            self.rejects[REJECT_NONFINITE] += ~finite
+            self.rejects[REJECT_RANGE] += finite & ~in_range
+            self.rejects[REJECT_TIME] += finite & in_range & ~later
+            first = valid & ~self.initialised
+            run = valid & self.initialised
+            # invalid samples are computed on harmless stand-ins, then discarded
+            l_in = np.where(valid, l_in, self.l_prev)
+            v = np.where(valid, v, R.c(0.0))
+            y = np.where(valid, y, R.c(0.0))
+            dt = (np.where(run, t_us - self.t_prev, 1)).astype(R.dtype) / c.us_per_s
+            out = self._advance(first, run, dt, l_in, v, y)
+        status = np.where(valid, out.status, np.uint32(STATUS_REJECTED))
+        status = status | np.where(first, np.uint32(STATUS_INIT), np.uint32(0))
+        out = StepOutput(*(np.where(valid, new, old) if name != "status" else status
+                           for name, new, old in zip(StepOutput.__dataclass_fields__,
+                                                     _fields(out), _fields(self.last))))
+        self.t_prev = np.where(valid, t_us, self.t_prev)
+        self.l_prev = np.where(valid, l_in, self.l_prev)
+        self.initialised = self.initialised | valid
+        self.k = self.k + run
+        self.last = out
+        return out
+
+    # ------------------------------------------------------------------------------------
+    def _advance(self, first: Array, run: Array, dt: Array, l_in: Array, v: Array,
+                 y: Array) -> StepOutput:
+        R, c, cfg = self.R, self.c, self.cfg
+        B = self.batch
+        status = np.zeros(B, dtype=np.uint32)
+        l = clamp_depth(R, l_in)
+        l_prev = clamp_depth(R, self.l_prev)
+        surface = ~(l > R.c(0.0))
+        gap = run & (dt > c.dt_max)
+        s = smooth_sign(R, v, c.eps)
+        status |= np.where(surface, np.uint32(STATUS_OUT_OF_TISSUE), np.uint32(0))
+        status |= np.where(gap, np.uint32(STATUS_GAP), np.uint32(0))
+        z_prev = self.z
+        zero = R.c(0.0)
+        z_post = z_prev
+        innovation0 = R.full(B, 0.0)
+        nis0 = R.full(B, 0.0)
+        rotate = cfg.schedule == "rotate"
+        if rotate:
+            # one prediction, with every identified parameter's sensitivity, serves all three
+            shared_pred = rk3_step(R, self.th, z_prev, l_prev, l, dt, cfg.substeps,
+                                   self.identified)
+        for i, names in enumerate(self.subsets):
+            if rotate:
+                pred = shared_pred
+                active = run & ((self.k % 3) == i)
+            else:
+                pred = rk3_step(R, self.th, z_prev, l_prev, l, dt, cfg.substeps, names)
+                active = run
+            d = depth_terms(R, self.th, l)
+            # out of tissue z is 0; after a gap it has relaxed to its steady state: either way
+            # the prior z carries no memory of z(k-1)
+            restart = gap | surface
+            z_restart = np.where(surface, zero, steady_state_z(R, self.th, d))
+            zp = np.where(restart, z_restart, pred.z)
+            F: Matrix = [[np.where(restart, zero, pred.dz_dz0)] +
+                         [np.where(restart, zero, pred.dz_du[nm]) for nm in names]]
+            for a in range(len(names)):
+                F.append([R.full(B, 0.0)] + [R.full(B, 1.0 if a == b else 0.0)
+                                             for b in range(len(names))])
+            q = [c.q_z] + [c.q_u[nm] for nm in names]
+            P_pred = predict_covariance(self.P[i], F, q)
+            x = [zp] + [self.u[IDX[nm]] for nm in names]
+
+            o = output(self.th, d, zp, s)
+            hrow = [output_dz(self.th, d, o)] + [output_du(self.th, d, zp, o, nm) for nm in names]
+            r_eff = c.r
+            if cfg.sign_inflation:
+                # the data follow the true direction sign(v), the model tanh(v/eps): their
+                # difference is at most (1 - |s|) l fr, treated as extra measurement noise
+                w = (R.c(1.0) - np.abs(s)) * (d.l * o.fr)
+                moving = np.abs(v) >= c.v_still
+                r_eff = c.r + np.where(moving, w * w, zero)
+                status |= np.where(active & moving & (w * w > c.r), np.uint32(STATUS_SIGN_UNCERTAIN),
+                                   np.uint32(0))
+            innovation = y - o.h
+            # a gate that has refused too many samples in a row would lock the filter out for
+            # good (its collapsed covariance never admits the data again): open it once
+            open_gate = self.gated_run[i] >= cfg.gate_reopen_after
+            upd = joseph_update(R, x, P_pred, hrow, innovation, r_eff, c.gate2, open_gate)
+            gated = active & ~upd.accepted
+            status |= np.where(gated, np.uint32(STATUS_GATED), np.uint32(0))
+            self.gated_run[i] = np.where(gated, self.gated_run[i] + 1,
+                                         np.where(active, 0, self.gated_run[i]))
+            newx = [np.where(active, upd.x[a], x[a]) for a in range(len(x))]
+            newP = [[np.where(active, upd.P[a][b], P_pred[a][b]) for b in range(len(x))]
+                    for a in range(len(x))]
+            newx, newP, st = self._guard(newx, newP, x)
+            status |= np.where(run, st, np.uint32(0))
+            # commit: every filter of a running sample keeps its propagated covariance
+            self.P[i] = [[np.where(run, newP[a][b], self.P[i][a][b]) for b in range(len(x))]
+                         for a in range(len(x))]
+            for a, nm in enumerate(names):
+                self.u[IDX[nm]] = np.where(run, newx[a + 1], self.u[IDX[nm]])
+            self.th = self.scaled.refresh(self.th, self.u, names)
+            z_post = np.where(active, newx[0], z_post)
+            if rotate or i == 0:
+                innovation0 = np.where(active, innovation, innovation0)
+                nis0 = np.where(active, upd.nis, nis0)
+
+        z_post = np.where(surface & run, R.c(0.0), z_post)
+        self.z = np.where(run, z_post, np.where(first, R.c(0.0), self.z))
+        # posterior output with the final shared model
+        d = depth_terms(R, self.th, l)
+        o = output(self.th, d, self.z, s)
+        innov = np.where(run, innovation0, y - o.h)
+        nis = np.where(run, nis0, R.c(0.0))
+        params, sds = self.parameter_estimates()
+        return StepOutput(o.h, self.z, innov, nis, status, params, sds)
+
+    def _guard(self, x: list[Array], P: Matrix, x_prior: list[Array]
+               ) -> tuple[list[Array], Matrix, Array]:
+        """Clip |u|, floor variances, and reset the filter when P or x went bad."""
+        R, c = self.R, self.c
+        n = len(x)
+        status = np.zeros(self.batch, dtype=np.uint32)
+        for a in range(1, n):
+            clipped = np.abs(x[a]) > c.u_max
+            x[a] = np.where(x[a] > c.u_max, c.u_max, np.where(x[a] < -c.u_max, -c.u_max, x[a]))
+            status |= np.where(clipped, np.uint32(STATUS_CLIPPED), np.uint32(0))
+        ok = positive_definite(R, P)
+        for a in range(n):
+            ok = ok & np.isfinite(x[a])
+        floors = [c.var_floor_z] + [c.var_floor_u] * (n - 1)
+        for a in range(n):
+            low = P[a][a] < floors[a]
+            P[a][a] = np.where(low, floors[a], P[a][a])
+            status |= np.where(ok & low, np.uint32(STATUS_FLOORED), np.uint32(0))
+        P0 = self._p0(n)
+        x = [np.where(ok, x[a], np.where(np.isfinite(x_prior[a]), x_prior[a], R.c(0.0)))
+             for a in range(n)]
+        P = [[np.where(ok, P[a][b], P0[a][b]) for b in range(n)] for a in range(n)]
+        status |= np.where(ok, np.uint32(0), np.uint32(STATUS_FILTER_RESET))
+        return x, P, status
+
+    # ------------------------------------------------------------------------------------
+    def owner(self, name: str) -> tuple[int, int]:
+        """(filter index, index in its state vector) of an identified parameter."""
+        for i, names in enumerate(self.subsets):
+            if name in names:
+                return i, names.index(name) + 1
+        raise KeyError(name)
+
+    def parameter_estimates(self) -> tuple[Array, Array]:
+        """Physical estimates and standard deviations (delta method on u) of the identified set."""
+        th = self.th
+        vals, sds = [], []
+        for name in self.identified:
+            i, a = self.owner(name)
+            sd_u = np.sqrt(self.P[i][a][a])
+            vals.append(getattr(th, name))
+            sds.append(np.abs(self.scaled.dtheta_du(th, name)) * sd_u)
+        return np.stack(vals), np.stack(sds)
+
+
+def _fields(o: StepOutput) -> tuple[Array, ...]:
+    return (o.force_hat, o.z, o.innovation, o.nis, o.status, o.params, o.params_sd)
+
+
+class _BatchScaled(ScaledParams):
+    """ScaledParams whose nominal differs per batch element."""
+
+    def __init__(self, R: Real, cols: list[tuple[float, ...]], batch: int) -> None:
+        self.R = R
+        self.nominal = [R.arr(list(col)) for col in cols]
+        f2 = np.asarray(cols[IDX["f2"]], dtype=np.float64)
+        f1 = np.asarray(cols[IDX["f1"]], dtype=np.float64)
+        kappa = np.where(f2 < 0.0, 1.0, 0.0)
+        if len(set(kappa.tolist())) > 1:
+            raise ValueError("every run of a batch must have the same sign of f2")
+        self.kappa = R.c(float(kappa[0]))
+        self.ex_nominal = R.arr(f1 - kappa * (-f2))
+        if np.any(self.ex_nominal <= 0):
+            raise ValueError("nominal f1 must exceed -f2 (g(0) = f1 + f2 must be positive)")
+
+
+class _Constants:
+    """Every configuration number in the working precision, rounded once."""
+
+    def __init__(self, R: Real, cfg: EstimatorConfig) -> None:
+        self.eps = R.c(cfg.eps_mm_s)
+        self.r = R.c(cfg.r_n2)
+        self.q_z = R.c(cfg.q_z)
+        self.q_u = {n: R.c(cfg.q_for(n)) for n in PARAM_NAMES}
+        self.p0_z = R.c(cfg.p0_z)
+        self.p0_u = R.c(cfg.p0_u)
+        self.gate2 = R.c(cfg.gate_sigma * cfg.gate_sigma)
+        self.u_max = R.c(cfg.u_max)
+        self.var_floor_z = R.c(cfg.var_floor_z)
+        self.var_floor_u = R.c(cfg.var_floor_u)
+        self.v_still = R.c(cfg.v_still_mm_s)
+        self.dt_max = R.c(cfg.dt_max_s)
+        self.depth_min = R.c(cfg.depth_min_mm)
+        self.depth_max = R.c(cfg.depth_max_mm)
+        self.speed_max = R.c(cfg.speed_max_mm_s)
+        self.force_max = R.c(cfg.force_max_n)
+        self.us_per_s = R.c(1.0e6)

@@ -1,0 +1,108 @@
+"""Tuning of the estimator: one structure with defaults, validated before use.
+
+Units are in every field's name or comment.  Two profiles ship:
+
+* ``default`` — tuned for this project (see README, "Estimator tuning");
+* ``paper``   — the paper's Table I mapped to the scaled parameters (below), R = 0.01 N^2.
+
+Mapping Table I to log-parameters.  The paper gives the per-sample random-walk variances of the
+raw parameters as 0.05 * diag(...), with diagonal entries 1e3 ... 1e15 that only make sense in the
+authors' own (unstated) scaling: taken literally, Q(sigma0) = 5e7 against sigma0 = 7.9e-3.  We keep
+what the table does say — the ratios between the parameters — and place the largest entry (1e15)
+at 5e-5 per sample in log units (a standard deviation of 0.7 % per sample, 10 % per second at
+200 Hz): q_u = 0.05 * entry * 1e-18.  The paper's "large" initial covariance becomes 1 (a factor
+e = 2.7 per standard deviation) in log units.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+from .params import BETA0_DEFAULT, FILTER_SUBSETS, PARAM_NAMES
+
+#: Table I: the raw diagonal entries of Q, per model and parameter
+PAPER_Q_ENTRIES: dict[int, dict[str, float]] = {
+    1: {"f2": 1e5, "sigma0": 1e9, "f1": 1e15, "sigma1": 1e15, "alpha": 1e5, "sigma2": 1e15},
+    2: {"sigma0": 1e9, "f1": 1e15, "sigma1": 1e15, "beta": 1e3, "sigma2": 1e15},
+}
+PAPER_Q_SCALE = 0.05 * 1e-18
+
+SCHEDULES = ("all", "rotate")
+
+
+@dataclass(frozen=True)
+class EstimatorConfig:
+    model: int = 2                     # 1 or 2 (paper's Model I / Model II)
+    schedule: str = "all"              # "all": three filters every sample; "rotate": one per sample
+    eps_mm_s: float = 0.5              # smooth-sign width: s(v) = tanh(v / eps), mm/s, > 0
+    beta0: float = BETA0_DEFAULT       # Model I's fixed beta, > 0 (overridden by a preset's beta)
+    substeps: int = 1                  # RK3 sub-steps per sample, 1..16
+    r_n2: float = 4.0e-6               # measurement noise variance, N^2, > 0
+    q_z: float = 1.0e-8                # process noise of z per sample (dimensionless^2), >= 0
+    q_u: dict[str, float] = field(default_factory=dict)  # per-sample variance of each u (log^2)
+    q_u_default: float = 2.0e-7        # for parameters missing from q_u
+    p0_z: float = 1.0e-6               # initial variance of z, > 0
+    p0_u: float = 0.03                 # initial variance of every u (log units^2), > 0
+    gate_sigma: float = 12.0           # innovation gate, in standard deviations, > 0
+    gate_reopen_after: int = 10        # after this many gated updates in a row, accept one, >= 1
+    u_max: float = 3.9                 # |u| clip (log units; 3.9 = factor 50), > 0
+    var_floor_z: float = 1.0e-12       # lower bound of var(z), > 0
+    var_floor_u: float = 1.0e-10       # lower bound of var(u), > 0
+    sign_inflation: bool = True        # inflate R where the smooth sign may be wrong (|s| < 1)
+    v_still_mm_s: float = 1.0e-3       # |v| below this is a dwell: the direction is known to be none
+    dt_max_s: float = 0.5              # a longer gap between samples restarts z at steady state
+    depth_min_mm: float = -1.0         # accepted depth range, mm (depth <= 0 is out of tissue)
+    depth_max_mm: float = 500.0
+    speed_max_mm_s: float = 500.0      # accepted |velocity|, mm/s
+    force_max_n: float = 50.0          # accepted |force|, N
+
+    def q_for(self, name: str) -> float:
+        return self.q_u.get(name, self.q_u_default)
+
+    def validate(self) -> None:
+        """Raise ValueError naming the first invalid field."""
+        def positive(name: str) -> None:
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ValueError(f"config field {name} must be finite and > 0 (got {v!r})")
+
+        if self.model not in FILTER_SUBSETS:
+            raise ValueError(f"config field model must be 1 or 2 (got {self.model!r})")
+        if self.schedule not in SCHEDULES:
+            raise ValueError(f"config field schedule must be one of {SCHEDULES}")
+        if not 1 <= self.gate_reopen_after <= 1000:
+            raise ValueError("config field gate_reopen_after must be in 1..1000")
+        if not 1 <= self.substeps <= 16:
+            raise ValueError("config field substeps must be in 1..16")
+        for name in ("eps_mm_s", "beta0", "r_n2", "p0_z", "p0_u", "gate_sigma", "u_max",
+                     "var_floor_z", "var_floor_u", "dt_max_s", "depth_max_mm",
+                     "speed_max_mm_s", "force_max_n"):
+            positive(name)
+        for name in ("q_z", "q_u_default", "v_still_mm_s"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"config field {name} must be finite and >= 0 (got {v!r})")
+        for name, v in self.q_u.items():
+            if name not in PARAM_NAMES or not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"config field q_u[{name!r}] invalid ({v!r})")
+
+
+def default_config(model: int = 2, schedule: str = "all") -> EstimatorConfig:
+    return EstimatorConfig(model=model, schedule=schedule)
+
+
+def paper_config(model: int = 2, schedule: str = "all") -> EstimatorConfig:
+    q = {k: v * PAPER_Q_SCALE for k, v in PAPER_Q_ENTRIES[model].items()}
+    return EstimatorConfig(model=model, schedule=schedule, r_n2=0.01, q_u=q, p0_u=1.0)
+
+
+PROFILES = {"default": default_config, "paper": paper_config}
+
+
+def profile_config(profile: str, model: int, schedule: str = "all") -> EstimatorConfig:
+    try:
+        factory = PROFILES[profile]
+    except KeyError:
+        raise ValueError(f"unknown tuning profile {profile!r} (known: {', '.join(PROFILES)})") \
+            from None
+    return replace(factory(model, schedule))

@@ -1,0 +1,96 @@
+"""The small dense EKF kernels every filter of the bank uses (state dimension n <= 3 here).
+
+Matrices are lists of lists of batch arrays (P[i][j] has shape (batch,)).  Every product is an
+explicit sum in a fixed order — k = 0, 1, ..., n-1, accumulated left to right — and only the upper
+triangle of a covariance is computed and then mirrored, so the result is symmetric by construction
+and the C library can repeat the operations one for one.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .fmath import Array, Real
+
+Matrix = list[list[Array]]
+
+
+def _dot(a: list[Array], b: list[Array]) -> Array:
+    acc = a[0] * b[0]
+    for k in range(1, len(a)):
+        acc = acc + a[k] * b[k]
+    return acc
+
+
+def predict_covariance(P: Matrix, F: Matrix, q: list[Array]) -> Matrix:
+    """P <- F P F^T + diag(q)."""
+    n = len(P)
+    FP = [[_dot(F[i], [P[k][j] for k in range(n)]) for j in range(n)] for i in range(n)]
+    out: Matrix = [[None] * n for _ in range(n)]  # type: ignore[list-item]
+    for i in range(n):
+        for j in range(i, n):
+            v = _dot(FP[i], F[j])
+            if i == j:
+                v = v + q[i]
+            out[i][j] = v
+            out[j][i] = v
+    return out
+
+
+@dataclass
+class Update:
+    x: list[Array]
+    P: Matrix
+    innovation: Array   # y - h, before the update
+    s: Array            # innovation variance h P h^T + R
+    nis: Array          # innovation^2 / s
+    accepted: Array     # bool: the gate let the update through
+
+
+def joseph_update(R: Real, x: list[Array], P: Matrix, h: list[Array], innovation: Array,
+                  r: Array, gate2: Array, open_gate: Array | bool = False) -> Update:
+    """Scalar measurement update in Joseph form, behind an innovation gate.
+
+    S = h P h^T + r,  K = P h^T / S,  x += K y,  P = (I - K h) P (I - K h)^T + K r K^T.
+    When y^2 / S > gate2 the measurement is rejected and x, P are returned unchanged, unless
+    ``open_gate`` (per batch element) forces it through.
+    """
+    n = len(x)
+    pht = [_dot(P[i], h) for i in range(n)]
+    s = _dot(h, pht) + r
+    k = [pht[i] / s for i in range(n)]
+    nis = (innovation * innovation) / s
+    accepted = (nis <= gate2) | open_gate
+    one, zero = R.c(1.0), R.c(0.0)
+    a = [[(one if i == j else zero) - k[i] * h[j] for j in range(n)] for i in range(n)]
+    ap = [[_dot(a[i], [P[m][j] for m in range(n)]) for j in range(n)] for i in range(n)]
+    newP: Matrix = [[None] * n for _ in range(n)]  # type: ignore[list-item]
+    for i in range(n):
+        for j in range(i, n):
+            v = _dot(ap[i], a[j]) + (k[i] * r) * k[j]
+            v = np.where(accepted, v, P[i][j])
+            newP[i][j] = v
+            newP[j][i] = v
+    newx = [np.where(accepted, x[i] + k[i] * innovation, x[i]) for i in range(n)]
+    return Update(newx, newP, innovation, s, nis, accepted)
+
+
+def positive_definite(R: Real, P: Matrix) -> Array:
+    """Sylvester's criterion: every leading principal minor > 0 (n <= 3), all entries finite."""
+    n = len(P)
+    zero = R.c(0.0)
+    ok = P[0][0] > zero
+    if n >= 2:
+        d2 = P[0][0] * P[1][1] - P[0][1] * P[1][0]
+        ok = ok & (d2 > zero)
+    if n >= 3:
+        c0 = P[1][1] * P[2][2] - P[1][2] * P[2][1]
+        c1 = P[1][0] * P[2][2] - P[1][2] * P[2][0]
+        c2 = P[1][0] * P[2][1] - P[1][1] * P[2][0]
+        d3 = (P[0][0] * c0 - P[0][1] * c1) + P[0][2] * c2
+        ok = ok & (d3 > zero)
+    for row in P:
+        for v in row:
+            ok = ok & np.isfinite(v)
+    return ok

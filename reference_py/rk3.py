@@ -1,0 +1,81 @@
+"""One sample of the state equation by Kutta's third-order Runge-Kutta method, with sensitivities.
+
+Kutta's classic RK3 (Butcher tableau c = (0, 1/2, 1), a21 = 1/2, a31 = -1, a32 = 2,
+b = (1/6, 4/6, 1/6)) on ``substeps`` equal sub-steps of the sample interval.  Depth is
+interpolated linearly between the two samples.  Alongside z the step carries the forward
+sensitivities dz/dz0 and dz/du_j (the exact derivative of the *discrete* map, obtained by
+differentiating every stage; JACOBIANS.md §3), which are the transition Jacobian the EKF needs.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .fmath import Array, Real
+from .model import Theta, clamp_depth, depth_terms, state_rate, state_rate_du, state_rate_dz
+
+
+@dataclass
+class Rk3Result:
+    z: Array
+    dz_dz0: Array
+    dz_du: dict[str, Array]
+
+
+def rk3_step(R: Real, th: Theta, z: Array, l_a: Array, l_b: Array, dt: Array, substeps: int,
+             params: tuple[str, ...] = ()) -> Rk3Result:
+    """Advance z from depth l_a to depth l_b over dt seconds.
+
+    ``params``: the scaled parameters whose sensitivities are wanted (may be empty).
+    """
+    n = R.c(float(substeps))
+    h = dt / n
+    h2 = h * R.c(0.5)
+    h6 = h / R.c(6.0)
+    twoh = h * R.c(2.0)
+    four = R.c(4.0)
+    dl = l_b - l_a
+    s_z = np.ones_like(z)  # dz/dz0
+    s_u = {p: np.zeros_like(z) for p in params}
+    for j in range(substeps):
+        tau0 = R.c(float(j)) / n
+        taum = R.c(float(2 * j + 1)) / (n * R.c(2.0))
+        tau1 = R.c(float(j + 1)) / n
+        d0 = depth_terms(R, th, clamp_depth(R, l_a + dl * tau0))
+        dm = depth_terms(R, th, clamp_depth(R, l_a + dl * taum))
+        d1 = depth_terms(R, th, clamp_depth(R, l_a + dl * tau1))
+        fz0, fzm, fz1 = state_rate_dz(d0), state_rate_dz(dm), state_rate_dz(d1)
+
+        k1 = state_rate(th, d0, z)
+        z2 = z + h2 * k1
+        k2 = state_rate(th, dm, z2)
+        z3 = (z - h * k1) + twoh * k2
+        k3 = state_rate(th, d1, z3)
+
+        # sensitivity of z: the same stages, differentiated (the rate is linear in z)
+        a1 = fz0 * s_z
+        a2 = fzm * (s_z + h2 * a1)
+        a3 = fz1 * ((s_z - h * a1) + twoh * a2)
+        new_s_z = s_z + h6 * ((a1 + four * a2) + a3)
+
+        new_s_u = {}
+        for p in params:
+            s = s_u[p]
+            q1 = fz0 * s
+            r1 = state_rate_du(th, d0, z, p)
+            if r1 is not None:
+                q1 = q1 + r1
+            q2 = fzm * (s + h2 * q1)
+            r2 = state_rate_du(th, dm, z2, p)
+            if r2 is not None:
+                q2 = q2 + r2
+            q3 = fz1 * ((s - h * q1) + twoh * q2)
+            r3 = state_rate_du(th, d1, z3, p)
+            if r3 is not None:
+                q3 = q3 + r3
+            new_s_u[p] = s + h6 * ((q1 + four * q2) + q3)
+
+        z = z + h6 * ((k1 + four * k2) + k3)
+        s_z, s_u = new_s_z, new_s_u
+    return Rk3Result(z, s_z, s_u)
