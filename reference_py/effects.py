@@ -1,0 +1,354 @@
+"""The effect library: extensions of the force model for effects it leaves out (model-notes §8).
+
+Every effect is a documented extension of the base model with its own parameters and units, and
+every extended model can be simulated (:func:`simulate_extended`).  Written in the normalised form
+the discrepancy fit uses (see DISCREPANCY.md §2): with zh = z / beta, the base model is
+
+    dzh/dt = l (1 - b(l) zh),          b(l) = 1 / (p + q exp(-alpha l)),  p = f1/sigma0, q = f2/sigma0
+    f      = A zh l + s l (C e(l) (1 - b zh)) + sigma2 s l + offset_i
+             A = sigma0 beta,  C = sigma1 beta,  e(l) = exp(-alpha l),  s = sign(v)
+
+so the force is linear in (A, C, sigma2, offset_i) once the nonlinear (p, g0 = p + q, alpha) and
+each trial's surface position are fixed.  l = stage depth - surface (mm, clamped at 0).  Each
+effect adds columns (linear parameters) and/or changes the inputs the base model sees (nonlinear
+parameters):
+
+``dwell_relaxation`` (viscoelastic stress relaxation while the needle rests)
+    f += -sum_k R_k,i (1 - exp(-(t - t0)/tau_k)),  k in {fast, slow}, during each dwell of trial i
+    (t0 = start of the dwell).  Parameters: tau_fast_s in [0.05, 1] s, tau_slow_s in [1, 30] s,
+    R_fast,i, R_slow,i in N (per trial: the force that relaxes depends on the dwell depth).
+    Reported drop fraction = force lost by the end of the dwell / force at its start.
+``reversal_presliding`` (friction needs travel to build up after a reversal: Dahl-like pre-sliding)
+    s -> s (1 - exp(-d/delta)), d = tissue depth travelled (mm) since the direction last changed.
+    Parameter: presliding_mm = delta in [0.05, 10] mm.  Zero-crossing distance is reported too.
+``velocity_friction`` (viscous shaft friction, b v l)
+    f += b_visc v l.  Parameter: b_visc in N s / mm^2 (bovine liver ~ 2e-4).  Needs >= 2 speeds.
+``direction_asymmetry`` (friction differs between insertion and retraction)
+    f += [v < 0] s l (dC e (1 - b zh) + dsigma2): extra retraction friction.  Parameters:
+    dC_out (N/mm, like C), dsigma2_out (N/mm); reported ratio = retraction / insertion friction.
+``layer_puncture`` (an extra membrane: a loading ramp then a sudden drop when it is pierced)
+    f += F_layer exp((l - d_layer)/w) while inserting and the layer is not yet pierced (l < d_layer
+    for the first time), 0 afterwards.  Parameters: d_layer (mm below the surface), w (mm) in
+    [0.2, 10], F_layer = drop (N).
+``sensor_drift`` (sensor bias that changes slowly after tare)
+    f += c_drift (t - t_mid,i).  Parameter: c_drift in N/s (the per-trial offset absorbs bias).
+``tissue_motion`` (periodic tissue displacement, e.g. breathing, not tied to commanded motion)
+    l -> l - m_i(t), v -> v - m_i'(t), m_i(t) = a_i sin(2 pi f t) + b_i cos(2 pi f t).
+    Parameters: motion_freq_hz in [0.1, 0.6] Hz, a_i, b_i in mm (per trial: phase differs).
+
+A known-additive-term form (:func:`known_force_term`) lets the reference EKF bank run with an
+effect: subtract the term from the measurement before the update (bank.py is left unchanged).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .fmath import Array
+from .params import BETA0_DEFAULT, ParamSet
+from .discrepancy.fastsim import state_trajectory
+
+#: the fixed vocabulary of effect names (report.json and text); "none" when nothing is missing
+VOCABULARY: tuple[str, ...] = ("dwell_relaxation", "reversal_presliding", "velocity_friction",
+                               "direction_asymmetry", "layer_puncture", "sensor_drift",
+                               "tissue_motion")
+NONE = "none"
+
+#: stage speed below which the needle is at rest (mm/s)
+V_REST_MM_S = 0.02
+#: shortest rest that counts as a dwell (s)
+MIN_DWELL_S = 0.2
+
+
+@dataclass(frozen=True)
+class NLParam:
+    """A nonlinear parameter: name, unit, bounds, whether it is searched in log, per trial."""
+
+    name: str
+    unit: str
+    lo: float
+    hi: float
+    init: float
+    log: bool = True
+    per_trial: bool = False
+    doc: str = ""
+
+
+BASE_NL: tuple[NLParam, ...] = (
+    NLParam("p", "1", 0.05, 1e4, 7.0, doc="f1/sigma0: g(l)/sigma0 deep in the tissue"),
+    NLParam("g0", "1", 0.05, 1e4, 4.4, doc="(f1+f2)/sigma0: g(l)/sigma0 at the surface"),
+    NLParam("alpha", "1/mm", 1e-3, 1.0, 0.05, doc="decay rate of e(l) = exp(-alpha l)"),
+    NLParam("surface", "mm", -1.5, 1.5, 0.0, log=False, per_trial=True,
+            doc="correction to the detected surface position"),
+)
+
+EFFECT_NL: dict[str, tuple[NLParam, ...]] = {
+    "dwell_relaxation": (NLParam("tau_fast_s", "s", 0.05, 1.0, 0.3),
+                         NLParam("tau_slow_s", "s", 1.0, 30.0, 3.0)),
+    "reversal_presliding": (NLParam("presliding_mm", "mm", 0.05, 10.0, 1.0),),
+    "velocity_friction": (),
+    "direction_asymmetry": (),
+    "layer_puncture": (NLParam("layer_depth_mm", "mm", 0.5, 200.0, 20.0),
+                       NLParam("layer_width_mm", "mm", 0.2, 10.0, 1.5)),
+    "sensor_drift": (),
+    "tissue_motion": (NLParam("motion_freq_hz", "Hz", 0.1, 0.6, 0.25),
+                      NLParam("motion_a_mm", "mm", -6.0, 6.0, 0.0, log=False, per_trial=True),
+                      NLParam("motion_b_mm", "mm", -6.0, 6.0, 0.0, log=False, per_trial=True)),
+}
+
+#: phases (see discrepancy.phases) each effect acts on: where its gap is measured
+EFFECT_PHASES: dict[str, tuple[str, ...]] = {
+    "dwell_relaxation": ("dwell",),
+    "reversal_presliding": ("reversal",),
+    "velocity_friction": ("loading", "insertion", "reversal", "retraction"),
+    "direction_asymmetry": ("reversal", "retraction"),
+    "layer_puncture": ("loading", "insertion"),
+    "sensor_drift": ("out_of_tissue", "loading", "insertion", "dwell", "reversal", "retraction",
+                     "after_exit"),
+    "tissue_motion": ("loading", "insertion", "dwell", "reversal", "retraction"),
+}
+
+EFFECT_MEANING: dict[str, str] = {
+    "dwell_relaxation": "viscoelastic stress relaxation: force decays while the needle rests",
+    "reversal_presliding": "pre-sliding: friction needs millimetres of travel to reverse",
+    "velocity_friction": "viscous friction: shaft force grows with speed (b v l)",
+    "direction_asymmetry": "friction differs between insertion and retraction",
+    "layer_puncture": "an extra tissue layer: its own loading ramp and puncture drop",
+    "sensor_drift": "sensor bias drifting slowly after tare",
+    "tissue_motion": "periodic tissue motion (breathing) not tied to the commanded motion",
+    NONE: "the base model explains the data",
+}
+
+
+@dataclass
+class TrialGrid:
+    """One trial as the model sees it: times (s), stage depth (mm), stage velocity (mm/s) and the
+    detected surface (mm, stage coordinate).  ``dwells`` are (start, stop) index ranges."""
+
+    t_s: Array
+    stage_mm: Array
+    v_mm_s: Array
+    surface_mm: float
+    dwells: list[tuple[int, int]] = field(default_factory=list)
+
+    @property
+    def t_mid(self) -> float:
+        return 0.5 * float(self.t_s[0] + self.t_s[-1])
+
+
+def find_dwells(t_s: Array, depth_mm: Array, v_mm_s: Array) -> list[tuple[int, int]]:
+    """Index ranges [i0, i1) where the needle rests inside the tissue for >= MIN_DWELL_S."""
+    rest = (np.abs(v_mm_s) <= V_REST_MM_S) & (depth_mm > 0.0)
+    out: list[tuple[int, int]] = []
+    n = len(rest)
+    i = 0
+    while i < n:
+        if rest[i]:
+            j = i
+            while j < n and rest[j]:
+                j += 1
+            if t_s[j - 1] - t_s[i] >= MIN_DWELL_S:
+                out.append((i, j))
+            i = j
+        else:
+            i += 1
+    return out
+
+
+def direction(v_mm_s: Array) -> Array:
+    """Exact sign of the velocity with a rest dead-band (the model's s(v); 0 at rest)."""
+    return np.where(v_mm_s > V_REST_MM_S, 1.0, np.where(v_mm_s < -V_REST_MM_S, -1.0, 0.0))
+
+
+def travel_since_reversal(l_mm: Array, s: Array) -> Array:
+    """Tissue depth travelled (mm) since the direction of motion last changed (rests skipped)."""
+    n = len(s)
+    idx = np.where(s != 0.0, np.arange(n), 0)
+    np.maximum.accumulate(idx, out=idx)
+    last = s[idx]                      # last non-zero direction (0 before any motion)
+    change = np.zeros(n, dtype=bool)
+    change[1:] = (last[1:] != last[:-1])
+    change[0] = True
+    cum = np.concatenate([[0.0], np.cumsum(np.abs(np.diff(l_mm)))])
+    seg_start = np.where(change, np.arange(n), 0)
+    np.maximum.accumulate(seg_start, out=seg_start)
+    return cum - cum[seg_start]
+
+
+def nl_defaults(effects: tuple[str, ...], n_trials: int) -> dict[str, Array]:
+    """Default nonlinear values for the base model plus ``effects`` (per-trial ones as arrays)."""
+    out: dict[str, Array] = {}
+    for par in BASE_NL + tuple(p for e in effects for p in EFFECT_NL[e]):
+        out[par.name] = np.full(n_trials, par.init) if par.per_trial else np.array(par.init)
+    return out
+
+
+def nl_specs(effects: tuple[str, ...]) -> list[NLParam]:
+    return list(BASE_NL) + [p for e in effects for p in EFFECT_NL[e]]
+
+
+class StateCache:
+    """Remembers the last zh per trial so fits that move only output parameters skip the ODE."""
+
+    def __init__(self) -> None:
+        self._key: dict[int, tuple[float, ...]] = {}
+        self._val: dict[int, tuple[Array, Array, Array, Array]] = {}
+
+    def get(self, i: int, key: tuple[float, ...]) -> tuple[Array, Array, Array, Array] | None:
+        return self._val[i] if self._key.get(i) == key else None
+
+    def put(self, i: int, key: tuple[float, ...], val: tuple[Array, Array, Array, Array]) -> None:
+        self._key[i], self._val[i] = key, val
+
+
+def trial_inputs(tr: TrialGrid, i: int, effects: tuple[str, ...], nl: dict[str, Array],
+                 cache: StateCache | None = None) -> tuple[Array, Array, Array, Array]:
+    """Depth l (mm), direction s, zh and b(l) the model sees in trial i (tissue motion applied)."""
+    surf = tr.surface_mm + float(np.atleast_1d(nl["surface"])[i])
+    key: tuple[float, ...] = (float(nl["p"]), float(nl["g0"]), float(nl["alpha"]), surf)
+    moving = "tissue_motion" in effects
+    if moving:
+        key += (float(nl["motion_freq_hz"]), float(nl["motion_a_mm"][i]),
+                float(nl["motion_b_mm"][i]))
+    if cache is not None:
+        hit = cache.get(i, key)
+        if hit is not None:
+            return hit
+    l_raw = tr.stage_mm - surf
+    v = tr.v_mm_s
+    if moving:
+        w = 2.0 * np.pi * float(nl["motion_freq_hz"])
+        a, b = float(nl["motion_a_mm"][i]), float(nl["motion_b_mm"][i])
+        l_raw = l_raw - (a * np.sin(w * tr.t_s) + b * np.cos(w * tr.t_s))
+        v = v - w * (a * np.cos(w * tr.t_s) - b * np.sin(w * tr.t_s))
+    l = np.maximum(l_raw, 0.0)
+    p, q, alpha = float(nl["p"]), float(nl["g0"]) - float(nl["p"]), float(nl["alpha"])
+    zh = state_trajectory(tr.t_s, l, p, q, alpha)
+    bl = 1.0 / (p + q * np.exp(-alpha * l))
+    s = direction(v) * (l > 0.0)
+    val = (l, s, zh, bl)
+    if cache is not None:
+        cache.put(i, key, val)
+    return val
+
+
+def design(trials: list[TrialGrid], effects: tuple[str, ...], nl: dict[str, Array],
+           cache: StateCache | None = None) -> tuple[Array, list[str]]:
+    """The regressor matrix (all trials stacked) of the extended model, and its column labels.
+
+    force = design @ coefficients; the coefficients are the linear parameters named by the labels.
+    """
+    n_tr = len(trials)
+    labels = ["A", "C", "sigma2"] + [f"offset[{i}]" for i in range(n_tr)]
+    if "velocity_friction" in effects:
+        labels.append("b_visc")
+    if "direction_asymmetry" in effects:
+        labels += ["dC_out", "dsigma2_out"]
+    if "layer_puncture" in effects:
+        labels.append("layer_drop")
+    if "sensor_drift" in effects:
+        labels.append("drift")
+    if "dwell_relaxation" in effects:
+        labels += [f"relax_fast[{i}]" for i in range(n_tr)] + \
+                  [f"relax_slow[{i}]" for i in range(n_tr)]
+    col = {name: j for j, name in enumerate(labels)}
+    blocks = []
+    for i, tr in enumerate(trials):
+        l, s, zh, bl = trial_inputs(tr, i, effects, nl, cache)
+        n = len(l)
+        m = np.zeros((n, len(labels)))
+        e = np.exp(-float(nl["alpha"]) * l)
+        if "reversal_presliding" in effects:
+            d = travel_since_reversal(l, s)
+            s = s * (1.0 - np.exp(-d / float(nl["presliding_mm"])))
+        fric_c = s * l * e * (1.0 - bl * zh)
+        m[:, col["A"]] = zh * l
+        m[:, col["C"]] = fric_c
+        m[:, col["sigma2"]] = s * l
+        m[:, col[f"offset[{i}]"]] = 1.0
+        if "velocity_friction" in effects:
+            m[:, col["b_visc"]] = tr.v_mm_s * l
+        if "direction_asymmetry" in effects:
+            back = tr.v_mm_s < -V_REST_MM_S
+            m[:, col["dC_out"]] = np.where(back, fric_c, 0.0)
+            m[:, col["dsigma2_out"]] = np.where(back, s * l, 0.0)
+        if "layer_puncture" in effects:
+            dl, w = float(nl["layer_depth_mm"]), float(nl["layer_width_mm"])
+            intact = np.maximum.accumulate(l) < dl
+            ramp = np.exp(np.minimum(l - dl, 0.0) / w)
+            m[:, col["layer_drop"]] = np.where(intact & (tr.v_mm_s > V_REST_MM_S) & (l > 0),
+                                               ramp, 0.0)
+        if "sensor_drift" in effects:
+            m[:, col["drift"]] = tr.t_s - tr.t_mid
+        if "dwell_relaxation" in effects:
+            for k, tau_name in (("fast", "tau_fast_s"), ("slow", "tau_slow_s")):
+                tau = float(nl[tau_name])
+                c = np.zeros(n)
+                for i0, i1 in tr.dwells:
+                    c[i0:i1] = -(1.0 - np.exp(-(tr.t_s[i0:i1] - tr.t_s[i0]) / tau))
+                m[:, col[f"relax_{k}[{i}]"]] = c
+        blocks.append(m)
+    return np.vstack(blocks), labels
+
+
+# ------------------------------------------------------------------------------------------
+# Physical parameters <-> the normalised form, and simulation of an extended model
+# ------------------------------------------------------------------------------------------
+def to_paramset(nl: dict[str, Array], coef: dict[str, float],
+                beta: float = BETA0_DEFAULT) -> ParamSet:
+    """Base-model parameters from the normalised fit (beta is the Model I normaliser).
+
+    Model II (alpha, f2 frozen at these values, beta identified) reaches the same force at the
+    same optimum, because only A = sigma0 beta, C = sigma1 beta and b(l) are identifiable.
+    """
+    sigma0 = coef["A"] / beta
+    p, g0 = float(nl["p"]), float(nl["g0"])
+    return ParamSet(sigma0=sigma0, sigma1=coef["C"] / beta, sigma2=coef["sigma2"],
+                    f1=p * sigma0, f2=(g0 - p) * sigma0, alpha=float(nl["alpha"]), beta=beta)
+
+
+def from_paramset(params: ParamSet, n_trials: int = 1) -> tuple[dict[str, Array], dict[str, float]]:
+    """The normalised nonlinear values and linear coefficients of a base ParamSet."""
+    nl = {"p": np.array(params.f1 / params.sigma0),
+          "g0": np.array((params.f1 + params.f2) / params.sigma0),
+          "alpha": np.array(params.alpha), "surface": np.zeros(n_trials)}
+    coef = {"A": params.sigma0 * params.beta, "C": params.sigma1 * params.beta,
+            "sigma2": params.sigma2}
+    coef.update({f"offset[{i}]": 0.0 for i in range(n_trials)})
+    return nl, coef
+
+
+def simulate_extended(params: ParamSet, effect_params: dict[str, dict[str, float]],
+                      t_s: Array, depth_mm: Array, velocity_mm_s: Array) -> Array:
+    """Force (N) of the base model ``params`` extended by ``effect_params`` along one trajectory.
+
+    ``effect_params`` maps effect name -> its parameters by the names used in :func:`design`
+    (nonlinear: EFFECT_NL names; linear: column labels without the trial index), e.g.
+    ``{"dwell_relaxation": {"tau_fast_s": .3, "tau_slow_s": 3, "relax_fast": .02,
+    "relax_slow": .05}}``.  Depth is measured from the surface (surface = 0).
+    """
+    effects = tuple(e for e in VOCABULARY if e in effect_params)
+    nl, coef = from_paramset(params, 1)
+    for e in effects:
+        for par in EFFECT_NL[e]:
+            val = float(effect_params[e].get(par.name, par.init))
+            nl[par.name] = np.array([val]) if par.per_trial else np.array(val)
+        for k, val in effect_params[e].items():
+            if k not in {par.name for par in EFFECT_NL[e]}:
+                coef[k] = float(val)
+    t = np.asarray(t_s, dtype=float)
+    d = np.asarray(depth_mm, dtype=float)
+    v = np.asarray(velocity_mm_s, dtype=float)
+    grid = TrialGrid(t, d, v, 0.0, find_dwells(t, d, v))
+    m, labels = design([grid], effects, nl)
+    theta = np.array([coef.get(lab, coef.get(lab.split("[")[0], 0.0)) for lab in labels])
+    return m @ theta
+
+
+def known_force_term(params: ParamSet, effect_params: dict[str, dict[str, float]],
+                     t_s: Array, depth_mm: Array, velocity_mm_s: Array) -> Array:
+    """The force the effects add to the base model (N): subtract it from a measurement before
+    the reference EKF bank's update to run the bank on the extended model."""
+    return (simulate_extended(params, effect_params, t_s, depth_mm, velocity_mm_s)
+            - simulate_extended(params, {}, t_s, depth_mm, velocity_mm_s))
