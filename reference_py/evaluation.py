@@ -85,7 +85,7 @@ def run_bank(R: Real, cfg: EstimatorConfig, sc: Scenario, start_list: list[list[
     it = range(n)
     if progress:
         from tqdm import tqdm
-        it = tqdm(it, desc="estimating", unit="sample", leave=False)
+        it = tqdm(it, desc="estimating", unit="sample", leave=False, disable=None)
     for k in it:
         o = bank.step(np.full(B, t_us[k]), np.full(B, sc.depth_mm[k]),
                       np.full(B, sc.velocity_mm_s[k]), sc.force_n[:, k])

@@ -45,6 +45,9 @@ def _inv_factorials(degree: int) -> list[float]:
     return coeffs
 
 
+_CONSTANTS: dict[str, dict[str, Any]] = {}
+
+
 @dataclass(frozen=True)
 class Real:
     """A working precision: its dtype and every constant the numeric path uses, already rounded."""
@@ -68,6 +71,12 @@ class Real:
 
     # --- constants of the portable exp -----------------------------------------------------
     def exp_constants(self) -> dict[str, Any]:
+        cached = _CONSTANTS.get(self.name)
+        if cached is None:
+            cached = _CONSTANTS[self.name] = self._make_exp_constants()
+        return cached
+
+    def _make_exp_constants(self) -> dict[str, Any]:
         if self.is_f32:
             hi, lo, deg, xmax = _LN2_HI_F32, _LN2_LO_F32, _EXP_DEGREE_F32, _EXP_XMAX_F32
         else:

@@ -1,0 +1,55 @@
+# Entry points (run as root on Debian 12 from the repository root):
+#   make demo   - simulate a paper insertion, run the estimator on it, print and plot the result
+#   make test   - every test: C unit tests (ctest) and the Python suite (pytest)
+#   make        - build the firmware for the host (build/host)
+# Each target installs what it needs (Debian packages, the .venv) and is quick when it is there.
+
+SHELL := /bin/bash
+PYTHON_SYS ?= /usr/bin/python3
+VENV := .venv
+PY := $(VENV)/bin/python
+BUILD := build/host
+DEMO_DIR := out/demo
+
+# Debian packages the build and the tests need
+APT_PACKAGES := python3 python3-venv python3-dev gcc make cmake libcmocka-dev cppcheck
+
+.PHONY: all build demo test deps venv clean
+
+all: build
+
+deps:
+	@missing=""; for p in $(APT_PACKAGES); do \
+	  dpkg-query -W -f='$${Status}' $$p 2>/dev/null | grep -q "install ok installed" || missing="$$missing $$p"; \
+	done; \
+	if [ -n "$$missing" ]; then \
+	  echo "installing Debian packages:$$missing"; \
+	  export DEBIAN_FRONTEND=noninteractive; \
+	  apt-get update -qq && apt-get install -y -qq --no-install-recommends $$missing; \
+	fi
+
+$(VENV)/.installed: pyproject.toml | deps
+	test -x $(PY) || $(PYTHON_SYS) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q -e '.[test]'
+	touch $@
+
+venv: $(VENV)/.installed
+
+build: deps
+	cmake -S . -B $(BUILD) -DCMAKE_BUILD_TYPE=Release > /dev/null
+	cmake --build $(BUILD) -j2
+
+demo: venv build
+	mkdir -p $(DEMO_DIR)
+	$(VENV)/bin/nte-ref simulate --preset paper-10mms --depth 50 --dwell 1 --seed 1 \
+	  --out $(DEMO_DIR)/insertion.csv
+	$(VENV)/bin/nte-ref estimate $(DEMO_DIR)/insertion.csv --model 2 --preset paper-10mms \
+	  --init-seed 7 --init-factor 1.25 --out $(DEMO_DIR)/estimate.csv --plot $(DEMO_DIR)/estimate.png
+
+test: venv build
+	cd $(BUILD) && ctest --output-on-failure
+	$(PY) -m pytest -q tests
+
+clean:
+	rm -rf build out

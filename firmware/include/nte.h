@@ -1,0 +1,306 @@
+/*
+ * nte — needle-tissue axial force estimator.
+ *
+ * WHAT IT DOES
+ *   Estimates, sample by sample, the axial force on a needle inserted into soft tissue and the
+ *   parameters of the force model of Asadian, Kermani and Patel, "A Novel Force Modeling Scheme
+ *   for Needle Insertion Using Multiple Kalman Filters", IEEE Trans. Instrum. Meas. 61(2), 2012:
+ *
+ *       dz/dt = l (beta - sigma0 z / g(l)),          g(l) = f1 + f2 exp(-alpha l)
+ *       f     = sigma0 z l + s(v) l (sigma1 exp(-alpha l) (beta - sigma0 z / g(l)) + sigma2)
+ *
+ *   with depth l in mm, velocity v in mm/s, force f in N, z dimensionless and the smooth sign
+ *   s(v) = tanh(v / eps).  Each sample feeds the paper's bank of three joint state-parameter
+ *   extended Kalman filters in switching mode (Model I or Model II, paper Table I).  Parameters
+ *   are identified in log form relative to nominal values, theta = nominal exp(u), so every
+ *   state stays O(1) in float32.  The derivations of the Jacobians are in
+ *   reference_py/JACOBIANS.md; the model reading (sign of the velocity, z reset at the surface)
+ *   in the project's model notes.
+ *
+ * THE SPECIFICATION IS THE PYTHON REFERENCE
+ *   reference_py/ (numpy) is the executable specification.  This library performs the same
+ *   IEEE-754 operations in the same order, so its float build reproduces the float32 reference
+ *   and its double build the float64 reference BIT FOR BIT.  exp and tanh are computed by the
+ *   library itself from + - * / (libm's differ between C libraries).  Build every file with
+ *   floating-point contraction off (-ffp-contract=off) and never with -ffast-math, or the bits
+ *   change (fused multiply-adds round differently).
+ *
+ * PRECISION
+ *   nte_real_t is float unless NTE_DOUBLE is defined to 1 (CMake option NTE_DOUBLE), then double.
+ *   The float build contains no double arithmetic at all (a build check enforces it).
+ *
+ * INTEGRATION
+ *   Copy firmware/include/nte.h and firmware/src/ (*.c, *.h) into your project, compile the .c
+ *   files as C99 with -ffp-contract=off, link with libm (sqrtf/sqrt in nte_get_params only).
+ *   No other dependency, no configuration header.
+ *
+ * MEMORY MODEL
+ *   The caller owns every instance (static, stack or pool; sizeof(nte_t) is a few hundred
+ *   bytes).  The library never allocates, has no global or static mutable state and no
+ *   recursion; all working memory is the instance plus a fixed, small stack frame (measure it
+ *   with -fstack-usage).  Several instances may coexist.
+ *
+ * THREAD SAFETY
+ *   None.  An instance must not be used from two contexts at once; different instances are
+ *   independent and may be used concurrently.
+ *
+ * COST (float build, one sample; n = substeps, default 1)
+ *   Schedule "all": 3 filters x (RK3 with sensitivities: 3n+1 exp + 3n div, 3x3 covariance
+ *   prediction, scalar Joseph update: 1 div per state) + up to 3 exp to refresh parameters;
+ *   roughly 700 flops and 17 exp for n = 1.  Schedule "rotate" costs about half.  Bounded: no
+ *   loop depends on the data.
+ */
+#ifndef NTE_H
+#define NTE_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#ifndef NTE_DOUBLE
+#define NTE_DOUBLE 0
+#endif
+#if NTE_DOUBLE != 0 && NTE_DOUBLE != 1
+#error "NTE_DOUBLE must be 0 (float) or 1 (double)"
+#endif
+
+#if NTE_DOUBLE
+typedef double nte_real_t;
+#else
+typedef float nte_real_t;
+#endif
+
+/* ---------------------------------------------------------------------------------------- */
+/* Parameters                                                                                */
+/* ---------------------------------------------------------------------------------------- */
+
+/** Index of each model parameter (the reference's PARAM_NAMES order). */
+typedef enum nte_param_id_t {
+    nte_param_sigma0 = 0, /**< bristle stiffness, N/mm^2 */
+    nte_param_sigma1 = 1, /**< bristle damping factor */
+    nte_param_sigma2 = 2, /**< viscous friction per unit depth, N/mm */
+    nte_param_f1 = 3,     /**< g(l) constant part */
+    nte_param_f2 = 4,     /**< g(l) exponential part */
+    nte_param_alpha = 5,  /**< decay rate of the exponential, 1/mm */
+    nte_param_beta = 6    /**< normalising constant (Model I: fixed beta0) */
+} nte_param_id_t;
+
+#define NTE_PARAM_COUNT 7
+/** At most this many parameters are identified (Model I: six, Model II: five). */
+#define NTE_IDENTIFIED_MAX 6
+#define NTE_FILTER_COUNT 3
+
+/** One identified parameter: its physical estimate and standard deviation (delta method). */
+typedef struct nte_param_estimate_t {
+    nte_param_id_t id;
+    nte_real_t value;
+    nte_real_t sd;
+} nte_param_estimate_t;
+
+/* ---------------------------------------------------------------------------------------- */
+/* Errors, status bits and counters                                                          */
+/* ---------------------------------------------------------------------------------------- */
+
+/** Result of nte_init / nte_step / nte_reset.  Zero is success, every error is negative. */
+typedef enum nte_err_t {
+    nte_err_ok = 0,
+    nte_err_null_argument = -1,   /**< a pointer argument was NULL */
+    nte_err_bad_model = -2,       /**< model is not 1 or 2 */
+    nte_err_bad_schedule = -3,    /**< schedule is not a nte_schedule_t value */
+    nte_err_bad_substeps = -4,    /**< substeps outside 1..16 */
+    nte_err_bad_gate_reopen = -5, /**< gate_reopen_after outside 1..1000 */
+    nte_err_not_finite = -6,      /**< a real field is NaN or infinite */
+    nte_err_not_positive = -7,    /**< a field that must be > 0 (or >= 0) is not */
+    nte_err_bad_range = -8,       /**< depth_min_mm > depth_max_mm */
+    nte_err_bad_nominal = -9,     /**< a nominal parameter is NaN or infinite */
+    nte_err_bad_f1 = -10          /**< nominal f1 does not exceed -f2 (g(0) must be > 0) */
+} nte_err_t;
+
+/* Status bits of one sample (same values as reference_py/bank.py STATUS_*). */
+#define NTE_STATUS_INIT (1U << 0U)            /**< first sample after init/reset: no prediction */
+#define NTE_STATUS_REJECTED (1U << 1U)        /**< sample invalid and ignored; outputs held */
+#define NTE_STATUS_GATED (1U << 2U)           /**< a filter's innovation failed the gate */
+#define NTE_STATUS_FILTER_RESET (1U << 3U)    /**< a filter's P or x went bad and was reset */
+#define NTE_STATUS_GAP (1U << 4U)             /**< dt > dt_max_s: z restarted at steady state */
+#define NTE_STATUS_OUT_OF_TISSUE (1U << 5U)   /**< depth <= 0: z held at 0 */
+#define NTE_STATUS_CLIPPED (1U << 6U)         /**< a log-parameter hit |u| = u_max */
+#define NTE_STATUS_FLOORED (1U << 7U)         /**< a variance was raised to its floor */
+#define NTE_STATUS_SIGN_UNCERTAIN (1U << 8U)  /**< R inflated: smooth sign may be wrong */
+
+/* Causes of a rejected sample (same values as reference_py/bank.py REJECT_*). */
+#define NTE_REJECT_NONFINITE 0 /**< depth, velocity or force NaN or infinite */
+#define NTE_REJECT_RANGE 1     /**< outside depth/speed/force limits of the config */
+#define NTE_REJECT_TIME 2      /**< time not later than the previous accepted sample */
+#define NTE_REJECT_CAUSES 3
+
+/** Monotonic event counters (wrap modulo 2^32).  Cleared by nte_init and nte_reset; the
+ *  application may also clear them itself at any time (plain fields). */
+typedef struct nte_counters_t {
+    uint32_t rejected[NTE_REJECT_CAUSES]; /**< rejected samples, by NTE_REJECT_* cause */
+    uint32_t gated;                        /**< filter updates skipped by the innovation gate */
+    uint32_t filter_resets;                /**< filter resets (covariance lost definiteness) */
+    uint32_t gaps;                         /**< samples after a gap longer than dt_max_s */
+} nte_counters_t;
+
+/* ---------------------------------------------------------------------------------------- */
+/* Configuration                                                                             */
+/* ---------------------------------------------------------------------------------------- */
+
+typedef enum nte_schedule_t {
+    nte_schedule_all = 0,   /**< the three filters run in turn on every sample */
+    nte_schedule_rotate = 1 /**< filter (k mod 3) alone updates at sample k; the others predict */
+} nte_schedule_t;
+
+/** q_u entry meaning "use q_u_default" (any negative value means the same). */
+#define NTE_Q_U_USE_DEFAULT (-1)
+
+/**
+ * Every tuning field, with its unit and valid range (checked by nte_init).  Fill it with
+ * nte_config_default or nte_config_paper, then change what you need.  The fields mirror
+ * reference_py/config.py EstimatorConfig; a value equals the reference's when it is the
+ * reference's float64 value rounded to nte_real_t.
+ */
+typedef struct nte_config_t {
+    int32_t model;              /**< 1 (Model I) or 2 (Model II) */
+    nte_schedule_t schedule;    /**< nte_schedule_all or nte_schedule_rotate */
+    int32_t substeps;           /**< RK3 sub-steps per sample, 1..16 (cost grows linearly) */
+    int32_t gate_reopen_after;  /**< after this many gated updates in a row accept one, 1..1000 */
+    bool sign_inflation;        /**< inflate R where the smooth sign may be wrong (|s| < 1) */
+    nte_real_t eps_mm_s;        /**< smooth-sign width, s(v) = tanh(v/eps), mm/s, > 0 */
+    nte_real_t beta0;           /**< Model I's fixed beta, > 0 (Model II ignores it) */
+    nte_real_t r_n2;            /**< measurement noise variance, N^2, > 0 */
+    nte_real_t q_z;             /**< process noise of z per sample, >= 0 */
+    nte_real_t q_u[NTE_PARAM_COUNT]; /**< per-sample variance of each u, log^2, >= 0, or
+                                          negative (NTE_Q_U_USE_DEFAULT): use q_u_default */
+    nte_real_t q_u_default;     /**< per-sample variance of u for defaulted entries, >= 0 */
+    nte_real_t p0_z;            /**< initial variance of z, > 0 */
+    nte_real_t p0_u;            /**< initial variance of every u, log^2, > 0 */
+    nte_real_t gate_sigma;      /**< innovation gate in standard deviations, > 0; the gate
+                                     compares NIS with gate_sigma^2 computed in nte_real_t */
+    nte_real_t u_max;           /**< |u| clip, log units (3.9 = factor 50), > 0 */
+    nte_real_t var_floor_z;     /**< lower bound of var(z), > 0 */
+    nte_real_t var_floor_u;     /**< lower bound of var(u), log^2, > 0 */
+    nte_real_t v_still_mm_s;    /**< |v| below this is a dwell (no sign inflation), mm/s, >= 0 */
+    nte_real_t dt_max_s;        /**< a longer gap restarts z at its steady state, s, > 0 */
+    nte_real_t depth_min_mm;    /**< accepted depth range, mm, finite, min <= max */
+    nte_real_t depth_max_mm;    /**< > 0 */
+    nte_real_t speed_max_mm_s;  /**< accepted |velocity|, mm/s, > 0 */
+    nte_real_t force_max_n;     /**< accepted |force|, N, > 0 */
+    /** Nominal (starting) physical values, nte_param_id_t order, finite.  Model II
+     *  keeps f2 and alpha fixed at theirs; Model I ignores nominal beta and uses beta0. */
+    nte_real_t nominal[NTE_PARAM_COUNT];
+    /** The identified part of nominal f1: f1 - kappa (-f2), kappa = 1 if f2 < 0 else 0; > 0.
+     *  0 means "compute it in nte_real_t from nominal f1 and f2".  Give it explicitly (computed
+     *  in double, then rounded) to match a reference that starts from double values. */
+    nte_real_t f1_excess;
+} nte_config_t;
+
+/** The project's tuning (reference "default" profile); nominal = preset paper-10mms.
+ *  model 1 or 2 (other values are stored and refused by nte_init).  Cost: O(1). */
+void nte_config_default(nte_config_t* cfg, int32_t model, nte_schedule_t schedule);
+
+/** The paper's Table I mapped to the log parameters (reference "paper" profile). */
+void nte_config_paper(nte_config_t* cfg, int32_t model, nte_schedule_t schedule);
+
+/** Check a configuration without touching any instance.  Cost: O(1). */
+nte_err_t nte_config_check(const nte_config_t* cfg);
+
+/* ---------------------------------------------------------------------------------------- */
+/* Samples and outputs                                                                       */
+/* ---------------------------------------------------------------------------------------- */
+
+/** One synchronous measurement. */
+typedef struct nte_sample_t {
+    int64_t t_us;             /**< time stamp, integer microseconds, strictly increasing */
+    nte_real_t depth_mm;      /**< insertion depth, mm (<= 0: out of tissue) */
+    nte_real_t velocity_mm_s; /**< insertion velocity, mm/s (negative while retracting) */
+    nte_real_t force_n;       /**< measured axial force, N */
+} nte_sample_t;
+
+/** The estimate after one sample. */
+typedef struct nte_output_t {
+    nte_real_t force_hat_n;  /**< posterior force estimate, N */
+    nte_real_t z;            /**< posterior internal state */
+    nte_real_t innovation_n; /**< first filter's one-step-ahead innovation f - h(prior), N */
+    nte_real_t nis;          /**< its normalised innovation squared */
+    uint32_t status;         /**< NTE_STATUS_* bits */
+} nte_output_t;
+
+/* ---------------------------------------------------------------------------------------- */
+/* The instance                                                                              */
+/* ---------------------------------------------------------------------------------------- */
+
+/** Physical parameters and the factors d theta / d u (internal). */
+typedef struct nte_theta_t {
+    nte_real_t v[NTE_PARAM_COUNT]; /**< physical values, nte_param_id_t order */
+    nte_real_t ex;                 /**< excess of f1 over kappa (-f2) = d f1 / d u_f1 */
+    nte_real_t mkf2;               /**< -kappa f2 = d f1 / d u_f2 */
+} nte_theta_t;
+
+/**
+ * One estimator.  Allocate it anywhere; initialise with nte_init.  Every field except
+ * `counters` is private: read results through nte_step's output and nte_get_params.
+ */
+typedef struct nte_t {
+    nte_config_t cfg;
+    /* constants derived at init */
+    nte_real_t gate2;
+    nte_real_t q_u[NTE_PARAM_COUNT];
+    nte_real_t nominal[NTE_PARAM_COUNT];
+    nte_real_t ex_nominal;
+    nte_real_t kappa;
+    /* shared model */
+    nte_real_t u[NTE_PARAM_COUNT];
+    nte_theta_t th;
+    nte_real_t z;
+    /* one covariance per filter, dimension 1 + its parameter count (at most 3) */
+    nte_real_t P[NTE_FILTER_COUNT][3][3];
+    uint32_t gated_run[NTE_FILTER_COUNT];
+    /* time line */
+    int64_t t_prev_us;
+    nte_real_t l_prev;
+    bool initialised;
+    uint8_t k_mod3;
+    nte_output_t last;
+    /** Event counters: public, read and clear at will. */
+    nte_counters_t counters;
+} nte_t;
+
+/**
+ * Validate cfg, copy it into self and start from the nominal values (every u = 0, z = 0,
+ * initial covariances).  On error self is left untouched.  Cost: O(1), 7 exp.
+ */
+nte_err_t nte_init(nte_t* self, const nte_config_t* cfg);
+
+/** Back to the state right after nte_init (same config); counters cleared.  Cost: 7 exp. */
+nte_err_t nte_reset(nte_t* self);
+
+/**
+ * Process one sample and write the estimate to *out (out may be NULL).  Invalid samples
+ * (non-finite, out of range, time not increasing) are counted, flagged NTE_STATUS_REJECTED and
+ * leave the state unchanged; out then repeats the previous estimate.  Cost: see COST above;
+ * constant for a given config.  Returns nte_err_ok or nte_err_null_argument.
+ */
+nte_err_t nte_step(nte_t* self, const nte_sample_t* sample, nte_output_t* out);
+
+/**
+ * The identified parameters (Model I: sigma0, sigma1, sigma2, f1, f2, alpha; Model II: sigma0,
+ * sigma1, sigma2, f1, beta — reference MODEL_PARAMS order) with their standard deviations.
+ * Writes at most `capacity` entries and returns how many the model identifies.  Before the
+ * first accepted sample every value and sd is 0 (as the reference reports).  Cost: one sqrt
+ * per parameter.
+ */
+size_t nte_get_params(const nte_t* self, nte_param_estimate_t* out, size_t capacity);
+
+/** Name of a parameter ("sigma0", ...), or "?" . Cost: O(1). */
+const char* nte_param_name(nte_param_id_t id);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* NTE_H */

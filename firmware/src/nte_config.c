@@ -1,0 +1,157 @@
+/*
+ * The two tuning profiles of reference_py/config.py and the validation nte_init applies.
+ * Every default comes from nte_constants.h, generated from the reference, so each field holds
+ * exactly the reference's value rounded to nte_real_t.
+ */
+#include "nte_real.h"
+
+static void set_common(nte_config_t* cfg, const int32_t model, const nte_schedule_t schedule)
+{
+    cfg->model = model;
+    cfg->schedule = schedule;
+    cfg->substeps = 1;
+    cfg->gate_reopen_after = 10;
+    cfg->sign_inflation = true;
+    cfg->eps_mm_s = NTE_K_DEF_EPS_MM_S;
+    cfg->beta0 = NTE_K_DEF_BETA0;
+    cfg->r_n2 = NTE_K_DEF_R_N2;
+    cfg->q_z = NTE_K_DEF_Q_Z;
+    for (size_t j = 0U; j < NTE_PARAM_COUNT; j++) {
+        cfg->q_u[j] = (nte_real_t)NTE_Q_U_USE_DEFAULT;
+    }
+    cfg->q_u_default = NTE_K_DEF_Q_U_DEFAULT;
+    cfg->p0_z = NTE_K_DEF_P0_Z;
+    cfg->p0_u = NTE_K_DEF_P0_U;
+    cfg->gate_sigma = NTE_K_DEF_GATE_SIGMA;
+    cfg->u_max = NTE_K_DEF_U_MAX;
+    cfg->var_floor_z = NTE_K_DEF_VAR_FLOOR_Z;
+    cfg->var_floor_u = NTE_K_DEF_VAR_FLOOR_U;
+    cfg->v_still_mm_s = NTE_K_DEF_V_STILL_MM_S;
+    cfg->dt_max_s = NTE_K_DEF_DT_MAX_S;
+    cfg->depth_min_mm = NTE_K_DEF_DEPTH_MIN_MM;
+    cfg->depth_max_mm = NTE_K_DEF_DEPTH_MAX_MM;
+    cfg->speed_max_mm_s = NTE_K_DEF_SPEED_MAX_MM_S;
+    cfg->force_max_n = NTE_K_DEF_FORCE_MAX_N;
+    cfg->nominal[nte_param_sigma0] = NTE_K_NOMINAL_SIGMA0;
+    cfg->nominal[nte_param_sigma1] = NTE_K_NOMINAL_SIGMA1;
+    cfg->nominal[nte_param_sigma2] = NTE_K_NOMINAL_SIGMA2;
+    cfg->nominal[nte_param_f1] = NTE_K_NOMINAL_F1;
+    cfg->nominal[nte_param_f2] = NTE_K_NOMINAL_F2;
+    cfg->nominal[nte_param_alpha] = NTE_K_NOMINAL_ALPHA;
+    cfg->nominal[nte_param_beta] = NTE_K_NOMINAL_BETA;
+    cfg->f1_excess = NTE_K_NOMINAL_F1_EXCESS;
+}
+
+void nte_config_default(nte_config_t* cfg, const int32_t model, const nte_schedule_t schedule)
+{
+    if (cfg != NULL) {
+        set_common(cfg, model, schedule);
+    }
+}
+
+void nte_config_paper(nte_config_t* cfg, const int32_t model, const nte_schedule_t schedule)
+{
+    if (cfg == NULL) {
+        return;
+    }
+    set_common(cfg, model, schedule);
+    cfg->r_n2 = NTE_K_PAPER_R_N2;
+    cfg->p0_u = NTE_K_PAPER_P0_U;
+    if (model == 1) {
+        cfg->q_u[nte_param_f2] = NTE_K_PAPER_Q_M1_F2;
+        cfg->q_u[nte_param_sigma0] = NTE_K_PAPER_Q_M1_SIGMA0;
+        cfg->q_u[nte_param_f1] = NTE_K_PAPER_Q_M1_F1;
+        cfg->q_u[nte_param_sigma1] = NTE_K_PAPER_Q_M1_SIGMA1;
+        cfg->q_u[nte_param_alpha] = NTE_K_PAPER_Q_M1_ALPHA;
+        cfg->q_u[nte_param_sigma2] = NTE_K_PAPER_Q_M1_SIGMA2;
+    } else if (model == 2) {
+        cfg->q_u[nte_param_sigma0] = NTE_K_PAPER_Q_M2_SIGMA0;
+        cfg->q_u[nte_param_f1] = NTE_K_PAPER_Q_M2_F1;
+        cfg->q_u[nte_param_sigma1] = NTE_K_PAPER_Q_M2_SIGMA1;
+        cfg->q_u[nte_param_beta] = NTE_K_PAPER_Q_M2_BETA;
+        cfg->q_u[nte_param_sigma2] = NTE_K_PAPER_Q_M2_SIGMA2;
+    } else {
+        /* an invalid model keeps the default q_u; nte_init refuses it */
+    }
+}
+
+static nte_err_t check_positive(const nte_real_t v)
+{
+    if (!nte_isfinite(v)) {
+        return nte_err_not_finite;
+    }
+    return (v > NTE_C(0.0)) ? nte_err_ok : nte_err_not_positive;
+}
+
+static nte_err_t check_nonnegative(const nte_real_t v)
+{
+    if (!nte_isfinite(v)) {
+        return nte_err_not_finite;
+    }
+    return (v >= NTE_C(0.0)) ? nte_err_ok : nte_err_not_positive;
+}
+
+nte_err_t nte_config_check(const nte_config_t* cfg)
+{
+    if (cfg == NULL) {
+        return nte_err_null_argument;
+    }
+    if ((cfg->model != 1) && (cfg->model != 2)) {
+        return nte_err_bad_model;
+    }
+    if ((cfg->schedule != nte_schedule_all) && (cfg->schedule != nte_schedule_rotate)) {
+        return nte_err_bad_schedule;
+    }
+    if ((cfg->gate_reopen_after < 1) || (cfg->gate_reopen_after > 1000)) {
+        return nte_err_bad_gate_reopen;
+    }
+    if ((cfg->substeps < 1) || (cfg->substeps > 16)) {
+        return nte_err_bad_substeps;
+    }
+    const nte_real_t positive[] = {cfg->eps_mm_s,   cfg->beta0,          cfg->r_n2,
+                                   cfg->p0_z,       cfg->p0_u,           cfg->gate_sigma,
+                                   cfg->u_max,      cfg->var_floor_z,    cfg->var_floor_u,
+                                   cfg->dt_max_s,   cfg->depth_max_mm,   cfg->speed_max_mm_s,
+                                   cfg->force_max_n};
+    for (size_t i = 0U; i < (sizeof positive / sizeof positive[0]); i++) {
+        const nte_err_t e = check_positive(positive[i]);
+        if (e != nte_err_ok) {
+            return e;
+        }
+    }
+    const nte_real_t nonnegative[] = {cfg->q_z, cfg->q_u_default, cfg->v_still_mm_s};
+    for (size_t i = 0U; i < (sizeof nonnegative / sizeof nonnegative[0]); i++) {
+        const nte_err_t e = check_nonnegative(nonnegative[i]);
+        if (e != nte_err_ok) {
+            return e;
+        }
+    }
+    for (size_t j = 0U; j < NTE_PARAM_COUNT; j++) {
+        if (!nte_isfinite(cfg->q_u[j])) {
+            return nte_err_not_finite;
+        }
+    }
+    if (!nte_isfinite(cfg->depth_min_mm)) {
+        return nte_err_not_finite;
+    }
+    if (cfg->depth_min_mm > cfg->depth_max_mm) {
+        return nte_err_bad_range;
+    }
+    for (size_t j = 0U; j < NTE_PARAM_COUNT; j++) {
+        if (!nte_isfinite(cfg->nominal[j])) {
+            return nte_err_bad_nominal;
+        }
+    }
+    if (!nte_isfinite(cfg->f1_excess) || (cfg->f1_excess < NTE_C(0.0))) {
+        return nte_err_bad_f1;
+    }
+    if (!(cfg->f1_excess > NTE_C(0.0))) {
+        const nte_real_t f2 = cfg->nominal[nte_param_f2];
+        const nte_real_t kappa = (f2 < NTE_C(0.0)) ? NTE_C(1.0) : NTE_C(0.0);
+        const nte_real_t ex = cfg->nominal[nte_param_f1] - (kappa * (-f2));
+        if (!(ex > NTE_C(0.0))) {
+            return nte_err_bad_f1;
+        }
+    }
+    return nte_err_ok;
+}

@@ -1,0 +1,117 @@
+/*
+ * EKF kernels: reference_py/ekf.py in C, same operation order (PX4-ECL style: symmetric
+ * covariance on one triangle, sequential scalar update, no matrix inverse).
+ */
+#include "nte_ekf.h"
+
+void nte_ekf_predict(const size_t n, const nte_mat3_t P, const nte_mat3_t F, const nte_real_t* q,
+                     nte_mat3_t out)
+{
+    nte_mat3_t FP;
+    for (size_t i = 0U; i < n; i++) {
+        for (size_t j = 0U; j < n; j++) {
+            nte_real_t acc = F[i][0] * P[0][j];
+            for (size_t k = 1U; k < n; k++) {
+                acc = acc + (F[i][k] * P[k][j]);
+            }
+            FP[i][j] = acc;
+        }
+    }
+    for (size_t i = 0U; i < n; i++) {
+        for (size_t j = i; j < n; j++) {
+            nte_real_t v = FP[i][0] * F[j][0];
+            for (size_t k = 1U; k < n; k++) {
+                v = v + (FP[i][k] * F[j][k]);
+            }
+            if (i == j) {
+                v = v + q[i];
+            }
+            out[i][j] = v;
+            out[j][i] = v;
+        }
+    }
+}
+
+nte_ekf_update_t nte_ekf_joseph_update(const size_t n, nte_real_t* x, nte_mat3_t P,
+                                       const nte_real_t* h, const nte_real_t innovation,
+                                       const nte_real_t r, const nte_real_t gate2,
+                                       const bool open_gate)
+{
+    nte_ekf_update_t res;
+    nte_real_t pht[NTE_EKF_N_MAX];
+    nte_real_t k[NTE_EKF_N_MAX];
+    nte_mat3_t a;
+    nte_mat3_t ap;
+    for (size_t i = 0U; i < n; i++) {
+        nte_real_t acc = P[i][0] * h[0];
+        for (size_t m = 1U; m < n; m++) {
+            acc = acc + (P[i][m] * h[m]);
+        }
+        pht[i] = acc;
+    }
+    nte_real_t s = h[0] * pht[0];
+    for (size_t m = 1U; m < n; m++) {
+        s = s + (h[m] * pht[m]);
+    }
+    s = s + r;
+    for (size_t i = 0U; i < n; i++) {
+        k[i] = pht[i] / s;
+    }
+    res.s = s;
+    res.nis = (innovation * innovation) / s;
+    res.accepted = (res.nis <= gate2) || open_gate;
+    if (!res.accepted) {
+        return res;
+    }
+    for (size_t i = 0U; i < n; i++) {
+        for (size_t j = 0U; j < n; j++) {
+            a[i][j] = ((i == j) ? NTE_C(1.0) : NTE_C(0.0)) - (k[i] * h[j]);
+        }
+    }
+    for (size_t i = 0U; i < n; i++) {
+        for (size_t j = 0U; j < n; j++) {
+            nte_real_t acc = a[i][0] * P[0][j];
+            for (size_t m = 1U; m < n; m++) {
+                acc = acc + (a[i][m] * P[m][j]);
+            }
+            ap[i][j] = acc;
+        }
+    }
+    for (size_t i = 0U; i < n; i++) {
+        for (size_t j = i; j < n; j++) {
+            nte_real_t v = ap[i][0] * a[j][0];
+            for (size_t m = 1U; m < n; m++) {
+                v = v + (ap[i][m] * a[j][m]);
+            }
+            v = v + ((k[i] * r) * k[j]);
+            P[i][j] = v;
+            P[j][i] = v;
+        }
+    }
+    for (size_t i = 0U; i < n; i++) {
+        x[i] = x[i] + (k[i] * innovation);
+    }
+    return res;
+}
+
+bool nte_ekf_positive_definite(const size_t n, const nte_mat3_t P)
+{
+    bool ok = P[0][0] > NTE_C(0.0);
+    if (n >= 2U) {
+        const nte_real_t d2 = (P[0][0] * P[1][1]) - (P[0][1] * P[1][0]);
+        ok = ok && (d2 > NTE_C(0.0));
+    }
+    if (n >= 3U) {
+        const nte_real_t c0 = (P[1][1] * P[2][2]) - (P[1][2] * P[2][1]);
+        const nte_real_t c1 = (P[1][0] * P[2][2]) - (P[1][2] * P[2][0]);
+        const nte_real_t c2 = (P[1][0] * P[2][1]) - (P[1][1] * P[2][0]);
+        const nte_real_t d3 = ((P[0][0] * c0) - (P[0][1] * c1)) + (P[0][2] * c2);
+        ok = ok && (d3 > NTE_C(0.0));
+    }
+    for (size_t i = 0U; i < n; i++) {
+        for (size_t j = 0U; j < n; j++) {
+            ok = ok && nte_isfinite(P[i][j]);
+        }
+    }
+    return ok;
+}

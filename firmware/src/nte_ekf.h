@@ -1,0 +1,35 @@
+/*
+ * Small dense EKF kernels (state dimension n <= 3): reference_py/ekf.py in C.  Every product is
+ * a sum in index order, accumulated left to right; covariances are computed on the upper
+ * triangle and mirrored.  Internal header.
+ */
+#ifndef NTE_EKF_H
+#define NTE_EKF_H
+
+#include "nte_real.h"
+
+#define NTE_EKF_N_MAX 3
+
+typedef nte_real_t nte_mat3_t[NTE_EKF_N_MAX][NTE_EKF_N_MAX];
+
+/** out = F P F^T + diag(q).  out must not alias P. */
+void nte_ekf_predict(size_t n, const nte_mat3_t P, const nte_mat3_t F, const nte_real_t* q,
+                     nte_mat3_t out);
+
+/** Result of one scalar update. */
+typedef struct nte_ekf_update_t {
+    nte_real_t s;   /**< innovation variance h P h^T + r */
+    nte_real_t nis; /**< innovation^2 / s */
+    bool accepted;  /**< the gate let the update through (or open_gate forced it) */
+} nte_ekf_update_t;
+
+/** Scalar measurement update in Joseph form behind an innovation gate (ekf.joseph_update).
+ *  x and P are updated in place only when accepted. */
+nte_ekf_update_t nte_ekf_joseph_update(size_t n, nte_real_t* x, nte_mat3_t P, const nte_real_t* h,
+                                       nte_real_t innovation, nte_real_t r, nte_real_t gate2,
+                                       bool open_gate);
+
+/** Sylvester's criterion on the leading minors, and every entry finite. */
+bool nte_ekf_positive_definite(size_t n, const nte_mat3_t P);
+
+#endif /* NTE_EKF_H */

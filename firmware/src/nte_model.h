@@ -1,0 +1,67 @@
+/*
+ * The force model (paper eqs. 1-4), its partial derivatives and the RK3 step with forward
+ * sensitivities: the C twin of reference_py/model.py and reference_py/rk3.py, expression by
+ * expression.  Derivations: reference_py/JACOBIANS.md.  Internal header.
+ */
+#ifndef NTE_MODEL_H
+#define NTE_MODEL_H
+
+#include "nte_real.h"
+
+/** Depth-dependent terms shared by rate and output (reference DepthTerms). */
+typedef struct nte_depth_terms_t {
+    nte_real_t l;         /**< depth, mm, clamped at 0 */
+    nte_real_t e;         /**< exp(-alpha l) */
+    nte_real_t g;         /**< f1 + f2 e */
+    nte_real_t inv_g;     /**< 1 / g */
+    nte_real_t b;         /**< sigma0 / g */
+    nte_real_t dg_dalpha; /**< -f2 l e */
+} nte_depth_terms_t;
+
+/** Output terms (reference OutputTerms). */
+typedef struct nte_output_terms_t {
+    nte_real_t m;  /**< beta - b z */
+    nte_real_t fr; /**< sigma1 e m + sigma2, N/mm */
+    nte_real_t sl; /**< s(v) l */
+    nte_real_t h;  /**< the force, N */
+} nte_output_terms_t;
+
+/** Sensitivities wanted from one RK3 step: up to NTE_IDENTIFIED_MAX parameter indices. */
+typedef struct nte_rk3_result_t {
+    nte_real_t z;
+    nte_real_t dz_dz0;
+    nte_real_t dz_du[NTE_PARAM_COUNT]; /**< indexed by nte_param_id_t; only requested ones set */
+} nte_rk3_result_t;
+
+/** theta from the seven log-ratios (ScaledParams.theta). */
+void nte_model_theta(nte_theta_t* th, const nte_real_t nominal[NTE_PARAM_COUNT],
+                     nte_real_t ex_nominal, nte_real_t kappa, const nte_real_t u[NTE_PARAM_COUNT]);
+
+/** theta after the parameters in ids[0..count) changed (ScaledParams.refresh). */
+void nte_model_refresh(nte_theta_t* th, const nte_real_t nominal[NTE_PARAM_COUNT],
+                       nte_real_t ex_nominal, nte_real_t kappa,
+                       const nte_real_t u[NTE_PARAM_COUNT], const uint8_t* ids, size_t count);
+
+nte_real_t nte_model_clamp_depth(nte_real_t l);
+void nte_model_depth_terms(nte_depth_terms_t* d, const nte_theta_t* th, nte_real_t l);
+nte_real_t nte_model_rate(const nte_theta_t* th, const nte_depth_terms_t* d, nte_real_t z);
+nte_real_t nte_model_rate_dz(const nte_depth_terms_t* d);
+/** d(dz/dt)/du_id; *present = false when the rate does not depend on it (sigma1, sigma2). */
+nte_real_t nte_model_rate_du(const nte_theta_t* th, const nte_depth_terms_t* d, nte_real_t z,
+                             uint8_t id, bool* present);
+void nte_model_output(nte_output_terms_t* o, const nte_theta_t* th, const nte_depth_terms_t* d,
+                      nte_real_t z, nte_real_t s);
+nte_real_t nte_model_output_dz(const nte_theta_t* th, const nte_depth_terms_t* d,
+                               const nte_output_terms_t* o);
+nte_real_t nte_model_output_du(const nte_theta_t* th, const nte_depth_terms_t* d, nte_real_t z,
+                               const nte_output_terms_t* o, uint8_t id);
+nte_real_t nte_model_steady_state_z(const nte_theta_t* th, const nte_depth_terms_t* d);
+nte_real_t nte_model_smooth_sign(nte_real_t v, nte_real_t eps);
+
+/** One sample of Kutta's RK3 on `substeps` sub-steps from depth l_a to l_b over dt seconds,
+ *  with dz/dz0 and dz/du_id for every id in ids[0..count) (rk3.py rk3_step). */
+void nte_model_rk3(nte_rk3_result_t* res, const nte_theta_t* th, nte_real_t z, nte_real_t l_a,
+                   nte_real_t l_b, nte_real_t dt, int32_t substeps, const uint8_t* ids,
+                   size_t count);
+
+#endif /* NTE_MODEL_H */

@@ -1,0 +1,91 @@
+/*
+ * The working precision and the few primitives every numeric file uses.
+ *
+ * Only + - * /, comparisons and integer<->float conversions (all correctly rounded IEEE-754
+ * operations) appear here, so results are the same bits on every conforming target.  exp and
+ * tanh mirror reference_py/fmath.py operation for operation.  Internal header.
+ */
+#ifndef NTE_REAL_H
+#define NTE_REAL_H
+
+#include "nte.h"
+#include "nte_constants.h"
+
+#include <math.h>
+#include <stdint.h>
+#include <string.h>
+
+#if NTE_DOUBLE
+#define NTE_C(x) (x)
+#else
+/** A decimal literal in the working precision (exact small numbers only: 0, 0.5, 1, 2, ...). */
+#define NTE_C(x) (x##f)
+#endif
+
+/** |x| (exact: clears the sign bit, like numpy's abs). */
+static inline nte_real_t nte_abs(const nte_real_t x)
+{
+#if NTE_DOUBLE
+    return fabs(x);
+#else
+    return fabsf(x);
+#endif
+}
+
+static inline bool nte_isfinite(const nte_real_t x)
+{
+    return isfinite(x) != 0;
+}
+
+/** 2^n for n in the normal exponent range, assembled from the exponent bits. */
+static inline nte_real_t nte_pow2(const int32_t n)
+{
+    nte_real_t out;
+#if NTE_DOUBLE
+    const uint64_t bits = ((uint64_t)(int64_t)(n + 1023)) << 52U;
+#else
+    const uint32_t bits = ((uint32_t)(n + 127)) << 23U;
+#endif
+    memcpy(&out, &bits, sizeof out);
+    return out;
+}
+
+/** exp(x), |x| clamped to NTE_K_EXP_XMAX; reference_py/fmath.py Real.exp. */
+static inline nte_real_t nte_exp(nte_real_t x)
+{
+    static const nte_real_t coeffs[NTE_K_EXP_DEGREE + 1] = NTE_K_EXP_COEFFS;
+    if (isnan(x)) {
+        return x;
+    }
+    if (x > NTE_K_EXP_XMAX) {
+        x = NTE_K_EXP_XMAX;
+    }
+    if (x < -NTE_K_EXP_XMAX) {
+        x = -NTE_K_EXP_XMAX;
+    }
+    nte_real_t t = x * NTE_K_EXP_LOG2E;
+    t = (t >= NTE_C(0.0)) ? (t + NTE_C(0.5)) : (t - NTE_C(0.5));
+    const int32_t n = (int32_t)t;
+    const nte_real_t nf = (nte_real_t)n;
+    const nte_real_t r = (x - (nf * NTE_K_EXP_LN2_HI)) - (nf * NTE_K_EXP_LN2_LO);
+    nte_real_t p = coeffs[NTE_K_EXP_DEGREE];
+    for (int i = NTE_K_EXP_DEGREE - 1; i >= 0; i--) {
+        p = (p * r) + coeffs[i];
+    }
+    return p * nte_pow2(n);
+}
+
+/** tanh(x) = sign(x) (1 - e)/(1 + e), e = exp(-2|x|); reference_py/fmath.py Real.tanh. */
+static inline nte_real_t nte_tanh(const nte_real_t x)
+{
+    const nte_real_t a = nte_abs(x);
+    const nte_real_t ac = (a > NTE_K_EXP_TANH_XMAX) ? NTE_K_EXP_TANH_XMAX : a;
+    const nte_real_t e = nte_exp(-(ac + ac));
+    nte_real_t t = (NTE_C(1.0) - e) / (NTE_C(1.0) + e);
+    if (a > NTE_K_EXP_TANH_XMAX) {
+        t = NTE_C(1.0);
+    }
+    return (x < NTE_C(0.0)) ? -t : t;
+}
+
+#endif /* NTE_REAL_H */

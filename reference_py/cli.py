@@ -1,0 +1,168 @@
+"""nte-ref: simulate needle insertions and run the force estimator on them (numpy reference).
+
+    nte-ref simulate --preset NAME --depth MM --dwell S [--speed MM_S] [--rate HZ] [--noise N]
+                     [--seed K] [--cycles C] [--accel MM_S2] --out FILE.csv
+    nte-ref estimate FILE.csv --model 1|2 [--estimator bank] [--preset NAME] [--init-seed K]
+                     [--init-factor F] [--precision float64|float32] [--schedule all|rotate]
+                     [--profile default|paper] --out EST.csv [--plot EST.png]
+    nte-ref evaluate [--preset NAME] [--model 1|2] [--factor F] [--seeds N] [--precision P]
+                     [--profile P] [--schedule S]
+    nte-ref bench [--samples N]
+
+Exit status: 0 on success, 2 on bad input (the message on stderr names the file, line and column).
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import Sequence
+
+import numpy as np
+
+from .csvio import CsvError, read_trial, write_atomic
+from .params import PRESETS, get_preset
+
+EXIT_BAD_INPUT = 2
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> None:  # argparse exits with 2 too; keep the prefix short
+        self.print_usage(sys.stderr)
+        print(f"nte-ref: error: {message}", file=sys.stderr)
+        raise SystemExit(EXIT_BAD_INPUT)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    presets = ", ".join(PRESETS)
+    p = _Parser(prog="nte-ref", description=__doc__.split("\n\n")[0],
+                formatter_class=argparse.RawDescriptionHelpFormatter,
+                epilog=f"presets: {presets}\nunits: depth mm, speed mm/s, time s, force N")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    s = sub.add_parser("simulate", help="simulate an insertion-dwell-retraction to CSV",
+                       description="Simulate the force of a preset tissue along an LSPB "
+                                   "insertion, dwell and retraction; write "
+                                   "t_s,depth_mm,velocity_mm_s,force_n,force_true_n.")
+    s.add_argument("--preset", required=True, help="parameter set (see the list below)")
+    s.add_argument("--depth", type=float, required=True, metavar="MM", help="insertion depth, mm")
+    s.add_argument("--dwell", type=float, required=True, metavar="S", help="dwell at depth, s")
+    s.add_argument("--speed", type=float, metavar="MM_S", help="cruise speed (default: preset's)")
+    s.add_argument("--accel", type=float, default=100.0, metavar="MM_S2",
+                   help="blend acceleration, mm/s^2 (default 100)")
+    s.add_argument("--rate", type=float, default=200.0, metavar="HZ",
+                   help="sample rate (default 200)")
+    s.add_argument("--noise", type=float, default=2e-3, metavar="N",
+                   help="white force noise standard deviation, N (default 0.002)")
+    s.add_argument("--seed", type=int, default=1, metavar="K", help="noise seed (default 1)")
+    s.add_argument("--cycles", type=int, default=1, help="identical insertion cycles (default 1)")
+    s.add_argument("--out", required=True, metavar="FILE.csv")
+
+    e = sub.add_parser("estimate", help="run the estimator on a CSV",
+                       description="Run the estimator over a CSV of t_s, depth_mm, force_n "
+                                   "(velocity_mm_s optional, else central differences of "
+                                   "depth); write one row per sample: t_s, force_hat_n, z, "
+                                   "innovation_n, status, then every identified parameter and "
+                                   "its standard deviation.")
+    e.add_argument("csv", metavar="FILE.csv")
+    e.add_argument("--model", type=int, choices=(1, 2), required=True)
+    e.add_argument("--estimator", default="bank", choices=("bank",),
+                   help="bank: the paper's three filters in switching mode")
+    e.add_argument("--preset", default="paper-10mms",
+                   help="starting (nominal) parameters; Model II also takes its fixed f2 and "
+                        "alpha from it, Model I its beta0 (default paper-10mms)")
+    e.add_argument("--init-seed", type=int, default=0, metavar="K",
+                   help="0: start at the preset; K > 0: multiply each identified parameter by "
+                        "a factor drawn log-uniformly from [1/F, F] with seed K")
+    e.add_argument("--init-factor", type=float, default=5.0, metavar="F", help="default 5")
+    e.add_argument("--precision", default="float64", choices=("float64", "float32"))
+    e.add_argument("--schedule", default="all", choices=("all", "rotate"),
+                   help="all: three filters every sample; rotate: one filter per sample")
+    e.add_argument("--profile", default="default", choices=("default", "paper"),
+                   help="tuning: ours, or the paper's Table I mapped to scaled parameters")
+    e.add_argument("--out", required=True, metavar="EST.csv")
+    e.add_argument("--plot", metavar="EST.png", help="also draw force and parameters")
+
+    v = sub.add_parser("evaluate", help="estimation quality over many seeds (printed table)",
+                       description="Simulate the quality scenario (LSPB to 50 mm, 1 s dwell, "
+                                   "200 Hz, 2 mN noise) for N seeds and print the metrics.")
+    v.add_argument("--preset", default="paper-10mms")
+    v.add_argument("--model", type=int, choices=(1, 2), default=2)
+    v.add_argument("--factor", type=float, default=1.25, help="start within this factor")
+    v.add_argument("--seeds", type=int, default=100)
+    v.add_argument("--precision", default="float64", choices=("float64", "float32"))
+    v.add_argument("--profile", default="default", choices=("default", "paper"))
+    v.add_argument("--schedule", default="all", choices=("all", "rotate"))
+    v.add_argument("--cycles", type=int, default=1)
+
+    b = sub.add_parser("bench", help="samples per second of the reference (and of filterpy)")
+    b.add_argument("--samples", type=int, default=10000)
+    return p
+
+
+def _simulate(a: argparse.Namespace) -> int:
+    from .simulate import simulate_force
+    from .trajectory import TrajectorySpec, lspb_profile
+
+    preset = get_preset(a.preset)
+    spec = TrajectorySpec(depth_mm=a.depth, speed_mm_s=a.speed or preset.speed_mm_s,
+                          accel_mm_s2=a.accel, dwell_s=a.dwell, rate_hz=a.rate, cycles=a.cycles)
+    if not (np.isfinite(a.noise) and a.noise >= 0):
+        raise ValueError(f"--noise must be >= 0 (got {a.noise})")
+    t, l, vel, _ = lspb_profile(spec)
+    truth = simulate_force(preset.params, t, l, vel)[0][0]
+    noisy = truth + np.random.default_rng(a.seed).normal(0.0, a.noise, len(t))
+    lines = ["t_s,depth_mm,velocity_mm_s,force_n,force_true_n"]
+    lines += ["%.17g,%.17g,%.17g,%.17g,%.17g" % row for row in zip(t, l, vel, noisy, truth)]
+    write_atomic(a.out, lines)
+    print(f"wrote {len(t)} samples ({t[-1]:.2f} s) to {a.out}")
+    return 0
+
+
+def _estimate(a: argparse.Namespace) -> int:
+    from .estimate import estimate_csv_lines, run_estimate
+    from .params import MODEL_PARAMS
+
+    preset = get_preset(a.preset)
+    trial = read_trial(a.csv)
+    run = run_estimate(trial, preset, a.model, a.estimator, a.precision, a.profile, a.schedule,
+                       a.init_seed, a.init_factor, progress=True)
+    write_atomic(a.out, estimate_csv_lines(run))
+    if a.plot:
+        from .plotting import plot_estimate
+        plot_estimate(run, a.plot)
+    print(f"{len(run.t_s)} samples, Model {'I' if a.model == 1 else 'II'}, {a.precision}; "
+          f"final estimates (± 1 sd):")
+    for j, name in enumerate(MODEL_PARAMS[a.model]):
+        print(f"  {name:7s} = {float(run.params[-1, j]):.6g} ± {float(run.params_sd[-1, j]):.3g}")
+    print(f"wrote {a.out}" + (f" and {a.plot}" if a.plot else ""))
+    return 0
+
+
+def _evaluate(a: argparse.Namespace) -> int:
+    from .quality import QualityCase, format_summary, run_quality
+
+    case = QualityCase(a.preset, a.model, a.factor, a.precision, a.profile, a.schedule,
+                       a.seeds, a.cycles)
+    print(format_summary([run_quality(case, progress=True)]))
+    return 0
+
+
+def _bench(a: argparse.Namespace) -> int:
+    from .bench import run_bench
+    run_bench(a.samples)
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    handlers = {"simulate": _simulate, "estimate": _estimate, "evaluate": _evaluate,
+                "bench": _bench}
+    try:
+        return handlers[args.command](args)
+    except (CsvError, ValueError) as exc:
+        print(f"nte-ref: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+
+
+if __name__ == "__main__":
+    sys.exit(main())
