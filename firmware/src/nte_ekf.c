@@ -4,7 +4,7 @@
  */
 #include "nte_ekf.h"
 
-void nte_ekf_predict(const size_t n, const nte_mat3_t P, const nte_mat3_t F, const nte_real_t* q,
+void nte_ekf_predict(const size_t n, nte_mat3_t P, nte_mat3_t F, const nte_real_t* q,
                      nte_mat3_t out)
 {
     nte_mat3_t FP;
@@ -38,8 +38,8 @@ nte_ekf_update_t nte_ekf_joseph_update(const size_t n, nte_real_t* x, nte_mat3_t
                                        const bool open_gate)
 {
     nte_ekf_update_t res;
-    nte_real_t pht[NTE_EKF_N_MAX];
-    nte_real_t k[NTE_EKF_N_MAX];
+    nte_real_t pht[NTE_EKF_N_MAX] = {NTE_C(0.0)};
+    nte_real_t k[NTE_EKF_N_MAX] = {NTE_C(0.0)};
     nte_mat3_t a;
     nte_mat3_t ap;
     for (size_t i = 0U; i < n; i++) {
@@ -94,7 +94,7 @@ nte_ekf_update_t nte_ekf_joseph_update(const size_t n, nte_real_t* x, nte_mat3_t
     return res;
 }
 
-bool nte_ekf_positive_definite(const size_t n, const nte_mat3_t P)
+bool nte_ekf_positive_definite(const size_t n, nte_mat3_t P)
 {
     bool ok = P[0][0] > NTE_C(0.0);
     if (n >= 2U) {

@@ -12,8 +12,9 @@
 
 typedef nte_real_t nte_mat3_t[NTE_EKF_N_MAX][NTE_EKF_N_MAX];
 
-/** out = F P F^T + diag(q).  out must not alias P. */
-void nte_ekf_predict(size_t n, const nte_mat3_t P, const nte_mat3_t F, const nte_real_t* q,
+/** out = F P F^T + diag(q).  P and F are read only (not const: C99 array qualifiers);
+ *  out must not alias P. */
+void nte_ekf_predict(size_t n, nte_mat3_t P, nte_mat3_t F, const nte_real_t* q,
                      nte_mat3_t out);
 
 /** Result of one scalar update. */
@@ -29,7 +30,7 @@ nte_ekf_update_t nte_ekf_joseph_update(size_t n, nte_real_t* x, nte_mat3_t P, co
                                        nte_real_t innovation, nte_real_t r, nte_real_t gate2,
                                        bool open_gate);
 
-/** Sylvester's criterion on the leading minors, and every entry finite. */
-bool nte_ekf_positive_definite(size_t n, const nte_mat3_t P);
+/** Sylvester's criterion on the leading minors, and every entry finite (P read only). */
+bool nte_ekf_positive_definite(size_t n, nte_mat3_t P);
 
 #endif /* NTE_EKF_H */

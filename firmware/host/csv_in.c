@@ -1,0 +1,373 @@
+/* Strict CSV reader of the host programs; mirrors reference_py/csvio.py read_trial. */
+#include "csv_in.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define MAX_COLS 64
+
+static void fail(char* err, size_t size, const char* fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    (void)vsnprintf(err, size, fmt, ap);
+    va_end(ap);
+}
+
+void nte_py_repr(const double x, char* buf, const size_t size)
+{
+    if (isnan(x)) {
+        (void)snprintf(buf, size, "nan");
+        return;
+    }
+    if (isinf(x)) {
+        (void)snprintf(buf, size, (x < 0.0) ? "-inf" : "inf");
+        return;
+    }
+    char e[40];
+    int prec = 1;
+    for (; prec <= 17; prec++) {
+        (void)snprintf(e, sizeof e, "%.*e", prec - 1, x);
+        const double back = strtod(e, NULL);
+        if (memcmp(&back, &x, sizeof back) == 0) {
+            break;
+        }
+    }
+    /* e = [-]d[.ddd]e[+-]XX : digits and decimal exponent */
+    char digits[24];
+    size_t nd = 0U;
+    const char* p = e;
+    const int neg = (*p == '-');
+    if (neg) {
+        p++;
+    }
+    for (; (*p != 'e') && (*p != '\0'); p++) {
+        if ((*p >= '0') && (*p <= '9') && (nd < (sizeof digits - 1U))) {
+            digits[nd++] = *p;
+        }
+    }
+    digits[nd] = '\0';
+    const int exp10 = atoi(p + 1);
+    char out[64];
+    size_t o = 0U;
+    if (neg) {
+        out[o++] = '-';
+    }
+    if ((exp10 < -4) || (exp10 >= 16)) {
+        out[o++] = digits[0];
+        if (nd > 1U) {
+            out[o++] = '.';
+            for (size_t i = 1U; i < nd; i++) {
+                out[o++] = digits[i];
+            }
+        }
+        (void)snprintf(out + o, sizeof out - o, "e%c%02d", (exp10 < 0) ? '-' : '+', abs(exp10));
+    } else if (exp10 < 0) {
+        out[o++] = '0';
+        out[o++] = '.';
+        for (int i = -1; i > exp10; i--) {
+            out[o++] = '0';
+        }
+        for (size_t i = 0U; i < nd; i++) {
+            out[o++] = digits[i];
+        }
+        out[o] = '\0';
+    } else {
+        const size_t ip = (size_t)exp10 + 1U;
+        for (size_t i = 0U; i < ip; i++) {
+            out[o++] = (i < nd) ? digits[i] : '0';
+        }
+        out[o++] = '.';
+        if (nd > ip) {
+            for (size_t i = ip; i < nd; i++) {
+                out[o++] = digits[i];
+            }
+        } else {
+            out[o++] = '0';
+        }
+        out[o] = '\0';
+    }
+    (void)snprintf(buf, size, "%s", out);
+}
+
+static char* strip(char* s)
+{
+    while ((*s != '\0') && (strchr(" \t\r\n\v\f", *s) != NULL)) {
+        s++;
+    }
+    size_t n = strlen(s);
+    while ((n > 0U) && (strchr(" \t\r\n\v\f", s[n - 1U]) != NULL)) {
+        s[--n] = '\0';
+    }
+    return s;
+}
+
+/* Split `line` in place at commas; returns the number of cells (or MAX_COLS + 1 if more). */
+static size_t split(char* line, char** cells)
+{
+    size_t n = 0U;
+    char* p = line;
+    for (;;) {
+        char* c = strchr(p, ',');
+        if (n < MAX_COLS) {
+            cells[n] = p;
+        }
+        n++;
+        if (c == NULL) {
+            break;
+        }
+        *c = '\0';
+        p = c + 1;
+    }
+    return n;
+}
+
+static int push(nte_trial_t* tr, size_t* cap, const double t, const double l, const double v,
+                const double f)
+{
+    if (tr->n == *cap) {
+        const size_t nc = (*cap == 0U) ? 1024U : (*cap * 2U);
+        double* a[4] = {tr->t_s, tr->depth_mm, tr->velocity_mm_s, tr->force_n};
+        for (size_t i = 0U; i < 4U; i++) {
+            double* b = realloc(a[i], nc * sizeof(double));
+            if (b == NULL) {
+                return -1;
+            }
+            a[i] = b;
+        }
+        tr->t_s = a[0];
+        tr->depth_mm = a[1];
+        tr->velocity_mm_s = a[2];
+        tr->force_n = a[3];
+        *cap = nc;
+    }
+    tr->t_s[tr->n] = t;
+    tr->depth_mm[tr->n] = l;
+    tr->velocity_mm_s[tr->n] = v;
+    tr->force_n[tr->n] = f;
+    tr->n++;
+    return 0;
+}
+
+static char* slurp(const char* path, size_t* len)
+{
+    FILE* fh = fopen(path, "rb");
+    if (fh == NULL) {
+        return NULL;
+    }
+    size_t cap = 65536U;
+    size_t n = 0U;
+    char* buf = malloc(cap);
+    while (buf != NULL) {
+        if ((n + 1U) >= cap) {
+            char* b = realloc(buf, cap * 2U);
+            if (b == NULL) {
+                free(buf);
+                buf = NULL;
+                break;
+            }
+            buf = b;
+            cap *= 2U;
+        }
+        const size_t got = fread(buf + n, 1U, cap - n - 1U, fh);
+        n += got;
+        if (got == 0U) {
+            break;
+        }
+    }
+    (void)fclose(fh);
+    if (buf != NULL) {
+        buf[n] = '\0';
+        *len = n;
+    }
+    return buf;
+}
+
+int nte_trial_read(const char* path, nte_trial_t* tr, char* err, const size_t es)
+{
+    memset(tr, 0, sizeof *tr);
+    size_t len = 0U;
+    errno = 0;
+    char* text = slurp(path, &len);
+    if (text == NULL) {
+        fail(err, es, "%s: cannot read: %s", path, strerror((errno != 0) ? errno : EIO));
+        return -1;
+    }
+    if (strlen(text) != len) {
+        fail(err, es, "%s: not a text file", path);
+        free(text);
+        return -1;
+    }
+    size_t n_lines = 1U;
+    for (size_t i = 0U; i < len; i++) {
+        n_lines += (text[i] == '\n') ? 1U : 0U;
+    }
+    char* header[MAX_COLS];
+    char hbuf[4096];
+    size_t ncols = 0U;
+    size_t header_line = 0U;
+    int ti = -1;
+    int li = -1;
+    int fi = -1;
+    int vi = -1;
+    size_t cap = 0U;
+    double prev_t = -INFINITY;
+    int rc = 0;
+    char* line = text;
+    for (size_t lineno = 1U; (lineno <= n_lines) && (rc == 0); lineno++) {
+        char* nl = strchr(line, '\n');
+        if (nl != NULL) {
+            *nl = '\0';
+        }
+        char* next = (nl != NULL) ? (nl + 1) : (line + strlen(line));
+        size_t ll = strlen(line);
+        while ((ll > 0U) && (line[ll - 1U] == '\r')) {
+            line[--ll] = '\0';
+        }
+        if (line[0] == '#') {
+            line = next;
+            continue;
+        }
+        if (ll == 0U) {
+            if (lineno != n_lines) {
+                fail(err, es, "%s:%zu: empty line", path, lineno);
+                rc = -1;
+            }
+            line = next;
+            continue;
+        }
+        char* cells[MAX_COLS];
+        const size_t nc = split(line, cells);
+        if (ncols == 0U) {
+            if (nc > MAX_COLS) {
+                fail(err, es, "%s:%zu: more than %d columns", path, lineno, MAX_COLS);
+                rc = -1;
+                break;
+            }
+            size_t o = 0U;
+            for (size_t c = 0U; c < nc; c++) {
+                header[c] = strip(cells[c]);
+                const int w = snprintf(hbuf + o, sizeof hbuf - o, "%s%s", (c > 0U) ? ", " : "",
+                                       header[c]);
+                if ((w > 0) && ((size_t)w < (sizeof hbuf - o))) {
+                    o += (size_t)w;
+                }
+                if (strcmp(header[c], "t_s") == 0) { ti = (int)c; }
+                if (strcmp(header[c], "depth_mm") == 0) { li = (int)c; }
+                if (strcmp(header[c], "force_n") == 0) { fi = (int)c; }
+                if (strcmp(header[c], "velocity_mm_s") == 0) { vi = (int)c; }
+            }
+            const char* req[3] = {"t_s", "depth_mm", "force_n"};
+            const int idx[3] = {ti, li, fi};
+            for (size_t r = 0U; (r < 3U) && (rc == 0); r++) {
+                if (idx[r] < 0) {
+                    fail(err, es, "%s:%zu: column '%s': missing from the header (have: %s)", path,
+                         lineno, req[r], hbuf);
+                    rc = -1;
+                }
+            }
+            for (size_t a = 0U; (a < nc) && (rc == 0); a++) {
+                for (size_t b = a + 1U; (b < nc) && (rc == 0); b++) {
+                    if (strcmp(header[a], header[b]) == 0) {
+                        fail(err, es, "%s:%zu: duplicate column name in the header", path,
+                             lineno);
+                        rc = -1;
+                    }
+                }
+            }
+            ncols = nc;
+            header_line = lineno;
+            line = next;
+            continue;
+        }
+        if (nc != ncols) {
+            fail(err, es, "%s:%zu: expected %zu cells, found %zu", path, lineno, ncols, nc);
+            rc = -1;
+            break;
+        }
+        double row[MAX_COLS];
+        for (size_t c = 0U; (c < nc) && (rc == 0); c++) {
+            char* cell = strip(cells[c]);
+            char* end = NULL;
+            const int hex = (strchr(cell, 'x') != NULL) || (strchr(cell, 'X') != NULL);
+            row[c] = strtod(cell, &end);
+            if ((cell[0] == '\0') || (end == NULL) || (*end != '\0') || hex) {
+                fail(err, es, "%s:%zu: column '%s': not a number: '%s'", path, lineno, header[c],
+                     cell);
+                rc = -1;
+            } else if (!isfinite(row[c])) {
+                fail(err, es, "%s:%zu: column '%s': not finite: '%s'", path, lineno, header[c],
+                     cell);
+                rc = -1;
+            } else {
+                /* a valid number */
+            }
+        }
+        if (rc != 0) {
+            break;
+        }
+        const double t = row[ti];
+        if (!(t > prev_t)) {
+            char a[40];
+            char b[40];
+            nte_py_repr(t, a, sizeof a);
+            nte_py_repr(prev_t, b, sizeof b);
+            fail(err, es, "%s:%zu: column 't_s': time %s does not increase (previous %s)", path,
+                 lineno, a, b);
+            rc = -1;
+            break;
+        }
+        prev_t = t;
+        if (push(tr, &cap, t, row[li], (vi >= 0) ? row[vi] : 0.0, row[fi]) != 0) {
+            fail(err, es, "%s:%zu: out of memory", path, lineno);
+            rc = -1;
+        }
+        line = next;
+    }
+    free(text);
+    if ((rc == 0) && (ncols == 0U)) {
+        fail(err, es, "%s:1: no header line", path);
+        rc = -1;
+    }
+    if ((rc == 0) && (tr->n == 0U)) {
+        fail(err, es, "%s:%zu: no samples after the header", path, header_line + 1U);
+        rc = -1;
+    }
+    if (rc != 0) {
+        nte_trial_free(tr);
+        return -1;
+    }
+    tr->velocity_given = (vi >= 0);
+    if (vi < 0) {
+        nte_central_difference(tr->t_s, tr->depth_mm, tr->n, tr->velocity_mm_s);
+    }
+    return 0;
+}
+
+void nte_trial_free(nte_trial_t* tr)
+{
+    free(tr->t_s);
+    free(tr->depth_mm);
+    free(tr->velocity_mm_s);
+    free(tr->force_n);
+    memset(tr, 0, sizeof *tr);
+}
+
+void nte_central_difference(const double* t, const double* x, const size_t n, double* v)
+{
+    if (n < 2U) {
+        for (size_t k = 0U; k < n; k++) {
+            v[k] = 0.0;
+        }
+        return;
+    }
+    v[0] = (x[1] - x[0]) / (t[1] - t[0]);
+    for (size_t k = 1U; k < (n - 1U); k++) {
+        v[k] = (x[k + 1U] - x[k - 1U]) / (t[k + 1U] - t[k - 1U]);
+    }
+    v[n - 1U] = (x[n - 1U] - x[n - 2U]) / (t[n - 1U] - t[n - 2U]);
+}

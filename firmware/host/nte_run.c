@@ -1,0 +1,300 @@
+/*
+ * nte-run: the C twin of `nte-ref estimate` (reference_py/cli.py).  Runs the library over a
+ * CSV of t_s, depth_mm, force_n (velocity_mm_s optional) and writes one estimate row per
+ * sample.  Built twice: nte-run (float) and nte-run-double (NTE_DOUBLE=1).
+ *
+ *   nte-run FILE.csv --model 1|2 [--estimator bank] [--preset NAME] [--profile default|paper]
+ *           [--init-seed K] [--init-factor F] [--schedule all|rotate] [--precision P]
+ *           --out EST.csv
+ *
+ * Exit status 0 on success, 2 on bad input (message "FILE:LINE: column 'NAME': reason").
+ */
+#include "csv_in.h"
+#include "nte.h"
+#include "nte_presets.h"
+#include "starts.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#if NTE_DOUBLE
+#define PROG "nte-run-double"
+#define PRECISION "float64"
+#define REAL_FMT "%.17g"
+#else
+#define PROG "nte-run"
+#define PRECISION "float32"
+#define REAL_FMT "%.9g"
+#endif
+
+#define EXIT_BAD_INPUT 2
+
+typedef struct args_t {
+    const char* csv;
+    const char* out;
+    const char* preset;
+    const char* profile;
+    const char* schedule;
+    const char* precision;
+    int model;
+    long long seed;
+    double factor;
+} args_t;
+
+static int usage(const char* msg)
+{
+    fprintf(stderr,
+            "usage: " PROG " FILE.csv --model 1|2 [--estimator bank] [--preset NAME]\n"
+            "       [--profile default|paper] [--init-seed K] [--init-factor F]\n"
+            "       [--schedule all|rotate] [--precision " PRECISION "] --out EST.csv\n");
+    if (msg != NULL) {
+        fprintf(stderr, PROG ": error: %s\n", msg);
+    }
+    return EXIT_BAD_INPUT;
+}
+
+static int parse_args(int argc, char** argv, args_t* a)
+{
+    char msg[256];
+    a->csv = NULL;
+    a->out = NULL;
+    a->preset = NTE_PRESET_DEFAULT;
+    a->profile = "default";
+    a->schedule = "all";
+    a->precision = PRECISION;
+    a->model = 0;
+    a->seed = 0;
+    a->factor = 5.0;
+    for (int i = 1; i < argc; i++) {
+        const char* opt = argv[i];
+        if (strncmp(opt, "--", 2) != 0) {
+            if (a->csv != NULL) {
+                return usage("more than one input file");
+            }
+            a->csv = opt;
+            continue;
+        }
+        if ((strcmp(opt, "--help") == 0) || (strcmp(opt, "-h") == 0)) {
+            (void)usage(NULL);
+            exit(0);
+        }
+        const char* eq = strchr(opt, '=');
+        char name[64];
+        const char* val = NULL;
+        if (eq != NULL) {
+            (void)snprintf(name, sizeof name, "%.*s", (int)(eq - opt), opt);
+            val = eq + 1;
+        } else {
+            (void)snprintf(name, sizeof name, "%s", opt);
+            if ((i + 1) < argc) {
+                val = argv[++i];
+            }
+        }
+        if (val == NULL) {
+            (void)snprintf(msg, sizeof msg, "argument %s: expected one argument", name);
+            return usage(msg);
+        }
+        char* end = NULL;
+        if (strcmp(name, "--model") == 0) {
+            if ((strcmp(val, "1") != 0) && (strcmp(val, "2") != 0)) {
+                (void)snprintf(msg, sizeof msg, "argument --model: invalid choice: '%s'", val);
+                return usage(msg);
+            }
+            a->model = atoi(val);
+        } else if (strcmp(name, "--estimator") == 0) {
+            if (strcmp(val, "bank") != 0) {
+                (void)snprintf(msg, sizeof msg, "argument --estimator: invalid choice: '%s'", val);
+                return usage(msg);
+            }
+        } else if (strcmp(name, "--preset") == 0) {
+            a->preset = val;
+        } else if (strcmp(name, "--profile") == 0) {
+            if ((strcmp(val, "default") != 0) && (strcmp(val, "paper") != 0)) {
+                (void)snprintf(msg, sizeof msg, "argument --profile: invalid choice: '%s'", val);
+                return usage(msg);
+            }
+            a->profile = val;
+        } else if (strcmp(name, "--schedule") == 0) {
+            if ((strcmp(val, "all") != 0) && (strcmp(val, "rotate") != 0)) {
+                (void)snprintf(msg, sizeof msg, "argument --schedule: invalid choice: '%s'", val);
+                return usage(msg);
+            }
+            a->schedule = val;
+        } else if (strcmp(name, "--precision") == 0) {
+            if (strcmp(val, PRECISION) != 0) {
+                (void)snprintf(msg, sizeof msg,
+                               "argument --precision: this binary computes in " PRECISION
+                               " (got '%s'; use nte-run for float32, nte-run-double for "
+                               "float64)", val);
+                return usage(msg);
+            }
+        } else if (strcmp(name, "--init-seed") == 0) {
+            errno = 0;
+            a->seed = strtoll(val, &end, 10);
+            if ((end == val) || (*end != '\0') || (errno != 0)) {
+                (void)snprintf(msg, sizeof msg, "argument --init-seed: invalid int value: '%s'",
+                               val);
+                return usage(msg);
+            }
+        } else if (strcmp(name, "--init-factor") == 0) {
+            a->factor = strtod(val, &end);
+            if ((end == val) || (*end != '\0')) {
+                (void)snprintf(msg, sizeof msg,
+                               "argument --init-factor: invalid float value: '%s'", val);
+                return usage(msg);
+            }
+        } else if (strcmp(name, "--out") == 0) {
+            a->out = val;
+        } else {
+            (void)snprintf(msg, sizeof msg, "unrecognized arguments: %s", name);
+            return usage(msg);
+        }
+    }
+    if (a->csv == NULL) {
+        return usage("the following arguments are required: FILE.csv");
+    }
+    if (a->model == 0) {
+        return usage("the following arguments are required: --model");
+    }
+    if (a->out == NULL) {
+        return usage("the following arguments are required: --out");
+    }
+    return 0;
+}
+
+static const nte_preset_t* find_preset(const char* name)
+{
+    for (size_t i = 0U; i < NTE_PRESET_COUNT; i++) {
+        if (strcmp(nte_presets[i].name, name) == 0) {
+            return &nte_presets[i];
+        }
+    }
+    return NULL;
+}
+
+static int bad(const char* msg)
+{
+    fprintf(stderr, PROG ": error: %s\n", msg);
+    return EXIT_BAD_INPUT;
+}
+
+/* Write every row to a temporary file beside `path`, then rename it into place. */
+static int run(const args_t* a, const nte_trial_t* tr, nte_t* est)
+{
+    char tmp[4096];
+    const char* slash = strrchr(a->out, '/');
+    const int dir_len = (slash != NULL) ? (int)(slash - a->out + 1) : 0;
+    (void)snprintf(tmp, sizeof tmp, "%.*s.%s.XXXXXX", dir_len, a->out,
+                   (slash != NULL) ? (slash + 1) : a->out);
+    const int fd = mkstemp(tmp);
+    if (fd < 0) {
+        fprintf(stderr, PROG ": error: %s: cannot write: %s\n", a->out, strerror(errno));
+        return 1;
+    }
+    FILE* fh = fdopen(fd, "w");
+    if (fh == NULL) {
+        (void)close(fd);
+        (void)unlink(tmp);
+        return 1;
+    }
+    nte_param_estimate_t pe[NTE_IDENTIFIED_MAX];
+    const size_t np = nte_get_params(est, pe, NTE_IDENTIFIED_MAX);
+    fprintf(fh, "t_s,force_hat_n,z,innovation_n,status");
+    for (size_t j = 0U; j < np; j++) {
+        fprintf(fh, ",%s,%s_sd", nte_param_name(pe[j].id), nte_param_name(pe[j].id));
+    }
+    fprintf(fh, "\n");
+    for (size_t k = 0U; k < tr->n; k++) {
+        nte_sample_t s;
+        nte_output_t o;
+        s.t_us = (int64_t)floor((tr->t_s[k] * 1e6) + 0.5);
+        s.depth_mm = (nte_real_t)tr->depth_mm[k];
+        s.velocity_mm_s = (nte_real_t)tr->velocity_mm_s[k];
+        s.force_n = (nte_real_t)tr->force_n[k];
+        (void)nte_step(est, &s, &o);
+        (void)nte_get_params(est, pe, NTE_IDENTIFIED_MAX);
+        fprintf(fh, "%.17g," REAL_FMT "," REAL_FMT "," REAL_FMT ",%u", tr->t_s[k],
+                (double)o.force_hat_n, (double)o.z, (double)o.innovation_n, (unsigned)o.status);
+        for (size_t j = 0U; j < np; j++) {
+            fprintf(fh, "," REAL_FMT "," REAL_FMT, (double)pe[j].value, (double)pe[j].sd);
+        }
+        fprintf(fh, "\n");
+    }
+    if ((fclose(fh) != 0) || (rename(tmp, a->out) != 0)) {
+        fprintf(stderr, PROG ": error: %s: cannot write: %s\n", a->out, strerror(errno));
+        (void)unlink(tmp);
+        return 1;
+    }
+    return 0;
+}
+
+int main(int argc, char** argv)
+{
+    args_t a;
+    char msg[8192];
+    const int pr = parse_args(argc, argv, &a);
+    if (pr != 0) {
+        return pr;
+    }
+    const nte_preset_t* preset = find_preset(a.preset);
+    if (preset == NULL) {
+        size_t o = (size_t)snprintf(msg, sizeof msg, "unknown preset '%s' (known: ", a.preset);
+        for (size_t i = 0U; (i < NTE_PRESET_COUNT) && (o < sizeof msg); i++) {
+            o += (size_t)snprintf(msg + o, sizeof msg - o, "%s%s", (i > 0U) ? ", " : "",
+                                  nte_presets[i].name);
+        }
+        if (o < sizeof msg) {
+            (void)snprintf(msg + o, sizeof msg - o, ")");
+        }
+        return bad(msg);
+    }
+    nte_trial_t tr;
+    if (nte_trial_read(a.csv, &tr, msg, sizeof msg) != 0) {
+        return bad(msg);
+    }
+    double start[7];
+    if (nte_start_values(preset->values, (uint64_t)a.seed, a.factor, a.model, start) != 0) {
+        nte_trial_free(&tr);
+        (void)snprintf(msg, sizeof msg, "init factor must be >= 1 (got %g)", a.factor);
+        return bad(msg);
+    }
+    nte_config_t cfg;
+    const nte_schedule_t sch =
+        (strcmp(a.schedule, "rotate") == 0) ? nte_schedule_rotate : nte_schedule_all;
+    if (strcmp(a.profile, "paper") == 0) {
+        nte_config_paper(&cfg, a.model, sch);
+    } else {
+        nte_config_default(&cfg, a.model, sch);
+    }
+    /* Model I's fixed beta0 is the preset's beta (model-notes §2) */
+    cfg.beta0 = (nte_real_t)preset->values[6];
+    for (size_t j = 0U; j < NTE_PARAM_COUNT; j++) {
+        cfg.nominal[j] = (nte_real_t)start[j];
+    }
+    /* the identified part of f1, computed in double as the reference does, rounded once */
+    const double kappa = (start[4] < 0.0) ? 1.0 : 0.0;
+    const double excess = start[3] - (kappa * (-start[4]));
+    if (!(excess > 0.0)) {
+        nte_trial_free(&tr);
+        return bad("nominal f1 must exceed -f2 (g(0) = f1 + f2 must be positive)");
+    }
+    cfg.f1_excess = (nte_real_t)excess;
+    static nte_t est;
+    const nte_err_t err = nte_init(&est, &cfg);
+    if (err != nte_err_ok) {
+        nte_trial_free(&tr);
+        (void)snprintf(msg, sizeof msg, "invalid estimator configuration (nte_err %d)", (int)err);
+        return bad(msg);
+    }
+    const int rc = run(&a, &tr, &est);
+    if (rc == 0) {
+        printf("%zu samples, Model %s, " PRECISION "; wrote %s\n", tr.n,
+               (a.model == 1) ? "I" : "II", a.out);
+    }
+    nte_trial_free(&tr);
+    return rc;
+}

@@ -1,0 +1,406 @@
+/*
+ * The bank of three joint state-parameter EKFs in switching mode (paper §IV, Fig. 1, Table I):
+ * reference_py/bank.py in C for one run.  Every branch below is one of the reference's
+ * np.where selections; the order of the floating-point operations is the reference's.
+ */
+#include "nte_ekf.h"
+#include "nte_model.h"
+
+/* Table I: the parameters each filter identifies together with z, per model. */
+static const uint8_t subset_len[2][NTE_FILTER_COUNT] = {{2U, 2U, 2U}, {1U, 2U, 2U}};
+static const uint8_t subsets[2][NTE_FILTER_COUNT][2] = {
+    {{nte_param_f2, nte_param_sigma0}, {nte_param_f1, nte_param_sigma1},
+     {nte_param_alpha, nte_param_sigma2}},
+    {{nte_param_sigma0, 0U}, {nte_param_f1, nte_param_sigma1}, {nte_param_beta, nte_param_sigma2}}};
+/* reference MODEL_PARAMS: the identified parameters in output order */
+static const uint8_t identified_len[2] = {6U, 5U};
+static const uint8_t identified[2][NTE_IDENTIFIED_MAX] = {
+    {nte_param_sigma0, nte_param_sigma1, nte_param_sigma2, nte_param_f1, nte_param_f2,
+     nte_param_alpha},
+    {nte_param_sigma0, nte_param_sigma1, nte_param_sigma2, nte_param_f1, nte_param_beta, 0U}};
+
+static const char* const param_names[NTE_PARAM_COUNT] = {"sigma0", "sigma1", "sigma2", "f1",
+                                                         "f2",     "alpha",  "beta"};
+
+const char* nte_param_name(const nte_param_id_t id)
+{
+    const int i = (int)id;
+    return ((i >= 0) && (i < NTE_PARAM_COUNT)) ? param_names[i] : "?";
+}
+
+static size_t model_index(const nte_t* self)
+{
+    return (self->cfg.model == 1) ? 0U : 1U;
+}
+
+static void p0(const nte_t* self, const size_t n, nte_mat3_t P)
+{
+    for (size_t a = 0U; a < NTE_EKF_N_MAX; a++) {
+        for (size_t b = 0U; b < NTE_EKF_N_MAX; b++) {
+            P[a][b] = NTE_C(0.0);
+        }
+    }
+    P[0][0] = NTE_C(0.0) + self->cfg.p0_z;
+    for (size_t a = 1U; a < n; a++) {
+        P[a][a] = NTE_C(0.0) + self->cfg.p0_u;
+    }
+}
+
+static void start(nte_t* self)
+{
+    const size_t mi = model_index(self);
+    for (size_t j = 0U; j < NTE_PARAM_COUNT; j++) {
+        self->u[j] = NTE_C(0.0);
+    }
+    nte_model_theta(&self->th, self->nominal, self->ex_nominal, self->kappa, self->u);
+    self->z = NTE_C(0.0);
+    for (size_t i = 0U; i < NTE_FILTER_COUNT; i++) {
+        p0(self, (size_t)subset_len[mi][i] + 1U, self->P[i]);
+        self->gated_run[i] = 0U;
+    }
+    self->initialised = false;
+    self->t_prev_us = 0;
+    self->l_prev = NTE_C(0.0);
+    self->k_mod3 = 0U;
+    self->last.force_hat_n = NTE_C(0.0);
+    self->last.z = NTE_C(0.0);
+    self->last.innovation_n = NTE_C(0.0);
+    self->last.nis = NTE_C(0.0);
+    self->last.status = 0U;
+    for (size_t c = 0U; c < NTE_REJECT_CAUSES; c++) {
+        self->counters.rejected[c] = 0U;
+    }
+    self->counters.gated = 0U;
+    self->counters.filter_resets = 0U;
+    self->counters.gaps = 0U;
+}
+
+nte_err_t nte_init(nte_t* self, const nte_config_t* cfg)
+{
+    if (self == NULL) {
+        return nte_err_null_argument;
+    }
+    const nte_err_t err = nte_config_check(cfg);
+    if (err != nte_err_ok) {
+        return err;
+    }
+    self->cfg = *cfg;
+    self->gate2 = cfg->gate_sigma * cfg->gate_sigma;
+    for (size_t j = 0U; j < NTE_PARAM_COUNT; j++) {
+        self->q_u[j] = (cfg->q_u[j] < NTE_C(0.0)) ? cfg->q_u_default : cfg->q_u[j];
+        self->nominal[j] = cfg->nominal[j];
+    }
+    if (cfg->model == 1) {
+        /* Model I: beta is the fixed normalising constant beta0 */
+        self->nominal[nte_param_beta] = cfg->beta0;
+    }
+    const nte_real_t f2 = cfg->nominal[nte_param_f2];
+    self->kappa = (f2 < NTE_C(0.0)) ? NTE_C(1.0) : NTE_C(0.0);
+    self->ex_nominal = (cfg->f1_excess > NTE_C(0.0))
+                           ? cfg->f1_excess
+                           : (cfg->nominal[nte_param_f1] - (self->kappa * (-f2)));
+    start(self);
+    return nte_err_ok;
+}
+
+nte_err_t nte_reset(nte_t* self)
+{
+    if (self == NULL) {
+        return nte_err_null_argument;
+    }
+    start(self);
+    return nte_err_ok;
+}
+
+/* Clip |u|, floor variances, reset the filter when P or x went bad (bank._guard). */
+static uint32_t guard(nte_t* self, const size_t n, nte_real_t* x, nte_mat3_t P,
+                      const nte_real_t* x_prior)
+{
+    const nte_real_t umax = self->cfg.u_max;
+    uint32_t status = 0U;
+    for (size_t a = 1U; a < n; a++) {
+        if (nte_abs(x[a]) > umax) {
+            status |= NTE_STATUS_CLIPPED;
+        }
+        x[a] = (x[a] > umax) ? umax : ((x[a] < -umax) ? -umax : x[a]);
+    }
+    bool ok = nte_ekf_positive_definite(n, P);
+    for (size_t a = 0U; a < n; a++) {
+        ok = ok && nte_isfinite(x[a]);
+    }
+    for (size_t a = 0U; a < n; a++) {
+        const nte_real_t floor = (a == 0U) ? self->cfg.var_floor_z : self->cfg.var_floor_u;
+        if (P[a][a] < floor) {
+            P[a][a] = floor;
+            if (ok) {
+                status |= NTE_STATUS_FLOORED;
+            }
+        }
+    }
+    if (!ok) {
+        for (size_t a = 0U; a < n; a++) {
+            x[a] = nte_isfinite(x_prior[a]) ? x_prior[a] : NTE_C(0.0);
+        }
+        p0(self, n, P);
+        status |= NTE_STATUS_FILTER_RESET;
+        self->counters.filter_resets++;
+    }
+    return status;
+}
+
+/* One filter of the bank at a running sample (one pass of bank._advance's loop). */
+typedef struct step_ctx_t {
+    nte_real_t l;
+    nte_real_t l_prev;
+    nte_real_t dt;
+    nte_real_t v;
+    nte_real_t y;
+    nte_real_t s;
+    nte_real_t z_prev;
+    bool surface;
+    bool gap;
+    bool rotate;
+} step_ctx_t;
+
+typedef struct filter_out_t {
+    bool active;
+    nte_real_t z_post;
+    nte_real_t innovation;
+    nte_real_t nis;
+} filter_out_t;
+
+static uint32_t run_filter(nte_t* self, const step_ctx_t* c, const size_t i,
+                           const nte_rk3_result_t* shared, filter_out_t* fo)
+{
+    const size_t mi = model_index(self);
+    const uint8_t* names = subsets[mi][i];
+    const size_t na = subset_len[mi][i];
+    const size_t n = na + 1U;
+    uint32_t status = 0U;
+    nte_rk3_result_t own;
+    fo->innovation = NTE_C(0.0);
+    fo->nis = NTE_C(0.0);
+    const nte_rk3_result_t* pred = shared;
+    if (c->rotate) {
+        fo->active = (self->k_mod3 == (uint8_t)i);
+    } else {
+        nte_model_rk3(&own, &self->th, c->z_prev, c->l_prev, c->l, c->dt, self->cfg.substeps,
+                      names, na);
+        pred = &own;
+        fo->active = true;
+    }
+    nte_depth_terms_t d;
+    nte_model_depth_terms(&d, &self->th, c->l);
+    /* out of tissue z is 0; after a gap it has relaxed to its steady state: either way the
+     * prior z carries no memory of z(k-1) */
+    const bool restart = c->gap || c->surface;
+    nte_real_t zp = pred->z;
+    if (restart) {
+        zp = c->surface ? NTE_C(0.0) : nte_model_steady_state_z(&self->th, &d);
+    }
+    nte_mat3_t F;
+    nte_real_t q[NTE_EKF_N_MAX];
+    nte_real_t x[NTE_EKF_N_MAX];
+    nte_real_t h[NTE_EKF_N_MAX];
+    F[0][0] = restart ? NTE_C(0.0) : pred->dz_dz0;
+    q[0] = self->cfg.q_z;
+    x[0] = zp;
+    for (size_t a = 0U; a < na; a++) {
+        F[0][a + 1U] = restart ? NTE_C(0.0) : pred->dz_du[names[a]];
+        F[a + 1U][0] = NTE_C(0.0);
+        for (size_t b = 0U; b < na; b++) {
+            F[a + 1U][b + 1U] = (a == b) ? NTE_C(1.0) : NTE_C(0.0);
+        }
+        q[a + 1U] = self->q_u[names[a]];
+        x[a + 1U] = self->u[names[a]];
+    }
+    nte_mat3_t P;
+    nte_ekf_predict(n, self->P[i], F, q, P);
+
+    nte_output_terms_t o;
+    nte_model_output(&o, &self->th, &d, zp, c->s);
+    h[0] = nte_model_output_dz(&self->th, &d, &o);
+    for (size_t a = 0U; a < na; a++) {
+        h[a + 1U] = nte_model_output_du(&self->th, &d, zp, &o, names[a]);
+    }
+    nte_real_t r_eff = self->cfg.r_n2;
+    if (self->cfg.sign_inflation) {
+        /* the data follow sign(v), the model tanh(v/eps): their difference is at most
+         * (1 - |s|) l fr, treated as extra measurement noise */
+        const nte_real_t w = (NTE_C(1.0) - nte_abs(c->s)) * (d.l * o.fr);
+        const bool moving = nte_abs(c->v) >= self->cfg.v_still_mm_s;
+        const nte_real_t ww = w * w;
+        r_eff = self->cfg.r_n2 + (moving ? ww : NTE_C(0.0));
+        if (fo->active && moving && (ww > self->cfg.r_n2)) {
+            status |= NTE_STATUS_SIGN_UNCERTAIN;
+        }
+    }
+    const nte_real_t innovation = c->y - o.h;
+    nte_real_t xn[NTE_EKF_N_MAX];
+    for (size_t a = 0U; a < n; a++) {
+        xn[a] = x[a];
+    }
+    if (fo->active) {
+        /* a gate that refused too many samples in a row would lock the filter out: open it */
+        const bool open_gate = self->gated_run[i] >= (uint32_t)self->cfg.gate_reopen_after;
+        const nte_ekf_update_t upd =
+            nte_ekf_joseph_update(n, xn, P, h, innovation, r_eff, self->gate2, open_gate);
+        if (upd.accepted) {
+            self->gated_run[i] = 0U;
+        } else {
+            status |= NTE_STATUS_GATED;
+            self->gated_run[i]++;
+            self->counters.gated++;
+        }
+        fo->innovation = innovation;
+        fo->nis = upd.nis;
+    }
+    status |= guard(self, n, xn, P, x);
+    for (size_t a = 0U; a < n; a++) {
+        for (size_t b = 0U; b < n; b++) {
+            self->P[i][a][b] = P[a][b];
+        }
+    }
+    for (size_t a = 0U; a < na; a++) {
+        self->u[names[a]] = xn[a + 1U];
+    }
+    nte_model_refresh(&self->th, self->nominal, self->ex_nominal, self->kappa, self->u, names, na);
+    fo->z_post = xn[0];
+    return status;
+}
+
+static void advance(nte_t* self, const bool first, const nte_real_t dt, const nte_real_t l_in,
+                    const nte_real_t v, const nte_real_t y, nte_output_t* out)
+{
+    step_ctx_t c;
+    c.l = nte_model_clamp_depth(l_in);
+    c.l_prev = nte_model_clamp_depth(self->l_prev);
+    c.dt = dt;
+    c.v = v;
+    c.y = y;
+    c.surface = !(c.l > NTE_C(0.0));
+    c.gap = (!first) && (dt > self->cfg.dt_max_s);
+    c.s = nte_model_smooth_sign(v, self->cfg.eps_mm_s);
+    c.z_prev = self->z;
+    c.rotate = self->cfg.schedule == nte_schedule_rotate;
+    uint32_t status = c.surface ? NTE_STATUS_OUT_OF_TISSUE : 0U;
+    nte_real_t innovation0 = NTE_C(0.0);
+    nte_real_t nis0 = NTE_C(0.0);
+    if (first) {
+        self->z = NTE_C(0.0);
+    } else {
+        if (c.gap) {
+            status |= NTE_STATUS_GAP;
+            self->counters.gaps++;
+        }
+        nte_rk3_result_t shared;
+        const size_t mi = model_index(self);
+        if (c.rotate) {
+            /* one prediction, with every identified parameter's sensitivity, serves all three */
+            nte_model_rk3(&shared, &self->th, c.z_prev, c.l_prev, c.l, dt, self->cfg.substeps,
+                          identified[mi], identified_len[mi]);
+        }
+        nte_real_t z_post = c.z_prev;
+        for (size_t i = 0U; i < NTE_FILTER_COUNT; i++) {
+            filter_out_t fo;
+            status |= run_filter(self, &c, i, &shared, &fo);
+            if (fo.active) {
+                z_post = fo.z_post;
+                if (c.rotate || (i == 0U)) {
+                    innovation0 = fo.innovation;
+                    nis0 = fo.nis;
+                }
+            }
+        }
+        self->z = c.surface ? NTE_C(0.0) : z_post;
+    }
+    /* posterior output with the final shared model */
+    nte_depth_terms_t d;
+    nte_output_terms_t o;
+    nte_model_depth_terms(&d, &self->th, c.l);
+    nte_model_output(&o, &self->th, &d, self->z, c.s);
+    out->force_hat_n = o.h;
+    out->z = self->z;
+    out->innovation_n = first ? (y - o.h) : innovation0;
+    out->nis = first ? NTE_C(0.0) : nis0;
+    out->status = status;
+}
+
+nte_err_t nte_step(nte_t* self, const nte_sample_t* sample, nte_output_t* out)
+{
+    if ((self == NULL) || (sample == NULL)) {
+        return nte_err_null_argument;
+    }
+    const nte_config_t* cfg = &self->cfg;
+    const nte_real_t l_in = sample->depth_mm;
+    const nte_real_t v = sample->velocity_mm_s;
+    const nte_real_t y = sample->force_n;
+    const bool finite = nte_isfinite(l_in) && nte_isfinite(v) && nte_isfinite(y);
+    const bool in_range = (l_in >= cfg->depth_min_mm) && (l_in <= cfg->depth_max_mm) &&
+                          (nte_abs(v) <= cfg->speed_max_mm_s) && (nte_abs(y) <= cfg->force_max_n);
+    const bool later = (!self->initialised) || (sample->t_us > self->t_prev_us);
+    if (!finite) {
+        self->counters.rejected[NTE_REJECT_NONFINITE]++;
+    } else if (!in_range) {
+        self->counters.rejected[NTE_REJECT_RANGE]++;
+    } else if (!later) {
+        self->counters.rejected[NTE_REJECT_TIME]++;
+    } else {
+        const bool first = !self->initialised;
+        const int64_t dt_us = first ? 1 : (sample->t_us - self->t_prev_us);
+        const nte_real_t dt = (nte_real_t)dt_us / NTE_C(1.0e6);
+        advance(self, first, dt, l_in, v, y, &self->last);
+        if (first) {
+            self->last.status |= NTE_STATUS_INIT;
+        } else {
+            self->k_mod3 = (uint8_t)((self->k_mod3 + 1U) % 3U);
+        }
+        self->t_prev_us = sample->t_us;
+        self->l_prev = l_in;
+        self->initialised = true;
+        if (out != NULL) {
+            *out = self->last;
+        }
+        return nte_err_ok;
+    }
+    self->last.status = NTE_STATUS_REJECTED;
+    if (out != NULL) {
+        *out = self->last;
+    }
+    return nte_err_ok;
+}
+
+size_t nte_get_params(const nte_t* self, nte_param_estimate_t* out, const size_t capacity)
+{
+    if (self == NULL) {
+        return 0U;
+    }
+    const size_t mi = model_index(self);
+    const size_t count = identified_len[mi];
+    for (size_t j = 0U; (j < count) && (j < capacity) && (out != NULL); j++) {
+        const uint8_t id = identified[mi][j];
+        out[j].id = (nte_param_id_t)id;
+        out[j].value = NTE_C(0.0);
+        out[j].sd = NTE_C(0.0);
+        if (!self->initialised) {
+            continue;
+        }
+        /* the filter that owns the parameter, and its index in that filter's state */
+        for (size_t i = 0U; i < NTE_FILTER_COUNT; i++) {
+            for (size_t a = 0U; a < subset_len[mi][i]; a++) {
+                if (subsets[mi][i][a] == id) {
+#if NTE_DOUBLE
+                    const nte_real_t sd_u = sqrt(self->P[i][a + 1U][a + 1U]);
+#else
+                    const nte_real_t sd_u = sqrtf(self->P[i][a + 1U][a + 1U]);
+#endif
+                    const nte_real_t dth = (id == (uint8_t)nte_param_f1) ? self->th.ex
+                                                                         : self->th.v[id];
+                    out[j].value = self->th.v[id];
+                    out[j].sd = nte_abs(dth) * sd_u;
+                }
+            }
+        }
+    }
+    return count;
+}
