@@ -1,0 +1,417 @@
+/* cmocka tests of firmware/can/nte_frames: ids, round trips at range ends and at one
+ * resolution step, range and selector errors, NaN/inf, E2E failures, clamping of outputs, the
+ * parameter log10 std encoding, the clock unwrapper. */
+#include <math.h>
+#include <setjmp.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <string.h>
+
+#include <cmocka.h>
+
+#include "nte_frames.h"
+
+#define assert_near(a, b, tol) assert_true(fabs((double)(a) - (double)(b)) <= (double)(tol))
+
+typedef struct {
+    nte_e2e_tx_t tx;
+    nte_e2e_rx_t rx;
+    uint8_t frame[8];
+} link_t;
+
+static void link_init(link_t* l, nte_frames_kind_t kind)
+{
+    assert_int_equal(nte_frames_tx_init(&l->tx, kind), nte_frames_ok);
+    assert_int_equal(nte_frames_rx_init(&l->rx, kind), nte_frames_ok);
+    memset(l->frame, 0xEE, sizeof l->frame);
+}
+
+static void test_ids(void** state)
+{
+    uint32_t id;
+    nte_frames_kind_t kind;
+    int k;
+    const uint32_t offsets[6] = {0x00, 0x01, 0x02, 0x10, 0x11, 0x12};
+    (void)state;
+    for (k = 0; k < (int)nte_frames_kind_count; ++k) {
+        assert_int_equal(nte_frames_can_id(0x200u, (nte_frames_kind_t)k, &id), nte_frames_ok);
+        assert_int_equal(id, 0x200u + offsets[k]);
+        assert_int_equal(nte_frames_kind_of(0x200u, id, &kind), nte_frames_ok);
+        assert_int_equal(kind, k);
+        assert_int_equal(nte_frames_can_id(0x7EDu, (nte_frames_kind_t)k, &id), nte_frames_ok);
+        assert_int_equal(nte_frames_kind_of(0x7EDu, id, &kind), nte_frames_ok);
+        assert_int_equal(kind, k);
+    }
+    assert_int_equal(nte_frames_can_id(0x7EEu, nte_frames_kind_heartbeat, &id),
+                     nte_frames_err_bad_config);
+    assert_int_equal(nte_frames_can_id(0x200u, nte_frames_kind_count, &id),
+                     nte_frames_err_bad_config);
+    assert_int_equal(nte_frames_kind_of(0x200u, 0x203u, &kind), nte_frames_err_unknown_id);
+    assert_int_equal(nte_frames_kind_of(0x200u, 0x1FFu, &kind), nte_frames_err_unknown_id);
+    assert_int_equal(nte_frames_kind_of(0x200u, 0x213u, &kind), nte_frames_err_unknown_id);
+}
+
+static void test_depth_round_trip(void** state)
+{
+    static const float depths[] = {0.0f, 0.001f, 0.002f, 123.456f, 499.999f, 500.0f};
+    static const float vels[] = {-500.0f, -499.99f, -0.01f, 0.0f, 0.01f, 10.0f, 499.99f, 500.0f};
+    static const uint16_t ticks[] = {0u, 1u, 32768u, 65535u};
+    link_t l;
+    size_t i;
+    size_t j;
+    (void)state;
+    link_init(&l, nte_frames_kind_depth);
+    for (i = 0; i < sizeof depths / sizeof depths[0]; ++i) {
+        for (j = 0; j < sizeof vels / sizeof vels[0]; ++j) {
+            nte_frames_depth_t in = {depths[i], vels[j], ticks[(i + j) % 4u]};
+            nte_frames_depth_t out;
+            nte_e2e_result_t r;
+            memset(&out, 0, sizeof out);
+            assert_int_equal(nte_frames_encode_depth(&in, &l.tx, l.frame), nte_frames_ok);
+            assert_int_equal(nte_frames_decode_depth(&l.rx, l.frame, 8, &out, &r, NULL),
+                             nte_frames_ok);
+            assert_int_equal(r, nte_e2e_ok);
+            /* float32 of the decoded multiple of 1 um: within 1e-4 of a um */
+            assert_near(out.depth_mm, in.depth_mm, 1e-4);
+            assert_near(out.velocity_mm_s, in.velocity_mm_s, 1e-4);
+            assert_int_equal(out.time_ticks, in.time_ticks);
+        }
+    }
+    /* resolution: half a step rounds, 0.4 step does not move */
+    {
+        nte_frames_depth_t in = {250.0004f, 0.004f, 7u};
+        nte_frames_depth_t out;
+        assert_int_equal(nte_frames_encode_depth(&in, &l.tx, l.frame), nte_frames_ok);
+        assert_int_equal(nte_frames_decode_depth(&l.rx, l.frame, 8, &out, NULL, NULL),
+                         nte_frames_ok);
+        assert_near(out.depth_mm, 250.0, 1e-4);
+        assert_near(out.velocity_mm_s, 0.0, 1e-6);
+    }
+}
+
+static void test_depth_range_errors(void** state)
+{
+    link_t l;
+    nte_frames_depth_t bad[] = {
+        {-0.001f, 0.0f, 0}, {500.001f, 0.0f, 0}, {0.0f, -500.01f, 0}, {0.0f, 500.01f, 0},
+        {1e30f, 0.0f, 0},   {0.0f, -1e30f, 0},
+    };
+    size_t i;
+    nte_frames_depth_t nan_in = {NAN, 0.0f, 0};
+    nte_frames_depth_t inf_in = {0.0f, INFINITY, 0};
+    (void)state;
+    link_init(&l, nte_frames_kind_depth);
+    for (i = 0; i < sizeof bad / sizeof bad[0]; ++i) {
+        assert_int_equal(nte_frames_encode_depth(&bad[i], &l.tx, l.frame), nte_frames_err_range);
+    }
+    assert_int_equal(nte_frames_encode_depth(&nan_in, &l.tx, l.frame), nte_frames_err_not_finite);
+    assert_int_equal(nte_frames_encode_depth(&inf_in, &l.tx, l.frame), nte_frames_err_not_finite);
+    assert_int_equal(l.tx.counter, 0); /* failed encodes do not advance the counter */
+    assert_int_equal(nte_frames_encode_depth(NULL, &l.tx, l.frame), nte_frames_err_null);
+}
+
+/* A frame with a right CRC but a raw value beyond the DBC range is rejected by decode. */
+static void test_decode_range_error(void** state)
+{
+    link_t l;
+    nte_frames_depth_t out;
+    uint8_t lost;
+    (void)state;
+    link_init(&l, nte_frames_kind_depth);
+    memset(l.frame, 0, 8);
+    /* Depth raw = 2^19 - 1 = 524287 > 500000: bits 12..30 all ones */
+    l.frame[1] = 0xF0u;
+    l.frame[2] = 0xFFu;
+    l.frame[3] = 0x7Fu;
+    assert_int_equal(nte_e2e_protect(&l.tx, l.frame, 8), nte_e2e_ok);
+    assert_int_equal(nte_frames_decode_depth(&l.rx, l.frame, 8, &out, NULL, &lost),
+                     nte_frames_err_range);
+    assert_true(l.rx.synced); /* it passed E2E */
+}
+
+static void test_decode_e2e_errors(void** state)
+{
+    link_t l;
+    nte_frames_force_t in = {1.2345f, 100u};
+    nte_frames_force_t out;
+    nte_e2e_result_t r;
+    uint8_t lost;
+    uint8_t copy[8];
+    nte_e2e_rx_t depth_rx;
+    (void)state;
+    link_init(&l, nte_frames_kind_force);
+    assert_int_equal(nte_frames_encode_force(&in, &l.tx, l.frame), nte_frames_ok);
+    memcpy(copy, l.frame, 8);
+    copy[4] ^= 0x01u;
+    assert_int_equal(nte_frames_decode_force(&l.rx, copy, 8, &out, &r, &lost), nte_frames_err_e2e);
+    assert_int_equal(r, nte_e2e_err_bad_crc);
+    assert_int_equal(nte_frames_decode_force(&l.rx, l.frame, 7, &out, &r, &lost),
+                     nte_frames_err_e2e);
+    assert_int_equal(r, nte_e2e_err_wrong_length);
+    assert_int_equal(nte_frames_decode_force(&l.rx, l.frame, 8, &out, &r, &lost), nte_frames_ok);
+    assert_near(out.force_n, 1.2345, 1e-6);
+    assert_int_equal(nte_frames_decode_force(&l.rx, l.frame, 8, &out, &r, &lost),
+                     nte_frames_err_e2e);
+    assert_int_equal(r, nte_e2e_err_repeated);
+    /* three frames lost */
+    assert_int_equal(nte_frames_encode_force(&in, &l.tx, l.frame), nte_frames_ok);
+    assert_int_equal(nte_frames_encode_force(&in, &l.tx, l.frame), nte_frames_ok);
+    assert_int_equal(nte_frames_encode_force(&in, &l.tx, l.frame), nte_frames_ok);
+    assert_int_equal(nte_frames_encode_force(&in, &l.tx, l.frame), nte_frames_ok);
+    assert_int_equal(nte_frames_decode_force(&l.rx, l.frame, 8, &out, &r, &lost), nte_frames_ok);
+    assert_int_equal(r, nte_e2e_skipped);
+    assert_int_equal(lost, 3);
+    /* an E2E state of another message is refused */
+    assert_int_equal(nte_frames_rx_init(&depth_rx, nte_frames_kind_depth), nte_frames_ok);
+    assert_int_equal(nte_frames_decode_force(&depth_rx, l.frame, 8, &out, &r, &lost),
+                     nte_frames_err_wrong_kind);
+}
+
+static void test_force_ends(void** state)
+{
+    static const float forces[] = {-50.0f, -49.9999f, -0.0001f, 0.0f, 0.0001f, 49.9999f, 50.0f};
+    link_t l;
+    size_t i;
+    nte_frames_force_t over = {50.0001f, 0};
+    nte_frames_force_t under = {-50.0001f, 0};
+    (void)state;
+    link_init(&l, nte_frames_kind_force);
+    for (i = 0; i < sizeof forces / sizeof forces[0]; ++i) {
+        nte_frames_force_t in = {forces[i], (uint16_t)(i * 9000u)};
+        nte_frames_force_t out;
+        assert_int_equal(nte_frames_encode_force(&in, &l.tx, l.frame), nte_frames_ok);
+        assert_int_equal(nte_frames_decode_force(&l.rx, l.frame, 8, &out, NULL, NULL),
+                         nte_frames_ok);
+        assert_near(out.force_n, in.force_n, 5e-6);
+        assert_int_equal(out.time_ticks, in.time_ticks);
+    }
+    assert_int_equal(nte_frames_encode_force(&over, &l.tx, l.frame), nte_frames_err_range);
+    assert_int_equal(nte_frames_encode_force(&under, &l.tx, l.frame), nte_frames_err_range);
+}
+
+static void test_command_all_values(void** state)
+{
+    link_t l;
+    unsigned reset;
+    unsigned m;
+    unsigned e;
+    unsigned a;
+    (void)state;
+    link_init(&l, nte_frames_kind_command);
+    for (reset = 0; reset < 2u; ++reset) {
+        for (m = 0; m < 4u; ++m) {
+            for (e = 0; e < 4u; ++e) {
+                for (a = 0; a < 4u; ++a) {
+                    nte_frames_command_t in = {reset != 0u, (uint8_t)m, (uint8_t)e, (uint8_t)a};
+                    nte_frames_command_t out;
+                    nte_frames_err_t err = nte_frames_encode_command(&in, &l.tx, l.frame);
+                    if ((m == 3u) || (e == 3u) || (a == 3u)) {
+                        assert_int_equal(err, nte_frames_err_selector);
+                        continue;
+                    }
+                    assert_int_equal(err, nte_frames_ok);
+                    assert_int_equal(nte_frames_decode_command(&l.rx, l.frame, 8, &out, NULL, NULL),
+                                     nte_frames_ok);
+                    assert_int_equal(out.reset, in.reset);
+                    assert_int_equal(out.model_sel, m);
+                    assert_int_equal(out.estimator_sel, e);
+                    assert_int_equal(out.adapt_cmd, a);
+                }
+            }
+        }
+    }
+    /* a received ModelSel = 3 (bits 13..14) is a selector error */
+    memset(l.frame, 0, 8);
+    l.frame[1] = 0x60u;
+    assert_int_equal(nte_e2e_protect(&l.tx, l.frame, 8), nte_e2e_ok);
+    {
+        nte_frames_command_t out;
+        assert_int_equal(nte_frames_decode_command(&l.rx, l.frame, 8, &out, NULL, NULL),
+                         nte_frames_err_selector);
+    }
+}
+
+static void test_estimate_clamp_and_flags(void** state)
+{
+    link_t l;
+    nte_frames_estimate_t out;
+    nte_frames_estimate_t in = {0.2231f, -0.0042f, 0.1801f, true, true, false, false};
+    nte_frames_estimate_t big = {80.0f, -3.0f, 9.0f, false, false, false, true};
+    nte_frames_estimate_t nan_in = {NAN, 0.0f, 0.0f, false, false, false, true};
+    unsigned flags;
+    (void)state;
+    link_init(&l, nte_frames_kind_estimate);
+    assert_int_equal(nte_frames_encode_estimate(&in, &l.tx, l.frame), nte_frames_ok);
+    assert_int_equal(nte_frames_decode_estimate(&l.rx, l.frame, 8, &out, NULL, NULL),
+                     nte_frames_ok);
+    assert_near(out.force_n, 0.2231, 5e-5 + 1e-6);
+    assert_near(out.innovation_n, -0.0042, 1e-4 + 1e-6);
+    assert_near(out.z, 0.1801, 2.5e-4 + 1e-6);
+    assert_true(out.in_tissue);
+    assert_true(out.adapting);
+    assert_false(out.saturated);
+    assert_false(out.fault);
+    assert_int_equal(nte_frames_encode_estimate(&big, &l.tx, l.frame), nte_frames_ok);
+    assert_int_equal(nte_frames_decode_estimate(&l.rx, l.frame, 8, &out, NULL, NULL),
+                     nte_frames_ok);
+    assert_near(out.force_n, 50.0, 1e-4);
+    assert_near(out.innovation_n, -1.6384, 1e-5);
+    assert_near(out.z, 4.0955, 1e-5);
+    assert_true(out.saturated);
+    assert_true(out.fault);
+    assert_int_equal(nte_frames_encode_estimate(&nan_in, &l.tx, l.frame),
+                     nte_frames_err_not_finite);
+    /* every combination of the four status bits survives */
+    for (flags = 0; flags < 16u; ++flags) {
+        nte_frames_estimate_t f = {0.0f, 0.0f, 0.0f, (flags & 1u) != 0u, (flags & 2u) != 0u,
+                                   (flags & 4u) != 0u, (flags & 8u) != 0u};
+        assert_int_equal(nte_frames_encode_estimate(&f, &l.tx, l.frame), nte_frames_ok);
+        assert_int_equal(nte_frames_decode_estimate(&l.rx, l.frame, 8, &out, NULL, NULL),
+                         nte_frames_ok);
+        assert_int_equal(out.in_tissue, f.in_tissue);
+        assert_int_equal(out.adapting, f.adapting);
+        assert_int_equal(out.saturated, f.saturated);
+        assert_int_equal(out.fault, f.fault);
+    }
+}
+
+static void test_params(void** state)
+{
+    /* Model II nominal values (model-notes section 3) and a spread of standard deviations */
+    static const float values[7] = {7.9e-3f, 2.46f, 4.14e-3f, 5.59e-2f, -2.11e-2f, 5.25e-2f,
+                                    2.55e-2f};
+    static const float stds[] = {0.0f, 1e-30f, 3.3e-7f, 1e-4f, 0.0123f, 1.0f, 517.0f, 1e30f};
+    link_t l;
+    unsigned i;
+    size_t j;
+    nte_frames_param_t out;
+    (void)state;
+    link_init(&l, nte_frames_kind_params);
+    for (i = 0; i < 7u; ++i) {
+        for (j = 0; j < sizeof stds / sizeof stds[0]; ++j) {
+            nte_frames_param_t in = {(uint8_t)i, values[i], stds[j]};
+            assert_int_equal(nte_frames_encode_param(&in, &l.tx, l.frame), nte_frames_ok);
+            assert_int_equal(l.frame[1] >> 4, i);
+            assert_int_equal(nte_frames_decode_param(&l.rx, l.frame, 8, &out, NULL, NULL),
+                             nte_frames_ok);
+            assert_int_equal(out.index, i);
+            assert_true(memcmp(&out.value, &in.value, sizeof(float)) == 0); /* bit exact */
+            if (stds[j] > 0.0f) {
+                /* half a 0.001-decade step is 0.115 %; allow float rounding on top */
+                assert_near(out.std / in.std, 1.0, 1.2e-3);
+            } else {
+                assert_true(out.std <= 0.0f && out.std >= 0.0f);
+            }
+        }
+    }
+    {
+        nte_frames_param_t bad_index = {7u, 1.0f, 1.0f};
+        nte_frames_param_t neg_std = {0u, 1.0f, -1e-3f};
+        nte_frames_param_t nan_value = {0u, NAN, 1.0f};
+        nte_frames_param_t inf_std = {0u, 1.0f, INFINITY};
+        nte_frames_param_t tiny = {0u, 1.0f, 1e-38f};
+        nte_frames_param_t huge = {0u, 1.0f, 3e38f};
+        assert_int_equal(nte_frames_encode_param(&bad_index, &l.tx, l.frame),
+                         nte_frames_err_selector);
+        assert_int_equal(nte_frames_encode_param(&neg_std, &l.tx, l.frame), nte_frames_err_range);
+        assert_int_equal(nte_frames_encode_param(&nan_value, &l.tx, l.frame),
+                         nte_frames_err_not_finite);
+        assert_int_equal(nte_frames_encode_param(&inf_std, &l.tx, l.frame),
+                         nte_frames_err_not_finite);
+        /* beyond 10^+-32.767: clamped to the range end, not confused with "fixed" */
+        assert_int_equal(nte_frames_encode_param(&tiny, &l.tx, l.frame), nte_frames_ok);
+        assert_int_equal(nte_frames_decode_param(&l.rx, l.frame, 8, &out, NULL, NULL),
+                         nte_frames_ok);
+        assert_near(log10(out.std), -32.767, 1e-3);
+        assert_int_equal(nte_frames_encode_param(&huge, &l.tx, l.frame), nte_frames_ok);
+        assert_int_equal(nte_frames_decode_param(&l.rx, l.frame, 8, &out, NULL, NULL),
+                         nte_frames_ok);
+        assert_near(log10(out.std), 32.767, 1e-3);
+    }
+    /* a received index 7..15 is a selector error */
+    memset(l.frame, 0, 8);
+    l.frame[1] = 0xF0u;
+    assert_int_equal(nte_e2e_protect(&l.tx, l.frame, 8), nte_e2e_ok);
+    assert_int_equal(nte_frames_decode_param(&l.rx, l.frame, 8, &out, NULL, NULL),
+                     nte_frames_err_selector);
+}
+
+static void test_heartbeat(void** state)
+{
+    link_t l;
+    nte_frames_heartbeat_t out;
+    nte_frames_heartbeat_t in = {NTE_FRAMES_STATE_RUNNING, 1u, 0u, 3600.3f, 259u, 17u, 0.000734f};
+    nte_frames_heartbeat_t wrap = {NTE_FRAMES_STATE_FAULT, 0u, 1u, 104857.6f + 12.5f, 0u, 255u,
+                                   0.5f};
+    nte_frames_heartbeat_t bad_state = {3u, 0u, 0u, 0.0f, 0u, 0u, 0.0f};
+    nte_frames_heartbeat_t neg = {0u, 0u, 0u, -1.0f, 0u, 0u, 0.0f};
+    (void)state;
+    link_init(&l, nte_frames_kind_heartbeat);
+    assert_int_equal(nte_frames_encode_heartbeat(&in, &l.tx, l.frame), nte_frames_ok);
+    assert_int_equal(nte_frames_decode_heartbeat(&l.rx, l.frame, 8, &out, NULL, NULL),
+                     nte_frames_ok);
+    assert_int_equal(out.node_state, NTE_FRAMES_STATE_RUNNING);
+    assert_int_equal(out.active_model, 1);
+    assert_int_equal(out.active_estimator, 0);
+    assert_near(out.uptime_s, 3600.3, 0.05 + 1e-3);
+    assert_int_equal(out.e2e_errors, 259u & 0xFFu);
+    assert_int_equal(out.range_errors, 17u);
+    assert_near(out.step_time_s, 0.000734, 1e-6 + 1e-9);
+    assert_int_equal(nte_frames_encode_heartbeat(&wrap, &l.tx, l.frame), nte_frames_ok);
+    assert_int_equal(nte_frames_decode_heartbeat(&l.rx, l.frame, 8, &out, NULL, NULL),
+                     nte_frames_ok);
+    assert_near(out.uptime_s, 12.5, 0.05 + 0.01); /* float32 at 1e5 s: 0.008 s ulp */
+    assert_near(out.step_time_s, 0.00819, 1e-9 + 1e-7);
+    assert_int_equal(out.node_state, NTE_FRAMES_STATE_FAULT);
+    assert_int_equal(nte_frames_encode_heartbeat(&bad_state, &l.tx, l.frame),
+                     nte_frames_err_selector);
+    assert_int_equal(nte_frames_encode_heartbeat(&neg, &l.tx, l.frame), nte_frames_err_range);
+}
+
+static void test_clock_unwrap(void** state)
+{
+    nte_frames_clock_t c;
+    uint32_t t0;
+    uint32_t t;
+    uint32_t k;
+    uint16_t raw;
+    (void)state;
+    nte_frames_clock_reset(&c);
+    t0 = nte_frames_clock_unwrap(&c, 65000u);
+    assert_int_equal(t0, 65000u + 65536u);
+    /* 10 s of 1 kHz samples (10 ticks each) across wraps, with one sample out of order */
+    raw = 65000u;
+    for (k = 1; k <= 10000u; ++k) {
+        raw = (uint16_t)(raw + 10u);
+        t = nte_frames_clock_unwrap(&c, raw);
+        assert_int_equal(t - t0, k * 10u);
+    }
+    t = nte_frames_clock_unwrap(&c, (uint16_t)(raw - 50u)); /* 5 ms older sample */
+    assert_int_equal(t - t0, 10000u * 10u - 50u);
+    t = nte_frames_clock_unwrap(&c, (uint16_t)(raw + 10u));
+    assert_int_equal(t - t0, 10001u * 10u);
+    /* an older sample right after the start stays non-negative */
+    nte_frames_clock_reset(&c);
+    t0 = nte_frames_clock_unwrap(&c, 5u);
+    t = nte_frames_clock_unwrap(&c, 65530u); /* 11 ticks before */
+    assert_int_equal(t0 - t, 11u);
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_ids),
+        cmocka_unit_test(test_depth_round_trip),
+        cmocka_unit_test(test_depth_range_errors),
+        cmocka_unit_test(test_decode_range_error),
+        cmocka_unit_test(test_decode_e2e_errors),
+        cmocka_unit_test(test_force_ends),
+        cmocka_unit_test(test_command_all_values),
+        cmocka_unit_test(test_estimate_clamp_and_flags),
+        cmocka_unit_test(test_params),
+        cmocka_unit_test(test_heartbeat),
+        cmocka_unit_test(test_clock_unwrap),
+    };
+    return cmocka_run_group_tests_name("nte_frames", tests, NULL, NULL);
+}
