@@ -112,9 +112,10 @@ nte_err_t nte_reset(nte_t* self)
     return nte_err_ok;
 }
 
-/* Clip |u|, floor variances, reset the filter when P or x went bad (bank._guard). */
+/* Clip |u|, floor variances, reset the filter when its prior, P or x went bad (bank._guard):
+ * P back to its initial value, the state back to the prior (0 where not finite). */
 static uint32_t guard(nte_t* self, const size_t n, nte_real_t* x, nte_mat3_t P,
-                      const nte_real_t* x_prior)
+                      const nte_real_t* x_prior, const bool prior_ok)
 {
     const nte_real_t umax = self->cfg.u_max;
     uint32_t status = 0U;
@@ -124,7 +125,7 @@ static uint32_t guard(nte_t* self, const size_t n, nte_real_t* x, nte_mat3_t P,
         }
         x[a] = (x[a] > umax) ? umax : ((x[a] < -umax) ? -umax : x[a]);
     }
-    bool ok = nte_ekf_positive_definite(n, P);
+    bool ok = prior_ok && nte_ekf_positive_definite(n, P);
     for (size_t a = 0U; a < n; a++) {
         ok = ok && nte_isfinite(x[a]);
     }
@@ -237,14 +238,18 @@ static uint32_t run_filter(nte_t* self, const step_ctx_t* c, const size_t i,
     }
     const nte_real_t innovation = c->y - o.h;
     nte_real_t xn[NTE_EKF_N_MAX];
+    nte_mat3_t Pn;
     for (size_t a = 0U; a < n; a++) {
         xn[a] = x[a];
+        for (size_t b = 0U; b < n; b++) {
+            Pn[a][b] = P[a][b];
+        }
     }
+    /* a gate that refused too many samples in a row would lock the filter out: open it */
+    const bool open_gate = self->gated_run[i] >= (uint32_t)self->cfg.gate_reopen_after;
+    const nte_ekf_update_t upd = nte_ekf_joseph_update(n, xn, Pn, h, innovation, r_eff,
+                                                       self->gate2, open_gate, fo->active);
     if (fo->active) {
-        /* a gate that refused too many samples in a row would lock the filter out: open it */
-        const bool open_gate = self->gated_run[i] >= (uint32_t)self->cfg.gate_reopen_after;
-        const nte_ekf_update_t upd =
-            nte_ekf_joseph_update(n, xn, P, h, innovation, r_eff, self->gate2, open_gate);
         if (upd.accepted) {
             self->gated_run[i] = 0U;
         } else {
@@ -255,10 +260,13 @@ static uint32_t run_filter(nte_t* self, const step_ctx_t* c, const size_t i,
         fo->innovation = innovation;
         fo->nis = upd.nis;
     }
-    status |= guard(self, n, xn, P, x);
+    /* a prior that is not positive definite (or a non-positive innovation variance) can still
+     * yield a plausible-looking posterior: judge the filter on both */
+    const bool prior_ok = nte_ekf_positive_definite(n, P) && (upd.s > NTE_C(0.0));
+    status |= guard(self, n, xn, Pn, x, prior_ok);
     for (size_t a = 0U; a < n; a++) {
         for (size_t b = 0U; b < n; b++) {
-            self->P[i][a][b] = P[a][b];
+            self->P[i][a][b] = Pn[a][b];
         }
     }
     for (size_t a = 0U; a < na; a++) {

@@ -35,7 +35,7 @@ void nte_ekf_predict(const size_t n, nte_mat3_t P, nte_mat3_t F, const nte_real_
 nte_ekf_update_t nte_ekf_joseph_update(const size_t n, nte_real_t* x, nte_mat3_t P,
                                        const nte_real_t* h, const nte_real_t innovation,
                                        const nte_real_t r, const nte_real_t gate2,
-                                       const bool open_gate)
+                                       const bool open_gate, const bool apply)
 {
     nte_ekf_update_t res;
     nte_real_t pht[NTE_EKF_N_MAX] = {NTE_C(0.0)};
@@ -60,7 +60,7 @@ nte_ekf_update_t nte_ekf_joseph_update(const size_t n, nte_real_t* x, nte_mat3_t
     res.s = s;
     res.nis = (innovation * innovation) / s;
     res.accepted = (res.nis <= gate2) || open_gate;
-    if (!res.accepted) {
+    if (!(apply && res.accepted)) {
         return res;
     }
     for (size_t i = 0U; i < n; i++) {

@@ -25,10 +25,11 @@ typedef struct nte_ekf_update_t {
 } nte_ekf_update_t;
 
 /** Scalar measurement update in Joseph form behind an innovation gate (ekf.joseph_update).
- *  x and P are updated in place only when accepted. */
+ *  x and P are updated in place only when `apply` and accepted; s, nis and accepted are always
+ *  computed (the reference evaluates them for idle filters too). */
 nte_ekf_update_t nte_ekf_joseph_update(size_t n, nte_real_t* x, nte_mat3_t P, const nte_real_t* h,
                                        nte_real_t innovation, nte_real_t r, nte_real_t gate2,
-                                       bool open_gate);
+                                       bool open_gate, bool apply);
 
 /** Sylvester's criterion on the leading minors, and every entry finite (P read only). */
 bool nte_ekf_positive_definite(size_t n, nte_mat3_t P);
