@@ -205,7 +205,10 @@ class FilterBank:
             newx = [np.where(active, upd.x[a], x[a]) for a in range(len(x))]
             newP = [[np.where(active, upd.P[a][b], P_pred[a][b]) for b in range(len(x))]
                     for a in range(len(x))]
-            newx, newP, st = self._guard(newx, newP, x)
+            # a prior that is not positive definite (or a non-positive innovation variance)
+            # can still yield a plausible-looking posterior: judge the filter on both
+            prior_ok = positive_definite(R, P_pred) & (upd.s > zero)
+            newx, newP, st = self._guard(newx, newP, x, prior_ok)
             status |= np.where(run, st, np.uint32(0))
             # commit: every filter of a running sample keeps its propagated covariance
             self.P[i] = [[np.where(run, newP[a][b], self.P[i][a][b]) for b in range(len(x))]
@@ -228,9 +231,12 @@ class FilterBank:
         params, sds = self.parameter_estimates()
         return StepOutput(o.h, self.z, innov, nis, status, params, sds)
 
-    def _guard(self, x: list[Array], P: Matrix, x_prior: list[Array]
+    def _guard(self, x: list[Array], P: Matrix, x_prior: list[Array], prior_ok: Array
                ) -> tuple[list[Array], Matrix, Array]:
-        """Clip |u|, floor variances, and reset the filter when P or x went bad."""
+        """Clip |u|, floor variances, and reset the filter when P or x went bad.
+
+        Reset: P back to its initial value, the state back to the prior (0 where not finite).
+        """
         R, c = self.R, self.c
         n = len(x)
         status = np.zeros(self.batch, dtype=np.uint32)
@@ -238,7 +244,7 @@ class FilterBank:
             clipped = np.abs(x[a]) > c.u_max
             x[a] = np.where(x[a] > c.u_max, c.u_max, np.where(x[a] < -c.u_max, -c.u_max, x[a]))
             status |= np.where(clipped, np.uint32(STATUS_CLIPPED), np.uint32(0))
-        ok = positive_definite(R, P)
+        ok = prior_ok & positive_definite(R, P)
         for a in range(n):
             ok = ok & np.isfinite(x[a])
         floors = [c.var_floor_z] + [c.var_floor_u] * (n - 1)

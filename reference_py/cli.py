@@ -6,7 +6,7 @@
                      [--init-factor F] [--precision float64|float32] [--schedule all|rotate]
                      [--profile default|paper] --out EST.csv [--plot EST.png]
     nte-ref evaluate [--preset NAME] [--model 1|2] [--factor F] [--seeds N] [--precision P]
-                     [--profile P] [--schedule S]
+                     [--profile P] [--schedule S] [--matrix]
     nte-ref bench [--samples N]
 
 Exit status: 0 on success, 2 on bad input (the message on stderr names the file, line and column).
@@ -93,6 +93,8 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--profile", default="default", choices=("default", "paper"))
     v.add_argument("--schedule", default="all", choices=("all", "rotate"))
     v.add_argument("--cycles", type=int, default=1)
+    v.add_argument("--matrix", action="store_true",
+                   help="run the README's standard set of cases instead (about 2 minutes)")
 
     b = sub.add_parser("bench", help="samples per second of the reference (and of filterpy)")
     b.add_argument("--samples", type=int, default=10000)
@@ -139,11 +141,16 @@ def _estimate(a: argparse.Namespace) -> int:
 
 
 def _evaluate(a: argparse.Namespace) -> int:
-    from .quality import QualityCase, format_summary, run_quality
+    from dataclasses import replace
 
-    case = QualityCase(a.preset, a.model, a.factor, a.precision, a.profile, a.schedule,
-                       a.seeds, a.cycles)
-    print(format_summary([run_quality(case, progress=True)]))
+    from .quality import STANDARD_MATRIX, QualityCase, format_summary, run_quality
+
+    if a.matrix:
+        cases = [replace(c, seeds=a.seeds) for c in STANDARD_MATRIX]
+    else:
+        cases = [QualityCase(a.preset, a.model, a.factor, a.precision, a.profile, a.schedule,
+                             a.seeds, a.cycles)]
+    print(format_summary([run_quality(c, progress=True) for c in cases]))
     return 0
 
 

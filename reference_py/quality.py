@@ -34,6 +34,20 @@ class QualityCase:
                 + (f" {self.cycles} cycles" if self.cycles > 1 else ""))
 
 
+#: the cases the README's quality table reports (`nte-ref evaluate --matrix`)
+STANDARD_MATRIX: tuple[QualityCase, ...] = (
+    QualityCase(factor=1.25, precision="float64"),
+    QualityCase(factor=1.25, precision="float32"),
+    QualityCase(factor=5.0, precision="float64"),
+    QualityCase(factor=5.0, precision="float32"),
+    QualityCase(factor=1.25, schedule="rotate"),
+    QualityCase(factor=1.25, profile="paper"),
+    QualityCase(model=1, factor=1.25),
+    QualityCase(preset="paper-6mms", factor=1.25),
+    QualityCase(preset="paper-6mms", factor=1.25, precision="float32"),
+)
+
+
 @dataclass
 class QualityResult:
     case: QualityCase

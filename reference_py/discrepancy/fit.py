@@ -1,0 +1,110 @@
+"""Fitting the (extended) model to one or more trials by variable projection.
+
+The force is linear in the output coefficients once the nonlinear parameters (the base model's
+p, g0, alpha, each trial's surface correction, and any effect's time constants, depths,
+frequencies) are fixed (effects.design).  The linear coefficients are therefore solved exactly by
+least squares inside every residual evaluation, and scipy's bounded least_squares searches only the
+few nonlinear ones (log-parameters where the sign is known).  One parameter set is shared by all
+trials: they are the same needle and tissue; only offsets, surfaces and per-trial effect terms
+(relaxation amplitude, motion phase) belong to one trial.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from ..effects import NLParam, StateCache, TrialGrid, design, nl_specs
+from ..fmath import Array
+
+
+@dataclass
+class Fit:
+    """A fitted model: its effects, nonlinear values, linear coefficients and residual."""
+
+    effects: tuple[str, ...]
+    nl: dict[str, Array]
+    coef: dict[str, float]
+    sse: float
+    n: int
+    k: int          # parameters: nonlinear scalars + linear columns that are not identically 0
+    resid: Array
+
+
+def solve_linear(m: Array, y: Array) -> Array:
+    """Least-squares coefficients with column scaling (columns may be all zero)."""
+    norms = np.sqrt(np.sum(m * m, axis=0))
+    scale = np.where(norms > 0, 1.0 / np.where(norms > 0, norms, 1.0), 0.0)
+    coef, *_ = np.linalg.lstsq(m * scale, y, rcond=None)
+    return coef * scale
+
+
+def _slots(specs: list[NLParam], free: set[str], n_tr: int) -> list[tuple[NLParam, int | None]]:
+    out: list[tuple[NLParam, int | None]] = []
+    for par in specs:
+        if par.name in free:
+            out += [(par, i) for i in range(n_tr)] if par.per_trial else [(par, None)]
+    return out
+
+
+def _get(nl: dict[str, Array], par: NLParam, i: int | None) -> float:
+    return float(nl[par.name][i]) if i is not None else float(nl[par.name])
+
+
+def _pack(nl: dict[str, Array], slots: list[tuple[NLParam, int | None]]) -> tuple[Array, Array, Array]:
+    x, lo, hi = [], [], []
+    for par, i in slots:
+        val = min(max(_get(nl, par, i), par.lo), par.hi)
+        if par.log:
+            x.append(np.log(val)); lo.append(np.log(par.lo)); hi.append(np.log(par.hi))
+        else:
+            x.append(val); lo.append(par.lo); hi.append(par.hi)
+    xa, la, ha = np.array(x), np.array(lo), np.array(hi)
+    span = ha - la
+    return np.clip(xa, la + 1e-9 * span, ha - 1e-9 * span), la, ha
+
+
+def _unpack(x: Array, nl0: dict[str, Array], slots: list[tuple[NLParam, int | None]]
+            ) -> dict[str, Array]:
+    nl = {k: np.array(v, dtype=float, copy=True) for k, v in nl0.items()}
+    for xv, (par, i) in zip(x, slots):
+        val = float(np.exp(xv)) if par.log else float(xv)
+        if i is None:
+            nl[par.name] = np.array(val)
+        else:
+            nl[par.name][i] = val
+    return nl
+
+
+def evaluate(trials: list[TrialGrid], y: Array, effects: tuple[str, ...], nl: dict[str, Array],
+             cache: StateCache | None = None, rows: Array | None = None) -> Fit:
+    """Solve the linear coefficients for fixed nonlinear values (optionally on ``rows`` only)."""
+    m, labels = design(trials, effects, nl, cache)
+    mm, yy = (m, y) if rows is None else (m[rows], y[rows])
+    c = solve_linear(mm, yy)
+    resid = y - m @ c
+    used = np.any(mm != 0, axis=0)
+    n_nl = sum(len(trials) if p.per_trial else 1 for p in nl_specs(effects))
+    r = resid if rows is None else resid[rows]
+    return Fit(effects, nl, dict(zip(labels, c.tolist())), float(r @ r), len(yy),
+               int(np.count_nonzero(used)) + n_nl, resid)
+
+
+def fit(trials: list[TrialGrid], y: Array, effects: tuple[str, ...], nl0: dict[str, Array],
+        free: set[str], cache: StateCache | None = None, max_nfev: int = 60) -> Fit:
+    """Least-squares fit of the nonlinear parameters named in ``free`` (others held at nl0)."""
+    cache = cache if cache is not None else StateCache()
+    slots = _slots(nl_specs(effects), free, len(trials))
+    if not slots:
+        return evaluate(trials, y, effects, nl0, cache)
+    x0, lo, hi = _pack(nl0, slots)
+
+    def res(x: Array) -> Array:
+        nl = _unpack(x, nl0, slots)
+        m, _ = design(trials, effects, nl, cache)
+        return y - m @ solve_linear(m, y)
+
+    sol = least_squares(res, x0, bounds=(lo, hi), method="trf", x_scale=1.0, diff_step=1e-5,
+                        max_nfev=max_nfev, xtol=1e-6, ftol=1e-8)
+    return evaluate(trials, y, effects, _unpack(sol.x, nl0, slots), cache)
