@@ -173,11 +173,11 @@ class E2EReceiver:
         """Return (status, frames lost before this one) and advance on ok/skipped."""
         if len(data) != FRAME_LENGTH:
             return "wrong_length", 0
-        if not self.db.crc_ok(name, data):
-            return "bad_crc", 0
         counter = data[1] & 0x0F
         if counter >= COUNTER_MODULUS:
             return "bad_counter", 0
+        if not self.db.crc_ok(name, data):
+            return "bad_crc", 0
         if name not in self.last:
             self.last[name] = counter
             return "ok", 0

@@ -106,12 +106,12 @@ nte_e2e_result_t nte_e2e_check(nte_e2e_rx_t* self, const uint8_t* frame, size_t 
     if (length != (size_t)self->length) {
         return nte_e2e_err_wrong_length;
     }
-    if (frame[0] != nte_e2e_frame_crc(self->data_id, frame, length)) {
-        return nte_e2e_err_bad_crc;
-    }
     counter = nte_e2e_counter_of(frame);
     if (counter > NTE_E2E_COUNTER_MAX) {
         return nte_e2e_err_bad_counter;
+    }
+    if (frame[0] != nte_e2e_frame_crc(self->data_id, frame, length)) {
+        return nte_e2e_err_bad_crc;
     }
     if (!self->synced) {
         self->synced = true;

@@ -50,7 +50,7 @@ typedef enum {
     nte_e2e_err_repeated = -4,       /**< CRC right, same counter as the previous accepted frame
                                           (a repeat -- or exactly 15 frames lost, which is
                                           indistinguishable). */
-    nte_e2e_err_bad_counter = -5,    /**< CRC right but the counter is 15, which is never sent. */
+    nte_e2e_err_bad_counter = -5,    /**< The counter is 15, which is never sent. */
     nte_e2e_err_bad_config = -6      /**< Length outside 2..8 at init. */
 } nte_e2e_result_t;
 
@@ -95,7 +95,8 @@ nte_e2e_result_t nte_e2e_rx_init(nte_e2e_rx_t* self, uint16_t data_id, uint8_t l
 /** Forget the counter history (e.g. after a bus-off or a sender restart). */
 void nte_e2e_rx_reset(nte_e2e_rx_t* self);
 
-/** Check a received frame. Order: length, CRC, counter value, counter continuity.
+/** Check a received frame. Order: length, counter value (15 is invalid), CRC, counter
+ *  continuity (the autosar-e2e package also rejects counter 15 before anything else).
  *  `lost` (may be NULL) receives the number of frames missed before this one (0 unless the
  *  result is nte_e2e_skipped, then 1..13). The state advances only when the result is >= 0.
  *  Counter delta d = (counter - last) mod 15: d = 1 -> ok, d = 0 -> repeated, d = 2..14 ->

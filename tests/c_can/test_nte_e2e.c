@@ -145,6 +145,8 @@ static void test_check_errors(void** state)
     frame[1] = (uint8_t)(frame[1] | 0x0Fu);
     frame[0] = nte_e2e_frame_crc(0x4E01u, frame, 8);
     assert_int_equal(nte_e2e_check(&rx, frame, 8, NULL), nte_e2e_err_bad_counter);
+    frame[0] = (uint8_t)(frame[0] ^ 0xFFu); /* and with a wrong CRC: still the counter */
+    assert_int_equal(nte_e2e_check(&rx, frame, 8, NULL), nte_e2e_err_bad_counter);
     assert_int_equal(nte_e2e_check(NULL, good, 8, NULL), nte_e2e_err_null);
     assert_int_equal(nte_e2e_check(&rx, NULL, 8, NULL), nte_e2e_err_null);
     /* the good frame is accepted, then repeated, then after reset accepted again */
