@@ -1,0 +1,99 @@
+"""Run inside host_bench/with-vcan by test_with_vcan.py: exercises vcan0 and writes JSON.
+
+    python tests/python/vcan_probe.py OUT.json [N_ROUND_TRIPS]
+
+1. candump -L vcan0 captures three frames sent by cansend;
+2. python-can's socketcan interface: a message sent on one Bus arrives on another;
+3. a 200 Hz round trip: a python-can echo process (started here, stopped by its PID) answers
+   every frame 0x100 with 0x101; the send -> answer times are recorded.
+"""
+from __future__ import annotations
+
+import json
+import statistics
+import subprocess
+import sys
+import time
+
+import can
+
+ECHO = r"""
+import can, sys
+bus = can.Bus(interface="socketcan", channel="vcan0")
+bus.set_filters([{"can_id": 0x100, "can_mask": 0x7FF}])
+print("ready", flush=True)
+while True:
+    m = bus.recv(1.0)
+    if m is not None:
+        bus.send(can.Message(arbitration_id=0x101, is_extended_id=False, data=m.data))
+"""
+
+
+def main() -> int:
+    out_path = sys.argv[1]
+    n = int(sys.argv[2]) if len(sys.argv) > 2 else 400
+    res: dict = {}
+
+    # 1. candump / cansend
+    dump = subprocess.Popen(["candump", "-L", "vcan0"], stdout=subprocess.PIPE, text=True)
+    try:
+        time.sleep(0.5)
+        for frame in ("123#DEADBEEF", "5A1#0102", "7FF#0011223344556677"):
+            subprocess.run(["cansend", "vcan0", frame], check=True)
+        time.sleep(0.5)
+    finally:
+        dump.terminate()  # by PID: this Popen's own process
+        stdout, _ = dump.communicate(timeout=10)
+    res["candump"] = stdout.splitlines()
+
+    # 2. python-can round trip between two sockets
+    with can.Bus(interface="socketcan", channel="vcan0") as a, \
+            can.Bus(interface="socketcan", channel="vcan0") as b:
+        sent = can.Message(arbitration_id=0x321, is_extended_id=False, data=bytes([1, 2, 3, 250]))
+        a.send(sent)
+        got = b.recv(2.0)
+        res["pycan"] = None if got is None else {
+            "id": got.arbitration_id, "data": got.data.hex(), "dlc": got.dlc,
+            "ext": got.is_extended_id}
+
+    # 3. 200 Hz round trip through an echo process
+    echo = subprocess.Popen([sys.executable, "-c", ECHO], stdout=subprocess.PIPE, text=True)
+    rtts: list[float] = []
+    try:
+        assert echo.stdout is not None and echo.stdout.readline().strip() == "ready"
+        with can.Bus(interface="socketcan", channel="vcan0") as bus:
+            bus.set_filters([{"can_id": 0x101, "can_mask": 0x7FF}])
+            period = 1.0 / 200.0
+            t0 = time.perf_counter()
+            for k in range(n):
+                target = t0 + k * period
+                while time.perf_counter() < target:
+                    time.sleep(max(0.0, min(0.001, target - time.perf_counter())))
+                data = k.to_bytes(4, "little")
+                ts = time.perf_counter()
+                bus.send(can.Message(arbitration_id=0x100, is_extended_id=False, data=data))
+                while True:
+                    m = bus.recv(0.5)
+                    if m is None:
+                        break
+                    if bytes(m.data) == data:
+                        rtts.append(time.perf_counter() - ts)
+                        break
+            res["rate_hz"] = n / (time.perf_counter() - t0)
+    finally:
+        echo.terminate()  # by PID
+        echo.wait(timeout=10)
+    res["n"] = n
+    res["answered"] = len(rtts)
+    if rtts:
+        s = sorted(rtts)
+        res["rtt_median_ms"] = statistics.median(s) * 1e3
+        res["rtt_p99_ms"] = s[min(len(s) - 1, int(0.99 * len(s)))] * 1e3
+        res["rtt_max_ms"] = s[-1] * 1e3
+    with open(out_path, "w") as f:
+        json.dump(res, f, indent=1)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
