@@ -13,6 +13,7 @@ the same as one run at a time, and fast enough for the test suite.
 
     python tests/python/c_twin.py inputs    # regenerate the scenario inputs
     python tests/python/c_twin.py replay    # regenerate the replay files from build/host/bin/nte-run
+    python tests/python/c_twin.py reversal  # regenerate tests/data/c_faults/reversal.csv
 """
 from __future__ import annotations
 
@@ -185,6 +186,26 @@ def make_inputs() -> None:
                         "--out", str(DATA / f"{name}.csv")], check=True, cwd=ROOT)
 
 
+def make_reversal() -> None:
+    """tests/data/c_faults/reversal.csv: 10 mm/s in to 30 mm, then at once -10 mm/s back out
+    (no blend: the velocity jumps by 20 mm/s between two samples), preset paper-10mms truth,
+    exact sign, 2 mN noise (seed 1).  For the C fault-injection test."""
+    from reference_py.csvio import write_atomic
+    from reference_py.simulate import simulate_force
+    rate, speed, depth = 200.0, 10.0, 30.0
+    n_in = int(round(depth / speed * rate))
+    t = np.arange(2 * n_in + 41) / rate
+    k = np.arange(len(t))
+    l = np.where(k <= n_in, k * (speed / rate), np.maximum(0.0, (2 * n_in - k) * (speed / rate)))
+    v = np.where(k < n_in, speed, np.where(l > 0.0, -speed, 0.0))
+    truth = simulate_force(get_preset("paper-10mms").params, t, l, v)[0][0]
+    noisy = truth + np.random.default_rng(1).normal(0.0, 2e-3, len(t))
+    lines = ["# abrupt reversal at full speed at t = %.3f s" % (n_in / rate),
+             "t_s,depth_mm,velocity_mm_s,force_n,force_true_n"]
+    lines += ["%.17g,%.17g,%.17g,%.17g,%.17g" % row for row in zip(t, l, v, noisy, truth)]
+    write_atomic(ROOT / "tests" / "data" / "c_faults" / "reversal.csv", lines)
+
+
 def make_replay() -> None:
     import tempfile
     REPLAY.mkdir(parents=True, exist_ok=True)
@@ -199,4 +220,4 @@ def make_replay() -> None:
 
 
 if __name__ == "__main__":
-    {"inputs": make_inputs, "replay": make_replay}[sys.argv[1]]()
+    {"inputs": make_inputs, "replay": make_replay, "reversal": make_reversal}[sys.argv[1]]()
