@@ -162,7 +162,10 @@ static char* slurp(const char* path, size_t* len)
     size_t cap = 65536U;
     size_t n = 0U;
     char* buf = malloc(cap);
-    while (buf != NULL) {
+    for (;;) {
+        if (buf == NULL) {
+            break;
+        }
         if ((n + 1U) >= cap) {
             char* b = realloc(buf, cap * 2U);
             if (b == NULL) {
@@ -173,7 +176,7 @@ static char* slurp(const char* path, size_t* len)
             buf = b;
             cap *= 2U;
         }
-        const size_t got = fread(buf + n, 1U, cap - n - 1U, fh);
+        const size_t got = fread(&buf[n], 1U, cap - n - 1U, fh);
         n += got;
         if (got == 0U) {
             break;

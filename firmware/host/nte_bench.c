@@ -24,10 +24,9 @@ static void make_samples(void)
 {
     /* 10 mm/s in to 50 mm, dwell, out, repeated; force a smooth stand-in with noise-like term */
     double depth = 0.0;
-    double v = 10.0;
     for (int k = 0; k < N_SAMPLES; k++) {
         const int phase = (k / 200) % 12; /* 5 s in, 1 s dwell, 5 s out, 1 s rest */
-        v = (phase < 5) ? 10.0 : ((phase == 5) ? 0.0 : ((phase < 11) ? -10.0 : 0.0));
+        const double v = (phase < 5) ? 10.0 : ((phase == 5) ? 0.0 : ((phase < 11) ? -10.0 : 0.0));
         depth += v * 0.005;
         if (depth < 0.0) {
             depth = 0.0;

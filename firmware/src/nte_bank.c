@@ -302,6 +302,7 @@ static void advance(nte_t* self, const bool first, const nte_real_t dt, const nt
             self->counters.gaps++;
         }
         nte_rk3_result_t shared;
+        (void)memset(&shared, 0, sizeof shared);
         const size_t mi = model_index(self);
         if (c.rotate) {
             /* one prediction, with every identified parameter's sensitivity, serves all three */

@@ -165,7 +165,6 @@ void nte_model_rk3(nte_rk3_result_t* res, const nte_theta_t* th, nte_real_t z,
     const nte_real_t dl = l_b - l_a;
     nte_real_t s_z = NTE_C(1.0);
     nte_real_t s_u[NTE_PARAM_COUNT] = {NTE_C(0.0)};
-    const size_t m = (count < (size_t)NTE_PARAM_COUNT) ? count : (size_t)NTE_PARAM_COUNT;
     for (int32_t j = 0; j < substeps; j++) {
         const nte_real_t tau0 = (nte_real_t)j / n;
         const nte_real_t taum = (nte_real_t)((2 * j) + 1) / (n * NTE_C(2.0));
@@ -192,7 +191,7 @@ void nte_model_rk3(nte_rk3_result_t* res, const nte_theta_t* th, nte_real_t z,
         const nte_real_t a3 = fz1 * ((s_z - (h * a1)) + (twoh * a2));
         s_z = s_z + (h6 * ((a1 + (four * a2)) + a3));
 
-        for (size_t p = 0U; p < m; p++) {
+        for (size_t p = 0U; (p < count) && (p < (size_t)NTE_PARAM_COUNT); p++) {
             const nte_real_t s = s_u[p];
             bool present = false;
             nte_real_t q1 = fz0 * s;
@@ -216,7 +215,7 @@ void nte_model_rk3(nte_rk3_result_t* res, const nte_theta_t* th, nte_real_t z,
     }
     res->z = z;
     res->dz_dz0 = s_z;
-    for (size_t p = 0U; p < m; p++) {
+    for (size_t p = 0U; (p < count) && (p < (size_t)NTE_PARAM_COUNT); p++) {
         res->dz_du[ids[p]] = s_u[p];
     }
 }
