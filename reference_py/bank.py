@@ -71,12 +71,17 @@ class FilterBank:
         # per-parameter nominal arrays: nominal[b][j] -> column j over b
         cols = list(zip(*nominal))
         self.scaled = _BatchScaled(R, cols, self.batch)
+        self._nominal0 = ([x.copy() for x in self.scaled.nominal], self.scaled.ex_nominal.copy())
         self.c = _Constants(R, cfg)
         self.reset()
+        self.initial_theta = self.th
 
     # ------------------------------------------------------------------------------------
     def reset(self) -> None:
+        """Back to the configured nominal parameters, the initial covariances, no history."""
         R, B = self.R, self.batch
+        self.scaled.nominal = [x.copy() for x in self._nominal0[0]]
+        self.scaled.ex_nominal = self._nominal0[1].copy()
         self.u = [R.full(B, 0.0) for _ in PARAM_NAMES]
         self.th = self.scaled.theta(self.u)
         self.z = R.full(B, 0.0)
@@ -92,13 +97,31 @@ class FilterBank:
                                R.arr(np.zeros((len(self.identified), B))),
                                R.arr(np.zeros((len(self.identified), B))))
 
-    def _p0(self, n: int) -> Matrix:
+    def _p0(self, n: int, p0_u: Array | None = None) -> Matrix:
         R, B, c = self.R, self.batch, self.c
         P: Matrix = [[R.full(B, 0.0) for _ in range(n)] for _ in range(n)]
         P[0][0] = R.full(B, 0.0) + c.p0_z
         for i in range(1, n):
-            P[i][i] = R.full(B, 0.0) + c.p0_u
+            P[i][i] = R.full(B, 0.0) + (c.p0_u if p0_u is None else p0_u)
         return P
+
+    def restart_from(self, theta: list[Array], mask: Array, p0_u: Array) -> None:
+        """Re-centre the scaled parameters on ``theta`` (seven physical arrays) where ``mask``:
+        u = 0 there, covariances P0 with var(u) = p0_u; z and the sample history carry on."""
+        R = self.R
+        for j in range(len(PARAM_NAMES)):
+            self.scaled.nominal[j] = np.where(mask, theta[j], self.scaled.nominal[j])
+        ex = theta[IDX["f1"]] - self.scaled.kappa * (-theta[IDX["f2"]])
+        self.scaled.ex_nominal = np.where(mask, ex, self.scaled.ex_nominal)
+        self.u = [np.where(mask, R.c(0.0), u) for u in self.u]
+        fresh = self.scaled.theta(self.u)
+        self.th = Theta(*(np.where(mask, getattr(fresh, f), getattr(self.th, f))
+                          for f in Theta.__dataclass_fields__))
+        for i, names in enumerate(self.subsets):
+            P0 = self._p0(len(names) + 1, p0_u)
+            self.P[i] = [[np.where(mask, P0[a][b], self.P[i][a][b]) for b in range(len(P0))]
+                         for a in range(len(P0))]
+            self.gated_run[i] = np.where(mask, 0, self.gated_run[i])
 
     # ------------------------------------------------------------------------------------
     def step(self, t_us: Array, depth: Array, velocity: Array, force: Array) -> StepOutput:

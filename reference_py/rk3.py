@@ -38,11 +38,12 @@ def rk3_step(R: Real, th: Theta, z: Array, l_a: Array, l_b: Array, dt: Array, su
     dl = l_b - l_a
     s_z = np.ones_like(z)  # dz/dz0
     s_u = {p: np.zeros_like(z) for p in params}
+    # the end of one sub-step is the start of the next: its depth terms are computed once
+    d1 = depth_terms(R, th, clamp_depth(R, l_a + dl * (R.c(0.0) / n)))
     for j in range(substeps):
-        tau0 = R.c(float(j)) / n
         taum = R.c(float(2 * j + 1)) / (n * R.c(2.0))
         tau1 = R.c(float(j + 1)) / n
-        d0 = depth_terms(R, th, clamp_depth(R, l_a + dl * tau0))
+        d0 = d1
         dm = depth_terms(R, th, clamp_depth(R, l_a + dl * taum))
         d1 = depth_terms(R, th, clamp_depth(R, l_a + dl * tau1))
         fz0, fzm, fz1 = state_rate_dz(d0), state_rate_dz(dm), state_rate_dz(d1)
