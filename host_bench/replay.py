@@ -19,6 +19,7 @@ import argparse
 import csv
 import math
 import sys
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -109,12 +110,26 @@ class ReplayResult:
     sent_by_name: dict[str, int] = field(default_factory=dict)
 
 
-class _Counter(can.Listener):
-    def __init__(self) -> None:
+class _Received(can.Listener):
+    """Counts received messages and passes them on marked as received (is_rx = True): on a vcan
+    or any frame looped back on this host, python-can's socketcan reports is_rx = False (the
+    kernel flags locally originated frames), which would make the records ambiguous; this bus
+    does not receive its own frames, so everything arriving here was sent by someone else."""
+
+    def __init__(self, writers: Sequence[can.Listener]) -> None:
         self.n = 0
+        self.writers = list(writers)
+        self.lock = threading.Lock()  # the sender thread writes its frames to the same writers
 
     def on_message_received(self, msg: can.Message) -> None:
+        msg.is_rx = True
+        self.write(msg)
         self.n += 1
+
+    def write(self, msg: can.Message) -> None:
+        with self.lock:
+            for w in self.writers:
+                w.on_message_received(msg)
 
 
 def replay(bus: can.BusABC, frames: Iterable[ScheduledFrame], *, speed: float = 1.0,
@@ -124,8 +139,8 @@ def replay(bus: can.BusABC, frames: Iterable[ScheduledFrame], *, speed: float = 
     every received message and every sent one to `writers`. Keeps receiving for `tail_s` after
     the last frame. The caller owns the bus and closes the writers."""
     frames = list(frames)
-    counter = _Counter()
-    notifier = can.Notifier(bus, [counter, *writers])
+    counter = _Received(writers)
+    notifier = can.Notifier(bus, [counter])
     res = ReplayResult()
     t0_sched = frames[0].t_s if frames else 0.0
     start = time.perf_counter()
@@ -145,8 +160,7 @@ def replay(bus: can.BusABC, frames: Iterable[ScheduledFrame], *, speed: float = 
             sent = can.Message(timestamp=msg.timestamp, arbitration_id=msg.arbitration_id,
                                is_extended_id=False, data=msg.data, is_rx=False,
                                channel=msg.channel)
-            for w in writers:
-                w.on_message_received(sent)
+            counter.write(sent)
             res.sent += 1
             if db is not None:
                 name = db.name_of(msg.arbitration_id) or "?"
