@@ -12,7 +12,8 @@ BUILD := build/host
 DEMO_DIR := out/demo
 
 # Debian packages the build and the tests need
-APT_PACKAGES := python3 python3-venv python3-dev gcc make cmake libcmocka-dev cppcheck
+APT_PACKAGES := python3 python3-venv python3-dev gcc make cmake libcmocka-dev cppcheck \
+                user-mode-linux kmod can-utils iproute2
 
 .PHONY: all build demo test deps venv clean
 

@@ -2,11 +2,12 @@
 
     nte-ref simulate --preset NAME --depth MM --dwell S [--speed MM_S] [--rate HZ] [--noise N]
                      [--seed K] [--cycles C] [--accel MM_S2] --out FILE.csv
-    nte-ref estimate FILE.csv --model 1|2 [--estimator bank] [--preset NAME] [--init-seed K]
+    nte-ref estimate FILE.csv --model 1|2 [--estimator bank|robust] [--preset NAME] [--init-seed K]
                      [--init-factor F] [--precision float64|float32] [--schedule all|rotate]
                      [--profile default|paper] --out EST.csv [--plot EST.png]
     nte-ref evaluate [--preset NAME] [--model 1|2] [--factor F] [--seeds N] [--precision P]
-                     [--profile P] [--schedule S] [--matrix]
+                     [--profile P] [--schedule S] [--estimator E] [--cycles C]
+                     [--matrix | --robust-matrix]
     nte-ref bench [--samples N]
 
 Exit status: 0 on success, 2 on bad input (the message on stderr names the file, line and column).
@@ -65,8 +66,10 @@ def build_parser() -> argparse.ArgumentParser:
                                    "its standard deviation.")
     e.add_argument("csv", metavar="FILE.csv")
     e.add_argument("--model", type=int, choices=(1, 2), required=True)
-    e.add_argument("--estimator", default="bank", choices=("bank",),
-                   help="bank: the paper's three filters in switching mode")
+    e.add_argument("--estimator", default="bank", choices=("bank", "robust"),
+                   help="bank: the paper's three filters in switching mode; robust: the bank "
+                        "plus a batch refinement after every insertion (converges from "
+                        "factor-5 starts; adds a 'confidence' column)")
     e.add_argument("--preset", default="paper-10mms",
                    help="starting (nominal) parameters; Model II also takes its fixed f2 and "
                         "alpha from it, Model I its beta0 (default paper-10mms)")
@@ -93,8 +96,11 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--profile", default="default", choices=("default", "paper"))
     v.add_argument("--schedule", default="all", choices=("all", "rotate"))
     v.add_argument("--cycles", type=int, default=1)
+    v.add_argument("--estimator", default="bank", choices=("bank", "robust"))
     v.add_argument("--matrix", action="store_true",
-                   help="run the README's standard set of cases instead (about 2 minutes)")
+                   help="run the README's standard set of bank cases instead (about 2 minutes)")
+    v.add_argument("--robust-matrix", action="store_true",
+                   help="run the README's robust-estimator cases (three cycles; about 10 minutes)")
 
     b = sub.add_parser("bench", help="samples per second of the reference (and of filterpy)")
     b.add_argument("--samples", type=int, default=10000)
@@ -143,13 +149,15 @@ def _estimate(a: argparse.Namespace) -> int:
 def _evaluate(a: argparse.Namespace) -> int:
     from dataclasses import replace
 
-    from .quality import STANDARD_MATRIX, QualityCase, format_summary, run_quality
+    from .quality import (ROBUST_MATRIX, STANDARD_MATRIX, QualityCase, format_summary,
+                          run_quality)
 
-    if a.matrix:
-        cases = [replace(c, seeds=a.seeds) for c in STANDARD_MATRIX]
+    if a.matrix or a.robust_matrix:
+        cases = [replace(c, seeds=a.seeds)
+                 for c in (STANDARD_MATRIX if a.matrix else ROBUST_MATRIX)]
     else:
         cases = [QualityCase(a.preset, a.model, a.factor, a.precision, a.profile, a.schedule,
-                             a.seeds, a.cycles)]
+                             a.seeds, a.cycles, a.estimator)]
     print(format_summary([run_quality(c, progress=True) for c in cases]))
     return 0
 

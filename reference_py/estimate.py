@@ -12,7 +12,7 @@ from .fmath import Array, real_for
 from .params import IDX, MODEL_PARAMS, Preset
 from .starts import start_values
 
-ESTIMATORS = ("bank",)
+ESTIMATORS = ("bank", "robust")
 
 
 @dataclass
@@ -29,6 +29,7 @@ class EstimateRun:
     params: Array        # (samples, n_identified)
     params_sd: Array
     names: tuple[str, ...]
+    confidence: Array | None = None   # robust estimator only: confidence of the last refinement
 
 
 def make_config(preset: Preset, model: int, profile: str, schedule: str) -> EstimatorConfig:
@@ -46,7 +47,11 @@ def run_estimate(trial: Trial, preset: Preset, model: int, estimator: str = "ban
     R = real_for(precision)
     cfg = make_config(preset, model, profile, schedule)
     nominal = start_values(preset.params.as_list(), init_seed, init_factor, model)
-    bank = FilterBank(R, cfg, [nominal])
+    if estimator == "robust":
+        from .robust import RobustEstimator
+        est = RobustEstimator(R, cfg, [nominal])
+    else:
+        est = FilterBank(R, cfg, [nominal])
     n = len(trial.t_s)
     t_us = time_us(trial.t_s)
     names = MODEL_PARAMS[model]
@@ -56,6 +61,7 @@ def run_estimate(trial: Trial, preset: Preset, model: int, estimator: str = "ban
     st = np.zeros(n, dtype=np.uint32)
     pars = np.zeros((n, len(names)), dtype=R.dtype)
     sds = np.zeros((n, len(names)), dtype=R.dtype)
+    conf = np.zeros(n, dtype=R.dtype) if estimator == "robust" else None
     it = range(n)
     if progress:
         from tqdm import tqdm
@@ -64,11 +70,13 @@ def run_estimate(trial: Trial, preset: Preset, model: int, estimator: str = "ban
     vel = R.arr(trial.velocity_mm_s)
     force = R.arr(trial.force_n)
     for k in it:
-        o = bank.step(t_us[k:k + 1], depth[k:k + 1], vel[k:k + 1], force[k:k + 1])
+        o = est.step(t_us[k:k + 1], depth[k:k + 1], vel[k:k + 1], force[k:k + 1])
         fh[k], z[k], inn[k], st[k] = o.force_hat[0], o.z[0], o.innovation[0], o.status[0]
         pars[k], sds[k] = o.params[:, 0], o.params_sd[:, 0]
+        if conf is not None:
+            conf[k] = est.confidence[0]  # type: ignore[union-attr]
     return EstimateRun(precision, model, trial.t_s, trial.depth_mm, trial.force_n, fh, z, inn, st,
-                       pars, sds, names)
+                       pars, sds, names, conf)
 
 
 def estimate_csv_lines(run: EstimateRun) -> list[str]:
@@ -76,6 +84,8 @@ def estimate_csv_lines(run: EstimateRun) -> list[str]:
     header = ["t_s", "force_hat_n", "z", "innovation_n", "status"]
     for name in run.names:
         header += [name, name + "_sd"]
+    if run.confidence is not None:
+        header.append("confidence")
     lines = [",".join(header)]
     p = run.precision
     for k in range(len(run.t_s)):
@@ -84,6 +94,8 @@ def estimate_csv_lines(run: EstimateRun) -> list[str]:
                  "%d" % int(run.status[k])]
         for j in range(len(run.names)):
             cells += [format_real(run.params[k, j], p), format_real(run.params_sd[k, j], p)]
+        if run.confidence is not None:
+            cells.append(format_real(run.confidence[k], p))
         lines.append(",".join(cells))
     return lines
 
