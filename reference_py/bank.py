@@ -333,7 +333,7 @@ class _Constants:
         self.q_u = {n: R.c(cfg.q_for(n)) for n in PARAM_NAMES}
         self.p0_z = R.c(cfg.p0_z)
         self.p0_u = R.c(cfg.p0_u)
-        self.gate2 = R.c(cfg.gate_sigma * cfg.gate_sigma)
+        self.gate2 = R.c(cfg.gate_sigma) * R.c(cfg.gate_sigma)
         self.u_max = R.c(cfg.u_max)
         self.var_floor_z = R.c(cfg.var_floor_z)
         self.var_floor_u = R.c(cfg.var_floor_u)

@@ -36,6 +36,7 @@ from .rk3 import rk3_step
 
 STATUS_REFINED = 1 << 9      # a batch refinement ran at this sample and restarted the bank
 STATUS_CONVERGED = 1 << 10   # the last refinement agreed with the data and with the previous one
+COST_HUGE = 1.0e30           # cost of a diverged trial (finite in float32 too)
 
 
 @dataclass(frozen=True)
@@ -72,7 +73,9 @@ class RobustEstimator:
         self.has_refined = np.zeros(B, dtype=bool)
         self.converged = np.zeros(B, dtype=bool)
         self.confidence = R.full(B, 0.0)
-        self.last_surface: tuple[Array, Array, Array, Array] | None = None
+        # the latest sample at the surface: the anchor (z = 0) of the next insertion's record
+        self.last_surface = (np.zeros(B, dtype=np.int64), R.full(B, 0.0), R.full(B, 0.0),
+                             R.full(B, 0.0))
 
     # ------------------------------------------------------------------------------------
     def step(self, t_us: Array, depth: Array, velocity: Array, force: Array) -> StepOutput:
@@ -89,7 +92,8 @@ class RobustEstimator:
         self.inside = (self.inside | entering) & ~at_surface
         refined = leaving & (self.count >= self.rcfg.min_entries)
         if np.any(refined):
-            self._refine(refined)
+            with np.errstate(all="ignore"):   # trial steps may overflow; they are rejected
+                self._refine(refined)
         self.count = np.where(leaving, 0, self.count)
         # remember the surface sample as the anchor of the next insertion
         self._anchor(at_surface, t_us, depth, velocity, force)
@@ -109,9 +113,6 @@ class RobustEstimator:
     # --- the decimated buffer ------------------------------------------------------------
     def _anchor(self, mask: Array, t_us: Array, depth: Array, v: Array, f: Array) -> None:
         R = self.R
-        if self.last_surface is None:
-            self.last_surface = (np.zeros(self.batch, dtype=np.int64), R.full(self.batch, 0.0),
-                                 R.full(self.batch, 0.0), R.full(self.batch, 0.0))
         ts, ls, vs, fs = self.last_surface
         self.last_surface = (np.where(mask, t_us, ts), np.where(mask, R.arr(depth), ls),
                              np.where(mask, R.arr(v), vs), np.where(mask, R.arr(f), fs))
@@ -119,8 +120,7 @@ class RobustEstimator:
     def _restart_buffer(self, mask: Array, t_us: Array) -> None:
         if not np.any(mask):
             return
-        ts, ls, vs, fs = self.last_surface if self.last_surface is not None else (
-            t_us, *(self.R.full(self.batch, 0.0) for _ in range(3)))
+        ts, ls, vs, fs = self.last_surface
         R = self.R
         self.t0 = np.where(mask, ts, self.t0)
         self.count = np.where(mask, 1, self.count)
@@ -236,6 +236,9 @@ class RobustEstimator:
             for a in range(n):
                 for b in range(a):
                     jtj[a][b] = jtj[b][a]
+        # a diverged trial (inf or NaN) must compare as the worst possible cost
+        huge = R.c(COST_HUGE)
+        cost = np.where(cost <= huge, cost, huge)
         return cost, [jtj, jtr]  # type: ignore[list-item]
 
     def _lm(self, theta0: list[Array]) -> tuple[list[Array], Array]:
