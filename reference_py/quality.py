@@ -49,12 +49,10 @@ STANDARD_MATRIX: tuple[QualityCase, ...] = (
 )
 
 
-#: the robust estimator's cases (three insertion cycles each; `nte-ref evaluate --robust-matrix`)
-ROBUST_MATRIX: tuple[QualityCase, ...] = (
-    QualityCase(estimator="robust", factor=5.0, cycles=3),
-    QualityCase(estimator="robust", factor=5.0, cycles=3, precision="float32"),
-    QualityCase(estimator="bank", factor=5.0, cycles=3),
-    QualityCase(estimator="robust", factor=1.25, cycles=3),
+#: bank against robust estimator, three insertion cycles each (`nte-ref evaluate --robust-matrix`)
+ROBUST_MATRIX: tuple[QualityCase, ...] = tuple(
+    QualityCase(estimator=e, factor=f, cycles=3, precision=p)
+    for e in ("bank", "robust") for f in (1.25, 5.0) for p in ("float64", "float32")) + (
     QualityCase(estimator="robust", preset="paper-6mms", factor=5.0, cycles=3),
     QualityCase(estimator="robust", preset="needleB-tissueB-10mms", factor=5.0, cycles=3),
     QualityCase(estimator="robust", preset="needleB-tissueB-6mms", factor=5.0, cycles=3),

@@ -1,0 +1,81 @@
+"""The robust estimator's bookkeeping: decimated record, refinement trigger, restart, status."""
+import numpy as np
+import pytest
+
+from reference_py import robust as rb
+from reference_py.config import default_config
+from reference_py.fmath import F64
+from reference_py.params import get_preset
+from reference_py.simulate import simulate_force
+from reference_py.trajectory import TrajectorySpec, lspb_profile
+
+PRESET = get_preset("paper-10mms")
+
+
+def _scenario(cycles=1, depth=20.0):
+    t, l, v, _ = lspb_profile(TrajectorySpec(depth_mm=depth, dwell_s=0.3, cycles=cycles))
+    f = simulate_force(PRESET.params, t, l, v)[0][0]
+    f = f + np.random.default_rng(9).normal(0, 2e-3, len(f))
+    return np.floor(t * 1e6 + 0.5).astype(np.int64), l, v, f
+
+
+def _run(est, t, l, v, f):
+    outs = []
+    for k in range(len(t)):
+        outs.append(est.step(t[k:k + 1], l[k:k + 1], v[k:k + 1], f[k:k + 1]))
+    return outs
+
+
+def test_buffer_decimates_and_stays_uniform():
+    t, l, v, f = _scenario()
+    est = rb.RobustEstimator(F64, default_config(), [PRESET.params.as_list()],
+                             rb.RobustConfig(buffer_len=32, min_entries=8, fit_iterations=2))
+    inside = np.flatnonzero(l > 0)
+    for k in range(inside[-1] + 1):
+        est.step(t[k:k + 1], l[k:k + 1], v[k:k + 1], f[k:k + 1])
+    n = int(est.count[0])
+    assert 16 <= n <= 32
+    dt = np.diff(est.buf[0, :n, 0])
+    # one sample period times the decimation factor, everywhere
+    np.testing.assert_allclose(dt, est.decim[0] * 0.005, rtol=1e-9)
+    assert est.buf[1, 0, 0] == 0.0            # the anchor is the last surface sample
+    assert est.decim[0] >= 8
+
+
+def test_refines_once_per_insertion_and_restarts_the_bank():
+    t, l, v, f = _scenario(cycles=2)
+    start = [x * 1.6 for x in PRESET.params.as_list()]
+    est = rb.RobustEstimator(F64, default_config(), [start],
+                             rb.RobustConfig(fit_iterations=10))
+    outs = _run(est, t, l, v, f)
+    refined = [k for k, o in enumerate(outs) if o.status[0] & rb.STATUS_REFINED]
+    assert len(refined) == 2
+    for k in refined:
+        assert l[k] == 0.0 and l[k - 1] > 0.0     # at the sample the needle leaves the tissue
+    # after a restart the bank's scaled parameters are centred on the refinement
+    assert all(u[0] == 0.0 for u in est.bank.u)
+    # (plus the random walk of the samples at the surface since the restart)
+    assert 0.01 <= est.bank.P[0][1][1][0] <= 0.0101
+    # the refinement moved sigma2 close to the truth from 60 % off
+    assert abs(est.bank.th.sigma2[0] / PRESET.params.sigma2 - 1) < 0.05
+    assert 0.0 < est.confidence[0] <= 1.0
+    assert outs[-1].status[0] & rb.STATUS_CONVERGED
+    assert all(np.all(np.isfinite(o.params)) for o in outs)
+
+
+def test_short_insertion_is_not_refined():
+    t, l, v, f = _scenario(depth=0.5)
+    est = rb.RobustEstimator(F64, default_config(), [PRESET.params.as_list()],
+                             rb.RobustConfig(min_entries=200))
+    outs = _run(est, t, l, v, f)
+    assert not any(o.status[0] & rb.STATUS_REFINED for o in outs)
+
+
+def test_reset_restores_the_configured_nominal():
+    t, l, v, f = _scenario()
+    start = [x * 1.3 for x in PRESET.params.as_list()]
+    est = rb.RobustEstimator(F64, default_config(), [start], rb.RobustConfig(fit_iterations=3))
+    _run(est, t, l, v, f)
+    assert est.bank.th.sigma0[0] != pytest.approx(start[0])
+    est.bank.reset()
+    assert est.bank.th.sigma0[0] == pytest.approx(start[0], rel=1e-15)
