@@ -1,0 +1,65 @@
+"""Figures of the report (matplotlib, Agg): per trial, force vs time with phases shaded, force vs
+depth, and the residual before and after the added effects."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from .prep import PHASES  # noqa: E402
+from .workflow import Result  # noqa: E402
+
+_COLORS = {"out_of_tissue": "#eeeeee", "loading": "#fde0c5", "insertion": "#d4e8d4",
+           "dwell": "#d6e2f5", "reversal": "#f5d6e8", "retraction": "#e8e0f5",
+           "after_exit": "#f0f0e0"}
+
+
+def _shade(ax, t: np.ndarray, phase: np.ndarray) -> None:  # type: ignore[no-untyped-def]
+    edges = np.nonzero(np.diff(phase))[0] + 1
+    starts = np.concatenate([[0], edges])
+    stops = np.concatenate([edges, [len(t)]])
+    seen = set()
+    for a, b in zip(starts, stops):
+        name = PHASES[int(phase[a])]
+        ax.axvspan(t[a], t[min(b, len(t) - 1)], color=_COLORS[name], lw=0,
+                   label=None if name in seen else name)
+        seen.add(name)
+
+
+def draw(res: Result, out: Path) -> list[str]:
+    """Write the figures; returns their file names (relative to ``out``)."""
+    names = []
+    last = "+".join(s.effect for s in res.steps) or "base"
+    for i, p in enumerate(res.preps):
+        fig, axes = plt.subplots(3, 1, figsize=(9, 9))
+        ax = axes[0]
+        _shade(ax, p.t_s, p.phase)
+        ax.plot(p.t_s, p.force_n + p.tare_n, "k.", ms=1.5, label="measured")
+        ax.plot(p.t_s, res.predictions[0][i], "C0-", lw=1, label="base model")
+        if len(res.predictions) > 1:
+            ax.plot(p.t_s, res.predictions[-1][i], "C3-", lw=1, label=f"base {last}")
+        ax.set(xlabel="t (s)", ylabel="force (N)", title=f"{p.name}: force vs time")
+        ax.legend(fontsize=6, ncol=4)
+        ax = axes[1]
+        l = p.stage_mm - p.surface_mm
+        ax.plot(l, p.force_n + p.tare_n, "k.", ms=1.5, label="measured")
+        ax.plot(l, res.predictions[-1][i], "C3-", lw=1, label="final model")
+        ax.set(xlabel="depth below surface (mm)", ylabel="force (N)", title="force vs depth")
+        ax.legend(fontsize=6)
+        ax = axes[2]
+        ax.plot(p.t_s, p.force_n + p.tare_n - res.predictions[0][i], "C0.", ms=1.5,
+                label="residual, base")
+        ax.plot(p.t_s, p.force_n + p.tare_n - res.predictions[-1][i], "C3.", ms=1.5,
+                label=f"residual, base {last}")
+        ax.set(xlabel="t (s)", ylabel="residual (N)", title="residual before and after")
+        ax.legend(fontsize=6)
+        fig.tight_layout()
+        name = f"trial{i}_{p.name}.png"
+        fig.savefig(out / name, dpi=80)
+        plt.close(fig)
+        names.append(name)
+    return names
