@@ -332,6 +332,7 @@ nte_frames_err_t nte_frames_encode_estimate(const nte_frames_estimate_t* in, nte
     m.adapting = in->adapting ? 1u : 0u;
     m.saturated = (in->saturated || clamped) ? 1u : 0u;
     m.fault = in->fault ? 1u : 0u;
+    m.stale = in->stale ? 1u : 0u;
     (void)nte_can_estimate_pack(out, &m, NTE_FRAMES_LENGTH);
     return nte_frames_protect(e2e, nte_frames_kind_estimate, out);
 }
@@ -362,6 +363,7 @@ nte_frames_err_t nte_frames_decode_estimate(nte_e2e_rx_t* e2e, const uint8_t* da
     out->adapting = (m.adapting != 0u);
     out->saturated = (m.saturated != 0u);
     out->fault = (m.fault != 0u);
+    out->stale = (m.stale != 0u);
     return nte_frames_ok;
 }
 

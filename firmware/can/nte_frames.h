@@ -66,10 +66,10 @@ extern "C" {
 #define NTE_FRAMES_DEPTH_MAX_MM 500.0f
 #define NTE_FRAMES_VELOCITY_MAX_MM_S 500.0f
 #define NTE_FRAMES_FORCE_MAX_N 50.0f
-#define NTE_FRAMES_INNOVATION_MIN_N (-1.6384f)
-#define NTE_FRAMES_INNOVATION_MAX_N 1.6382f
-#define NTE_FRAMES_Z_MIN (-4.096f)
-#define NTE_FRAMES_Z_MAX 4.0955f
+#define NTE_FRAMES_INNOVATION_MIN_N (-0.8192f)
+#define NTE_FRAMES_INNOVATION_MAX_N 0.8188f
+#define NTE_FRAMES_Z_MIN (-8.192f)
+#define NTE_FRAMES_Z_MAX 8.1915f
 #define NTE_FRAMES_UPTIME_WRAP_S 104857.6f
 #define NTE_FRAMES_STEP_TIME_MAX_S 0.00819f
 /** log10(std) is sent in 0.001 steps in [-32.767, 32.767]; -32.768 means std = 0 (fixed). */
@@ -145,13 +145,14 @@ typedef struct {
 /** Estimate (output, one per force sample). */
 typedef struct {
     float force_n;       /**< Estimated force, N; clamped to +-50 N, 0.1 mN resolution. */
-    float innovation_n;  /**< Measured - predicted force, N; clamped to -1.6384..1.6382 N,
-                              0.2 mN resolution. */
-    float z;             /**< Internal state z; clamped to -4.096..4.0955, 5e-4 resolution. */
+    float innovation_n;  /**< Measured - predicted force, N; clamped to -0.8192..0.8188 N,
+                              0.4 mN resolution. */
+    float z;             /**< Internal state z; clamped to -8.192..8.1915, 5e-4 resolution. */
     bool in_tissue;      /**< Depth > 0. */
     bool adapting;       /**< Parameter adaptation running (not frozen). */
     bool saturated;      /**< Encode: ORed with "a value was clamped"; decode: as received. */
     bool fault;          /**< The estimator rejected its update. */
+    bool stale;          /**< No recent depth: the estimate is held, not updated. */
 } nte_frames_estimate_t;
 
 /** One identified parameter and its standard deviation (output, multiplexed by index). */

@@ -81,12 +81,13 @@ static const signal_t command_signals[] = {
 
 MSG(estimate)
 SIG(estimate, crc) SIG(estimate, counter) SIG(estimate, in_tissue) SIG(estimate, adapting)
-SIG(estimate, saturated) SIG(estimate, fault) SIG(estimate, force_est)
+SIG(estimate, saturated) SIG(estimate, fault) SIG(estimate, stale) SIG(estimate, force_est)
 SIG(estimate, innovation) SIG(estimate, z)
 static const signal_t estimate_signals[] = {
     ENTRY(estimate, crc, "Crc"), ENTRY(estimate, counter, "Counter"),
     ENTRY(estimate, in_tissue, "InTissue"), ENTRY(estimate, adapting, "Adapting"),
     ENTRY(estimate, saturated, "Saturated"), ENTRY(estimate, fault, "Fault"),
+    ENTRY(estimate, stale, "Stale"),
     ENTRY(estimate, force_est, "ForceEst"), ENTRY(estimate, innovation, "Innovation"),
     ENTRY(estimate, z, "Z")};
 

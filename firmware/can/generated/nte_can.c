@@ -649,17 +649,18 @@ int nte_can_estimate_pack(
     dst_p[1] |= pack_left_shift_u8(src_p->adapting, 5u, 0x20u);
     dst_p[1] |= pack_left_shift_u8(src_p->saturated, 6u, 0x40u);
     dst_p[1] |= pack_left_shift_u8(src_p->fault, 7u, 0x80u);
+    dst_p[2] |= pack_left_shift_u8(src_p->stale, 0u, 0x01u);
     force_est = (uint32_t)src_p->force_est;
-    dst_p[2] |= pack_left_shift_u32(force_est, 0u, 0xffu);
-    dst_p[3] |= pack_right_shift_u32(force_est, 8u, 0xffu);
-    dst_p[4] |= pack_right_shift_u32(force_est, 16u, 0x0fu);
+    dst_p[2] |= pack_left_shift_u32(force_est, 1u, 0xfeu);
+    dst_p[3] |= pack_right_shift_u32(force_est, 7u, 0xffu);
+    dst_p[4] |= pack_right_shift_u32(force_est, 15u, 0x1fu);
     innovation = (uint16_t)src_p->innovation;
-    dst_p[4] |= pack_left_shift_u16(innovation, 4u, 0xf0u);
-    dst_p[5] |= pack_right_shift_u16(innovation, 4u, 0xffu);
-    dst_p[6] |= pack_right_shift_u16(innovation, 12u, 0x03u);
+    dst_p[4] |= pack_left_shift_u16(innovation, 5u, 0xe0u);
+    dst_p[5] |= pack_right_shift_u16(innovation, 3u, 0xffu);
+    dst_p[6] |= pack_right_shift_u16(innovation, 11u, 0x01u);
     z = (uint16_t)src_p->z;
-    dst_p[6] |= pack_left_shift_u16(z, 2u, 0xfcu);
-    dst_p[7] |= pack_right_shift_u16(z, 6u, 0xffu);
+    dst_p[6] |= pack_left_shift_u16(z, 1u, 0xfeu);
+    dst_p[7] |= pack_right_shift_u16(z, 7u, 0xffu);
 
     return (8);
 }
@@ -683,29 +684,30 @@ int nte_can_estimate_unpack(
     dst_p->adapting = unpack_right_shift_u8(src_p[1], 5u, 0x20u);
     dst_p->saturated = unpack_right_shift_u8(src_p[1], 6u, 0x40u);
     dst_p->fault = unpack_right_shift_u8(src_p[1], 7u, 0x80u);
-    force_est = unpack_right_shift_u32(src_p[2], 0u, 0xffu);
-    force_est |= unpack_left_shift_u32(src_p[3], 8u, 0xffu);
-    force_est |= unpack_left_shift_u32(src_p[4], 16u, 0x0fu);
+    dst_p->stale = unpack_right_shift_u8(src_p[2], 0u, 0x01u);
+    force_est = unpack_right_shift_u32(src_p[2], 1u, 0xfeu);
+    force_est |= unpack_left_shift_u32(src_p[3], 7u, 0xffu);
+    force_est |= unpack_left_shift_u32(src_p[4], 15u, 0x1fu);
 
     if ((force_est & (1u << 19)) != 0u) {
         force_est |= 0xfff00000u;
     }
 
     dst_p->force_est = (int32_t)force_est;
-    innovation = unpack_right_shift_u16(src_p[4], 4u, 0xf0u);
-    innovation |= unpack_left_shift_u16(src_p[5], 4u, 0xffu);
-    innovation |= unpack_left_shift_u16(src_p[6], 12u, 0x03u);
+    innovation = unpack_right_shift_u16(src_p[4], 5u, 0xe0u);
+    innovation |= unpack_left_shift_u16(src_p[5], 3u, 0xffu);
+    innovation |= unpack_left_shift_u16(src_p[6], 11u, 0x01u);
 
-    if ((innovation & (1u << 13)) != 0u) {
-        innovation |= 0xc000u;
+    if ((innovation & (1u << 11)) != 0u) {
+        innovation |= 0xf000u;
     }
 
     dst_p->innovation = (int16_t)innovation;
-    z = unpack_right_shift_u16(src_p[6], 2u, 0xfcu);
-    z |= unpack_left_shift_u16(src_p[7], 6u, 0xffu);
+    z = unpack_right_shift_u16(src_p[6], 1u, 0xfeu);
+    z |= unpack_left_shift_u16(src_p[7], 7u, 0xffu);
 
-    if ((z & (1u << 13)) != 0u) {
-        z |= 0xc000u;
+    if ((z & (1u << 14)) != 0u) {
+        z |= 0x8000u;
     }
 
     dst_p->z = (int16_t)z;
@@ -844,6 +846,26 @@ bool nte_can_estimate_fault_is_in_phys_range(float value)
     return ((value >= 0.0f) && (value <= 1.0f));
 }
 
+uint8_t nte_can_estimate_stale_encode(float value)
+{
+    return (uint8_t)(cantools_unsigned_from_double(roundf(value)));
+}
+
+float nte_can_estimate_stale_decode(uint8_t value)
+{
+    return ((float)value);
+}
+
+bool nte_can_estimate_stale_is_in_range(uint8_t value)
+{
+    return (value <= 1u);
+}
+
+bool nte_can_estimate_stale_is_in_phys_range(float value)
+{
+    return ((value >= 0.0f) && (value <= 1.0f));
+}
+
 int32_t nte_can_estimate_force_est_encode(float value)
 {
     return (int32_t)(roundf(value / 0.0001f));
@@ -866,22 +888,22 @@ bool nte_can_estimate_force_est_is_in_phys_range(float value)
 
 int16_t nte_can_estimate_innovation_encode(float value)
 {
-    return (int16_t)(roundf(value / 0.0002f));
+    return (int16_t)(roundf(value / 0.0004f));
 }
 
 float nte_can_estimate_innovation_decode(int16_t value)
 {
-    return ((float)value * 0.0002f);
+    return ((float)value * 0.0004f);
 }
 
 bool nte_can_estimate_innovation_is_in_range(int16_t value)
 {
-    return ((value >= -8192) && (value <= 8191));
+    return ((value >= -2048) && (value <= 2047));
 }
 
 bool nte_can_estimate_innovation_is_in_phys_range(float value)
 {
-    return ((value >= -1.6384f) && (value <= 1.6382f));
+    return ((value >= -0.8192f) && (value <= 0.8188f));
 }
 
 int16_t nte_can_estimate_z_encode(float value)
@@ -896,12 +918,12 @@ float nte_can_estimate_z_decode(int16_t value)
 
 bool nte_can_estimate_z_is_in_range(int16_t value)
 {
-    return ((value >= -8192) && (value <= 8191));
+    return ((value >= -16384) && (value <= 16383));
 }
 
 bool nte_can_estimate_z_is_in_phys_range(float value)
 {
-    return ((value >= -4.096f) && (value <= 4.0955f));
+    return ((value >= -8.192f) && (value <= 8.1915f));
 }
 
 int nte_can_params_pack(

@@ -130,6 +130,7 @@ extern "C" {
 #define NTE_CAN_ESTIMATE_ADAPTING_NAME "Adapting"
 #define NTE_CAN_ESTIMATE_SATURATED_NAME "Saturated"
 #define NTE_CAN_ESTIMATE_FAULT_NAME "Fault"
+#define NTE_CAN_ESTIMATE_STALE_NAME "Stale"
 #define NTE_CAN_ESTIMATE_FORCE_EST_NAME "ForceEst"
 #define NTE_CAN_ESTIMATE_INNOVATION_NAME "Innovation"
 #define NTE_CAN_ESTIMATE_Z_NAME "Z"
@@ -373,6 +374,15 @@ struct nte_can_estimate_t {
     uint8_t fault;
 
     /**
+     * 1 = no depth sample within the node's depth timeout of this force sample: the estimator did not step, ForceEst, Innovation and Z repeat the last estimate (held).
+     *
+     * Range: 0..1 (0..1 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    uint8_t stale;
+
+    /**
      * Estimated axial force, 0.1 mN resolution, clamped to +-50 N.
      *
      * Range: -500000..500000 (-50..50 N)
@@ -382,18 +392,18 @@ struct nte_can_estimate_t {
     int32_t force_est;
 
     /**
-     * Measured minus predicted force, 0.2 mN resolution, clamped to -1.6384..1.6382 N.
+     * Measured minus predicted force, 0.4 mN resolution, clamped to -0.8192..0.8188 N.
      *
-     * Range: -8192..8191 (-1.6384..1.6382 N)
-     * Scale: 0.0002
+     * Range: -2048..2047 (-0.8192..0.8188 N)
+     * Scale: 0.0004
      * Offset: 0
      */
     int16_t innovation;
 
     /**
-     * Internal bristle state z (dimensionless), 5e-4 resolution, clamped to -4.096..4.0955.
+     * Internal bristle state z (dimensionless), 5e-4 resolution, clamped to -8.192..8.1915 (preset needleB-tissueB-6mms reaches 4.2).
      *
-     * Range: -8192..8191 (-4.096..4.0955 -)
+     * Range: -16384..16383 (-8.192..8.1915 -)
      * Scale: 0.0005
      * Offset: 0
      */
@@ -1603,6 +1613,46 @@ bool nte_can_estimate_fault_is_in_range(uint8_t value);
  * @return true if in range, false otherwise.
  */
 bool nte_can_estimate_fault_is_in_phys_range(float value);
+
+/**
+ * Encode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to encode.
+ *
+ * @return Encoded signal.
+ */
+uint8_t nte_can_estimate_stale_encode(float value);
+
+/**
+ * Decode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to decode.
+ *
+ * @return Decoded signal.
+ */
+float nte_can_estimate_stale_decode(uint8_t value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_estimate_stale_is_in_range(uint8_t value);
+
+/**
+ * Check that given physical value is in allowed range before encoding.
+ *
+ * Use this BEFORE calling _encode() to avoid silent integer overflow:
+ *   encode(-1.0) on a [0,100] signal wraps to 255 and passes is_in_range().
+ *   is_in_phys_range(-1.0) correctly returns false.
+ *
+ * @param[in] value Physical signal value to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_estimate_stale_is_in_phys_range(float value);
 
 /**
  * Encode given signal by applying scaling and offset.
