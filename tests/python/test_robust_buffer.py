@@ -44,7 +44,10 @@ def test_buffer_decimates_and_stays_uniform():
 
 def test_refines_once_per_insertion_and_restarts_the_bank():
     t, l, v, f = _scenario(cycles=2)
-    start = [x * 1.6 for x in PRESET.params.as_list()]
+    # 60 % off in every identified parameter (Model II keeps f2 and alpha fixed)
+    p = PRESET.params
+    start = p.with_values(sigma0=p.sigma0 * 1.6, sigma1=p.sigma1 / 1.6, sigma2=p.sigma2 * 1.6,
+                          f1=p.f1 * 1.6, beta=p.beta / 1.6).as_list()
     est = rb.RobustEstimator(F64, default_config(), [start],
                              rb.RobustConfig(fit_iterations=10))
     outs = _run(est, t, l, v, f)
