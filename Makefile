@@ -50,7 +50,7 @@ demo: venv build
 
 test: venv build
 	cd $(BUILD) && ctest --output-on-failure
-	$(PY) -m pytest -q tests
+	$(PY) -m pytest -q -n 2 --dist loadfile tests
 
 clean:
 	rm -rf build out
