@@ -1,9 +1,9 @@
 /*
  * nte-run: the C twin of `nte-ref estimate` (reference_py/cli.py).  Runs the library over a
  * CSV of t_s, depth_mm, force_n (velocity_mm_s optional) and writes one estimate row per
- * sample.  Built twice: nte-run (float) and nte-run-double (NTE_DOUBLE=1).
+ * sample (the robust estimator adds a last column, confidence).  Built twice: nte-run (float) and nte-run-double (NTE_DOUBLE=1).
  *
- *   nte-run FILE.csv --model 1|2 [--estimator bank] [--preset NAME] [--profile default|paper]
+ *   nte-run FILE.csv --model 1|2 [--estimator bank|robust] [--preset NAME] [--profile default|paper]
  *           [--init-seed K] [--init-factor F] [--schedule all|rotate] [--precision P]
  *           --out EST.csv
  *
@@ -41,6 +41,7 @@ typedef struct args_t {
     const char* schedule;
     const char* precision;
     int model;
+    int robust;
     long long seed;
     double factor;
 } args_t;
@@ -48,7 +49,7 @@ typedef struct args_t {
 static int usage(const char* msg)
 {
     fprintf(stderr,
-            "usage: " PROG " FILE.csv --model 1|2 [--estimator bank] [--preset NAME]\n"
+            "usage: " PROG " FILE.csv --model 1|2 [--estimator bank|robust] [--preset NAME]\n"
             "       [--profile default|paper] [--init-seed K] [--init-factor F]\n"
             "       [--schedule all|rotate] [--precision " PRECISION "] --out EST.csv\n");
     if (msg != NULL) {
@@ -67,6 +68,7 @@ static int parse_args(int argc, char** argv, args_t* a)
     a->schedule = "all";
     a->precision = PRECISION;
     a->model = 0;
+    a->robust = 0;
     a->seed = 0;
     a->factor = 5.0;
     for (int i = 1; i < argc; i++) {
@@ -106,10 +108,11 @@ static int parse_args(int argc, char** argv, args_t* a)
             }
             a->model = atoi(val);
         } else if (strcmp(name, "--estimator") == 0) {
-            if (strcmp(val, "bank") != 0) {
+            if ((strcmp(val, "bank") != 0) && (strcmp(val, "robust") != 0)) {
                 (void)snprintf(msg, sizeof msg, "argument --estimator: invalid choice: '%s'", val);
                 return usage(msg);
             }
+            a->robust = (strcmp(val, "robust") == 0) ? 1 : 0;
         } else if (strcmp(name, "--preset") == 0) {
             a->preset = val;
         } else if (strcmp(name, "--profile") == 0) {
@@ -207,7 +210,7 @@ static int run(const args_t* a, const nte_trial_t* tr, nte_t* est)
     for (size_t j = 0U; j < np; j++) {
         fprintf(fh, ",%s,%s_sd", nte_param_name(pe[j].id), nte_param_name(pe[j].id));
     }
-    fprintf(fh, "\n");
+    fprintf(fh, "%s\n", (a->robust != 0) ? ",confidence" : "");
     for (size_t k = 0U; k < tr->n; k++) {
         nte_sample_t s;
         nte_output_t o;
@@ -221,6 +224,9 @@ static int run(const args_t* a, const nte_trial_t* tr, nte_t* est)
                 (double)o.force_hat_n, (double)o.z, (double)o.innovation_n, (unsigned)o.status);
         for (size_t j = 0U; j < np; j++) {
             fprintf(fh, "," REAL_FMT "," REAL_FMT, (double)pe[j].value, (double)pe[j].sd);
+        }
+        if (a->robust != 0) {
+            fprintf(fh, "," REAL_FMT, (double)o.confidence);
         }
         fprintf(fh, "\n");
     }
@@ -283,6 +289,7 @@ int main(int argc, char** argv)
         return bad("nominal f1 must exceed -f2 (g(0) = f1 + f2 must be positive)");
     }
     cfg.f1_excess = (nte_real_t)excess;
+    cfg.estimator = (a.robust != 0) ? nte_estimator_robust : nte_estimator_bank;
     static nte_t est;
     const nte_err_t err = nte_init(&est, &cfg);
     if (err != nte_err_ok) {

@@ -49,6 +49,32 @@
  *   prediction, scalar Joseph update: 1 div per state) + up to 3 exp to refresh parameters;
  *   roughly 700 flops and 17 exp for n = 1.  Schedule "rotate" costs about half.  Bounded: no
  *   loop depends on the data.
+ *
+ * THE ROBUST ESTIMATOR (cfg.estimator = nte_estimator_robust; reference_py/robust.py)
+ *   The bank above, plus a batch output-error refinement once per insertion.  While the needle
+ *   is in the tissue every D-th accepted sample (t, l, v, f) is kept in a buffer of
+ *   cfg.robust.buffer_len entries that starts with the last sample at the surface; when the
+ *   buffer is full every other entry is dropped and D doubles.  When the depth returns to 0
+ *   with at least min_entries entries, a Levenberg-Marquardt fit of the identified
+ *   log-parameters (Model I: 6, Model II: 5 = n_p) minimises the squared output error over the
+ *   buffer from two starts (the bank's current estimate and the previous refinement, at first
+ *   the nominal), keeps the better, and restarts the bank from it (u = 0 around the refined
+ *   values, var(u) = restart_p0_u, z and the time line carry on).  That sample is flagged
+ *   NTE_STATUS_REFINED; nte_output_t.confidence holds the fit's confidence.
+ *   Cost on top of the bank, per sample: buffer bookkeeping only (a few integer operations,
+ *   one int64 -> real conversion and one division; a compaction of buffer_len/2 x 4 copies
+ *   at most once per buffer_len/2 kept samples).  Cost of one refinement (at the sample that
+ *   leaves the tissue; bounded, independent of the data):
+ *     2 starts x (fit_iterations + 1) simulations, each of (buffer_len - 1) entries x
+ *     fit_substeps RK3 sub-steps with the sensitivities to n_p parameters (per sub-step 2 exp
+ *     and 2 div of depth terms + 6 + ~8 n_p flops), plus per entry 1 exp (depth terms), 1
+ *     tanh, the output and its n_p derivatives and the n_p (n_p + 3) / 2 products of J^T J and
+ *     J^T r; plus per LM iteration one n_p x n_p LDL^T solve (n_p divisions, ~n_p^3/3 flops).
+ *     Defaults (96 entries, 4 sub-steps, 20 iterations, Model II, n_p = 5): 42 simulations
+ *     x 95 entries x 4 sub-steps = 15960 RK3 sub-steps with 5 sensitivities and 42 x 95 =
+ *     3990 output evaluations.  The refinement runs inside the nte_step call of the sample
+ *     that leaves the tissue: call nte_step from a context that tolerates that latency once
+ *     per insertion (measure it on the target).
  */
 #ifndef NTE_H
 #define NTE_H
@@ -72,6 +98,21 @@ extern "C" {
 typedef double nte_real_t;
 #else
 typedef float nte_real_t;
+#endif
+
+/**
+ * Capacity of the robust estimator's insertion buffer, entries (4 reals each), fixed at compile
+ * time; the runtime cfg.robust.buffer_len may be any even value 2..NTE_ROBUST_BUFFER_LEN.
+ * Define it to 0 to leave the robust estimator out (nte_init then refuses
+ * nte_estimator_robust with nte_err_bad_estimator and nte_t shrinks to the bank alone).
+ */
+#ifndef NTE_ROBUST_BUFFER_LEN
+#define NTE_ROBUST_BUFFER_LEN 96
+#endif
+#if (NTE_ROBUST_BUFFER_LEN != 0) &&                                                          \
+    ((NTE_ROBUST_BUFFER_LEN < 2) || (NTE_ROBUST_BUFFER_LEN > 4096) ||                        \
+     ((NTE_ROBUST_BUFFER_LEN % 2) != 0))
+#error "NTE_ROBUST_BUFFER_LEN must be 0 (no robust estimator) or even in 2..4096"
 #endif
 
 /* ---------------------------------------------------------------------------------------- */
@@ -117,7 +158,10 @@ typedef enum nte_err_t {
     nte_err_not_positive = -7,    /**< a field that must be > 0 (or >= 0) is not */
     nte_err_bad_range = -8,       /**< depth_min_mm > depth_max_mm */
     nte_err_bad_nominal = -9,     /**< a nominal parameter is NaN or infinite */
-    nte_err_bad_f1 = -10          /**< nominal f1 does not exceed -f2 (g(0) must be > 0) */
+    nte_err_bad_f1 = -10,         /**< nominal f1 does not exceed -f2 (g(0) must be > 0) */
+    nte_err_bad_estimator = -11,  /**< estimator is not a nte_estimator_t value, or robust
+                                       while NTE_ROBUST_BUFFER_LEN is 0 */
+    nte_err_bad_robust = -12      /**< a cfg.robust field is outside its range */
 } nte_err_t;
 
 /* Status bits of one sample (same values as reference_py/bank.py STATUS_*). */
@@ -130,6 +174,13 @@ typedef enum nte_err_t {
 #define NTE_STATUS_CLIPPED (1U << 6U)         /**< a log-parameter hit |u| = u_max */
 #define NTE_STATUS_FLOORED (1U << 7U)         /**< a variance was raised to its floor */
 #define NTE_STATUS_SIGN_UNCERTAIN (1U << 8U)  /**< R inflated: smooth sign may be wrong */
+/* Robust estimator only (same values as reference_py/robust.py STATUS_*). */
+#define NTE_STATUS_REFINED (1U << 9U)   /**< a batch refinement ran at this sample and
+                                             restarted the bank from its result */
+#define NTE_STATUS_CONVERGED (1U << 10U) /**< the last refinement agreed with the data
+                                              (confidence >= converged_confidence) and moved
+                                              no parameter by more than converged_change
+                                              (relative) since the previous one */
 
 /* Causes of a rejected sample (same values as reference_py/bank.py REJECT_*). */
 #define NTE_REJECT_NONFINITE 0 /**< depth, velocity or force NaN or infinite */
@@ -154,6 +205,26 @@ typedef enum nte_schedule_t {
     nte_schedule_all = 0,   /**< the three filters run in turn on every sample */
     nte_schedule_rotate = 1 /**< filter (k mod 3) alone updates at sample k; the others predict */
 } nte_schedule_t;
+
+typedef enum nte_estimator_t {
+    nte_estimator_bank = 0,  /**< the paper's bank of three EKFs alone */
+    nte_estimator_robust = 1 /**< the bank plus a refinement after each insertion (see top) */
+} nte_estimator_t;
+
+/** Tuning of the robust estimator (reference_py/robust.py RobustConfig; defaults in
+ *  brackets, set by nte_config_default / nte_config_paper).  Checked by nte_init only when
+ *  cfg.estimator is nte_estimator_robust. */
+typedef struct nte_robust_config_t {
+    int32_t buffer_len;     /**< [96] decimated samples kept per insertion, even,
+                                 2..NTE_ROBUST_BUFFER_LEN */
+    int32_t fit_substeps;   /**< [4] RK3 sub-steps between buffer entries, 1..16 */
+    int32_t fit_iterations; /**< [20] LM iterations per start, 0..1000 */
+    int32_t min_entries;    /**< [24] a shorter insertion is not refined, 1..buffer_len */
+    nte_real_t restart_p0_u;         /**< [0.01] var(u) of the bank after a restart, log^2, > 0 */
+    nte_real_t lm_lambda0;           /**< [0.01] initial LM damping, > 0 */
+    nte_real_t converged_confidence; /**< [0.75] CONVERGED needs confidence >= this, finite */
+    nte_real_t converged_change;     /**< [0.05] and a relative change <= this, finite, >= 0 */
+} nte_robust_config_t;
 
 /** q_u entry meaning "use q_u_default" (any negative value means the same). */
 #define NTE_Q_U_USE_DEFAULT (-1)
@@ -197,6 +268,8 @@ typedef struct nte_config_t {
      *  0 means "compute it in nte_real_t from nominal f1 and f2".  Give it explicitly (computed
      *  in double, then rounded) to match a reference that starts from double values. */
     nte_real_t f1_excess;
+    nte_estimator_t estimator;  /**< nte_estimator_bank (default) or nte_estimator_robust */
+    nte_robust_config_t robust; /**< the robust estimator's tuning (ignored by the bank) */
 } nte_config_t;
 
 /** The project's tuning (reference "default" profile); nominal = preset paper-10mms.
@@ -228,6 +301,9 @@ typedef struct nte_output_t {
     nte_real_t innovation_n; /**< first filter's one-step-ahead innovation f - h(prior), N */
     nte_real_t nis;          /**< its normalised innovation squared */
     uint32_t status;         /**< NTE_STATUS_* bits */
+    nte_real_t confidence;   /**< robust estimator: confidence of the last refinement,
+                                  sqrt(r_n2) / max(rms residual, sqrt(r_n2)) in (0, 1];
+                                  0 before the first refinement and for the bank */
 } nte_output_t;
 
 /* ---------------------------------------------------------------------------------------- */
@@ -240,6 +316,32 @@ typedef struct nte_theta_t {
     nte_real_t ex;                 /**< excess of f1 over kappa (-f2) = d f1 / d u_f1 */
     nte_real_t mkf2;               /**< -kappa f2 = d f1 / d u_f2 */
 } nte_theta_t;
+
+#if NTE_ROBUST_BUFFER_LEN > 0
+/** The robust estimator's state and workspace (internal; see the top of this file). */
+typedef struct nte_robust_t {
+    nte_real_t buf[4][NTE_ROBUST_BUFFER_LEN]; /**< t - t0 s, depth mm, velocity mm/s, force N */
+    int64_t t0_us;          /**< time of the buffer's first entry */
+    int64_t anchor_t_us;    /**< the latest accepted sample at the surface ... */
+    nte_real_t anchor[3];   /**< ... its depth, velocity, force */
+    uint32_t count;         /**< entries in the buffer */
+    uint32_t decim;         /**< keep every decim-th sample */
+    uint32_t phase;         /**< samples seen since the buffer start */
+    bool inside;            /**< needle in the tissue */
+    bool has_refined;
+    bool converged;
+    nte_real_t confidence;
+    nte_real_t prev_theta[NTE_PARAM_COUNT]; /**< start (b) of the next refinement */
+    /* Levenberg-Marquardt workspace: J^T J and J^T r at the current and the trial point */
+    nte_real_t A[NTE_IDENTIFIED_MAX][NTE_IDENTIFIED_MAX];
+    nte_real_t g[NTE_IDENTIFIED_MAX];
+    nte_real_t A_try[NTE_IDENTIFIED_MAX][NTE_IDENTIFIED_MAX];
+    nte_real_t g_try[NTE_IDENTIFIED_MAX];
+    nte_real_t M[NTE_IDENTIFIED_MAX][NTE_IDENTIFIED_MAX]; /**< damped system */
+    nte_real_t v[NTE_IDENTIFIED_MAX];     /**< current log-parameters of the fit */
+    nte_real_t v_try[NTE_IDENTIFIED_MAX]; /**< trial point */
+} nte_robust_t;
+#endif
 
 /**
  * One estimator.  Allocate it anywhere; initialise with nte_init.  Every field except
@@ -268,6 +370,9 @@ typedef struct nte_t {
     nte_output_t last;
     /** Event counters: public, read and clear at will. */
     nte_counters_t counters;
+#if NTE_ROBUST_BUFFER_LEN > 0
+    nte_robust_t robust;
+#endif
 } nte_t;
 
 /**
@@ -276,14 +381,16 @@ typedef struct nte_t {
  */
 nte_err_t nte_init(nte_t* self, const nte_config_t* cfg);
 
-/** Back to the state right after nte_init (same config); counters cleared.  Cost: 7 exp. */
+/** Back to the state right after nte_init (same config): the configured nominal values
+ *  (undoing every robust restart), the robust buffer emptied; counters cleared.  Cost: 7 exp. */
 nte_err_t nte_reset(nte_t* self);
 
 /**
  * Process one sample and write the estimate to *out (out may be NULL).  Invalid samples
  * (non-finite, out of range, time not increasing) are counted, flagged NTE_STATUS_REJECTED and
  * leave the state unchanged; out then repeats the previous estimate.  Cost: see COST above;
- * constant for a given config.  Returns nte_err_ok or nte_err_null_argument.
+ * constant for a given config, except that the robust estimator runs its refinement within
+ * the call at the sample that ends an insertion.  Returns nte_err_ok or nte_err_null_argument.
  */
 nte_err_t nte_step(nte_t* self, const nte_sample_t* sample, nte_output_t* out);
 

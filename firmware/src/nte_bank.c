@@ -5,6 +5,7 @@
  */
 #include "nte_ekf.h"
 #include "nte_model.h"
+#include "nte_robust.h"
 
 /* Table I: the parameters each filter identifies together with z, per model. */
 static const uint8_t subset_len[2][NTE_FILTER_COUNT] = {{2U, 2U, 2U}, {1U, 2U, 2U}};
@@ -33,7 +34,15 @@ static size_t model_index(const nte_t* self)
     return (self->cfg.model == 1) ? 0U : 1U;
 }
 
-static void p0(const nte_t* self, const size_t n, nte_mat3_t P)
+size_t nte_bank_identified(const nte_t* self, const uint8_t** ids)
+{
+    const size_t mi = model_index(self);
+    *ids = identified[mi];
+    return identified_len[mi];
+}
+
+/* bank._p0: the initial covariance of a filter with n states, var(u) = p0_u. */
+static void p0_with(const nte_t* self, const size_t n, nte_mat3_t P, const nte_real_t p0_u)
 {
     for (size_t a = 0U; a < NTE_EKF_N_MAX; a++) {
         for (size_t b = 0U; b < NTE_EKF_N_MAX; b++) {
@@ -42,13 +51,55 @@ static void p0(const nte_t* self, const size_t n, nte_mat3_t P)
     }
     P[0][0] = NTE_C(0.0) + self->cfg.p0_z;
     for (size_t a = 1U; a < n; a++) {
-        P[a][a] = NTE_C(0.0) + self->cfg.p0_u;
+        P[a][a] = NTE_C(0.0) + p0_u;
+    }
+}
+
+static void p0(const nte_t* self, const size_t n, nte_mat3_t P)
+{
+    p0_with(self, n, P, self->cfg.p0_u);
+}
+
+/* The configured nominal (bank.reset restores it: a robust restart re-centres it). */
+static void set_nominal(nte_t* self)
+{
+    const nte_config_t* cfg = &self->cfg;
+    for (size_t j = 0U; j < NTE_PARAM_COUNT; j++) {
+        self->nominal[j] = cfg->nominal[j];
+    }
+    if (cfg->model == 1) {
+        /* Model I: beta is the fixed normalising constant beta0 */
+        self->nominal[nte_param_beta] = cfg->beta0;
+    }
+    const nte_real_t f2 = cfg->nominal[nte_param_f2];
+    self->kappa = (f2 < NTE_C(0.0)) ? NTE_C(1.0) : NTE_C(0.0);
+    self->ex_nominal = (cfg->f1_excess > NTE_C(0.0))
+                           ? cfg->f1_excess
+                           : (cfg->nominal[nte_param_f1] - (self->kappa * (-f2)));
+}
+
+void nte_bank_restart_from(nte_t* self, const nte_real_t theta[NTE_PARAM_COUNT],
+                           const nte_real_t p0_u)
+{
+    const size_t mi = model_index(self);
+    for (size_t j = 0U; j < NTE_PARAM_COUNT; j++) {
+        self->nominal[j] = theta[j];
+    }
+    self->ex_nominal = theta[nte_param_f1] - (self->kappa * (-theta[nte_param_f2]));
+    for (size_t j = 0U; j < NTE_PARAM_COUNT; j++) {
+        self->u[j] = NTE_C(0.0);
+    }
+    nte_model_theta(&self->th, self->nominal, self->ex_nominal, self->kappa, self->u);
+    for (size_t i = 0U; i < NTE_FILTER_COUNT; i++) {
+        p0_with(self, (size_t)subset_len[mi][i] + 1U, self->P[i], p0_u);
+        self->gated_run[i] = 0U;
     }
 }
 
 static void start(nte_t* self)
 {
     const size_t mi = model_index(self);
+    set_nominal(self);
     for (size_t j = 0U; j < NTE_PARAM_COUNT; j++) {
         self->u[j] = NTE_C(0.0);
     }
@@ -67,12 +118,16 @@ static void start(nte_t* self)
     self->last.innovation_n = NTE_C(0.0);
     self->last.nis = NTE_C(0.0);
     self->last.status = 0U;
+    self->last.confidence = NTE_C(0.0);
     for (size_t c = 0U; c < NTE_REJECT_CAUSES; c++) {
         self->counters.rejected[c] = 0U;
     }
     self->counters.gated = 0U;
     self->counters.filter_resets = 0U;
     self->counters.gaps = 0U;
+#if NTE_ROBUST_BUFFER_LEN > 0
+    nte_robust_start(self);
+#endif
 }
 
 nte_err_t nte_init(nte_t* self, const nte_config_t* cfg)
@@ -88,17 +143,7 @@ nte_err_t nte_init(nte_t* self, const nte_config_t* cfg)
     self->gate2 = cfg->gate_sigma * cfg->gate_sigma;
     for (size_t j = 0U; j < NTE_PARAM_COUNT; j++) {
         self->q_u[j] = (cfg->q_u[j] < NTE_C(0.0)) ? cfg->q_u_default : cfg->q_u[j];
-        self->nominal[j] = cfg->nominal[j];
     }
-    if (cfg->model == 1) {
-        /* Model I: beta is the fixed normalising constant beta0 */
-        self->nominal[nte_param_beta] = cfg->beta0;
-    }
-    const nte_real_t f2 = cfg->nominal[nte_param_f2];
-    self->kappa = (f2 < NTE_C(0.0)) ? NTE_C(1.0) : NTE_C(0.0);
-    self->ex_nominal = (cfg->f1_excess > NTE_C(0.0))
-                           ? cfg->f1_excess
-                           : (cfg->nominal[nte_param_f1] - (self->kappa * (-f2)));
     start(self);
     return nte_err_ok;
 }
@@ -348,6 +393,7 @@ nte_err_t nte_step(nte_t* self, const nte_sample_t* sample, nte_output_t* out)
     const bool in_range = (l_in >= cfg->depth_min_mm) && (l_in <= cfg->depth_max_mm) &&
                           (nte_abs(v) <= cfg->speed_max_mm_s) && (nte_abs(y) <= cfg->force_max_n);
     const bool later = (!self->initialised) || (sample->t_us > self->t_prev_us);
+    const bool valid = finite && in_range && later;
     if (!finite) {
         self->counters.rejected[NTE_REJECT_NONFINITE]++;
     } else if (!in_range) {
@@ -367,12 +413,17 @@ nte_err_t nte_step(nte_t* self, const nte_sample_t* sample, nte_output_t* out)
         self->t_prev_us = sample->t_us;
         self->l_prev = l_in;
         self->initialised = true;
-        if (out != NULL) {
-            *out = self->last;
-        }
-        return nte_err_ok;
     }
-    self->last.status = NTE_STATUS_REJECTED;
+    if (!valid) {
+        self->last.status = NTE_STATUS_REJECTED;
+    }
+#if NTE_ROBUST_BUFFER_LEN > 0
+    if (cfg->estimator == nte_estimator_robust) {
+        /* RobustEstimator.step: after the bank's step of the same sample */
+        self->last.status |= nte_robust_step(self, sample, valid);
+        self->last.confidence = self->robust.confidence;
+    }
+#endif
     if (out != NULL) {
         *out = self->last;
     }

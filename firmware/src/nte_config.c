@@ -40,6 +40,15 @@ static void set_common(nte_config_t* cfg, const int32_t model, const nte_schedul
     cfg->nominal[nte_param_alpha] = NTE_K_NOMINAL_ALPHA;
     cfg->nominal[nte_param_beta] = NTE_K_NOMINAL_BETA;
     cfg->f1_excess = NTE_K_NOMINAL_F1_EXCESS;
+    cfg->estimator = nte_estimator_bank;
+    cfg->robust.buffer_len = 96;
+    cfg->robust.fit_substeps = 4;
+    cfg->robust.fit_iterations = 20;
+    cfg->robust.min_entries = 24;
+    cfg->robust.restart_p0_u = NTE_K_ROB_RESTART_P0_U;
+    cfg->robust.lm_lambda0 = NTE_K_ROB_LM_LAMBDA0;
+    cfg->robust.converged_confidence = NTE_K_ROB_CONVERGED_CONFIDENCE;
+    cfg->robust.converged_change = NTE_K_ROB_CONVERGED_CHANGE;
 }
 
 void nte_config_default(nte_config_t* cfg, const int32_t model, const nte_schedule_t schedule)
@@ -90,6 +99,31 @@ static nte_err_t check_nonnegative(const nte_real_t v)
     }
     return (v >= NTE_C(0.0)) ? nte_err_ok : nte_err_not_positive;
 }
+
+#if NTE_ROBUST_BUFFER_LEN > 0
+/* The robust estimator's fields (checked only when it is selected). */
+static nte_err_t check_robust(const nte_robust_config_t* rc)
+{
+    /* an odd buffer_len cannot be compacted to every other entry (robust.py's _record needs
+     * buffer_len // 2 == len(buf[0::2])) */
+    if ((rc->buffer_len < 2) || (rc->buffer_len > NTE_ROBUST_BUFFER_LEN) ||
+        ((rc->buffer_len % 2) != 0)) {
+        return nte_err_bad_robust;
+    }
+    if ((rc->fit_substeps < 1) || (rc->fit_substeps > 16) || (rc->fit_iterations < 0) ||
+        (rc->fit_iterations > 1000) || (rc->min_entries < 1) ||
+        (rc->min_entries > rc->buffer_len)) {
+        return nte_err_bad_robust;
+    }
+    if ((check_positive(rc->restart_p0_u) != nte_err_ok) ||
+        (check_positive(rc->lm_lambda0) != nte_err_ok) ||
+        !nte_isfinite(rc->converged_confidence) ||
+        (check_nonnegative(rc->converged_change) != nte_err_ok)) {
+        return nte_err_bad_robust;
+    }
+    return nte_err_ok;
+}
+#endif
 
 nte_err_t nte_config_check(const nte_config_t* cfg)
 {
@@ -152,6 +186,16 @@ nte_err_t nte_config_check(const nte_config_t* cfg)
         if (!(ex > NTE_C(0.0))) {
             return nte_err_bad_f1;
         }
+    }
+    if (cfg->estimator == nte_estimator_robust) {
+#if NTE_ROBUST_BUFFER_LEN > 0
+        return check_robust(&cfg->robust);
+#else
+        return nte_err_bad_estimator;
+#endif
+    }
+    if (cfg->estimator != nte_estimator_bank) {
+        return nte_err_bad_estimator;
     }
     return nte_err_ok;
 }

@@ -32,6 +32,16 @@ static inline nte_real_t nte_abs(const nte_real_t x)
 #endif
 }
 
+/** Correctly rounded square root (IEEE-754, like numpy's sqrt). */
+static inline nte_real_t nte_sqrt(const nte_real_t x)
+{
+#if NTE_DOUBLE
+    return sqrt(x);
+#else
+    return sqrtf(x);
+#endif
+}
+
 static inline bool nte_isfinite(const nte_real_t x)
 {
     return isfinite(x) != 0;

@@ -21,7 +21,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
-from reference_py import config, params  # noqa: E402
+from reference_py import config, params, robust  # noqa: E402
 from reference_py.fmath import F32, F64  # noqa: E402
 
 LIB_HEADER = ROOT / "firmware" / "src" / "nte_constants.h"
@@ -72,6 +72,16 @@ def lib_header() -> str:
             if name in pc.q_u:
                 v = float(pc.q_u[name])
                 rows.append(pair(f"NTE_K_PAPER_Q_M{model}_{name.upper()}", v, v))
+    # the robust estimator (reference_py/robust.py): RobustConfig's defaults, COST_HUGE and the
+    # literals its refinement rounds with R.c (the sign-certainty bound, the lambda clip)
+    rc = robust.RobustConfig()
+    for f in ("restart_p0_u", "lm_lambda0", "converged_confidence", "converged_change"):
+        v = float(getattr(rc, f))
+        rows.append(pair("NTE_K_ROB_" + f.upper(), v, v))
+    rows.append(pair("NTE_K_ROB_COST_HUGE", robust.COST_HUGE, robust.COST_HUGE))
+    rows.append(pair("NTE_K_ROB_SURE", 0.99, 0.99))
+    rows.append(pair("NTE_K_ROB_LAMBDA_MIN", 1e-7, 1e-7))
+    rows.append(pair("NTE_K_ROB_LAMBDA_MAX", 1e7, 1e7))
     p = params.PRESETS["paper-10mms"].params
     for name in params.PARAM_NAMES:
         v = float(getattr(p, name))
