@@ -227,9 +227,13 @@ def trial_inputs(tr: TrialGrid, i: int, effects: tuple[str, ...], nl: dict[str, 
         v = v - w * (a * np.cos(w * tr.t_s) - b * np.sin(w * tr.t_s))
     l = np.maximum(l_raw, 0.0)
     p, q, alpha = float(nl["p"]), float(nl["g0"]) - float(nl["p"]), float(nl["alpha"])
-    zh = state_trajectory(tr.t_s, l, p, q, alpha,
-                          substeps=cache.substeps if cache is not None else 10)
     bl = 1.0 / (p + q * np.exp(-alpha * l))
+    # RK3 is stable for |lambda h| up to ~2.5: add sub-steps where the fit wanders into stiff
+    # parameters (lambda = l b) rather than let z blow up
+    base_sub = cache.substeps if cache is not None else 10
+    lam_dt = float(np.max(l * bl)) * float(np.max(np.diff(tr.t_s))) if len(l) > 1 else 0.0
+    zh = state_trajectory(tr.t_s, l, p, q, alpha,
+                          substeps=int(min(max(base_sub, np.ceil(lam_dt / 1.0)), 400)))
     s = direction(v) * (l > 0.0)
     val = (l, s, zh, bl)
     if cache is not None:

@@ -110,6 +110,8 @@ def fit(trials: list[TrialGrid], y: Array, effects: tuple[str, ...], nl0: dict[s
     def res(x: Array) -> Array:
         nl = _unpack(x, nl0, slots)
         m, _ = design(trials, effects, nl, cache)
+        if not np.all(np.isfinite(m)):
+            return np.full_like(y, 10.0)     # a failed simulation is a very bad fit
         return y - m @ solve_linear(m, y)
 
     sol = least_squares(res, x0, bounds=(lo, hi), method="trf", x_scale=1.0, diff_step=1e-5,
