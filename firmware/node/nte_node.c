@@ -1,0 +1,533 @@
+/*
+ * nte_node.c -- the platform-free node loop (see nte_node.h for the contract).
+ */
+#include "nte_node.h"
+
+#include <string.h>
+
+#define NTE_NODE_TICK_US 100u
+#define NTE_NODE_IN_DEPTH 0u
+#define NTE_NODE_IN_FORCE 1u
+#define NTE_NODE_IN_COMMAND 2u
+#define NTE_NODE_OUT_ESTIMATE 0u
+#define NTE_NODE_OUT_PARAMS 1u
+#define NTE_NODE_OUT_HEARTBEAT 2u
+
+static const char* const nte_node_event_names[NTE_NODE_EVENT_COUNT] = {
+    "wrong_dlc",      "unknown_id",    "bad_crc",        "counter_invalid", "counter_repeated",
+    "counter_skipped", "out_of_range", "time_backwards", "queue_overflow",  "send_failed",
+    "command_refused", "stale",        "receive_error",  "encode_error"};
+
+/* Signed difference a - b of two unwrapped tick counts (they wrap modulo 2^32). */
+static int32_t nte_node_tdiff(uint32_t a, uint32_t b)
+{
+    const uint32_t d = a - b;
+    return (d <= 0x7FFFFFFFu) ? (int32_t)d : -(int32_t)(~d) - 1;
+}
+
+static void nte_node_count(nte_node_t* self, nte_node_event_t ev)
+{
+    self->counters.events[(uint32_t)ev]++;
+}
+
+void nte_node_config_default(nte_node_config_t* cfg, int32_t model)
+{
+    if (cfg == NULL) {
+        return;
+    }
+    (void)memset(cfg, 0, sizeof *cfg);
+    cfg->base_id = NTE_FRAMES_BASE_ID_DEFAULT;
+    cfg->model = model;
+    nte_config_default(&cfg->estimator[0], 1, nte_schedule_all);
+    nte_config_default(&cfg->estimator[1], 2, nte_schedule_all);
+    cfg->depth_timeout_us = 50000u;
+    cfg->heartbeat_period_us = 100000u;
+    cfg->params_per_step = 1u;
+    cfg->rx_budget = 64u;
+}
+
+static nte_node_err_t nte_node_check(const nte_node_config_t* cfg, const nte_node_port_t* port)
+{
+    uint32_t id = 0u;
+    if ((port->receive == NULL) || (port->send == NULL) || (port->now_us == NULL)) {
+        return nte_node_err_null;
+    }
+    if ((nte_frames_can_id(cfg->base_id, nte_frames_kind_heartbeat, &id) != nte_frames_ok) ||
+        ((cfg->model != 1) && (cfg->model != 2)) || (cfg->depth_timeout_us < 100u) ||
+        (cfg->depth_timeout_us > 3000000u) || (cfg->heartbeat_period_us < 1000u) ||
+        (cfg->heartbeat_period_us > 10000000u) || (cfg->params_per_step < 1u) ||
+        (cfg->params_per_step > (uint32_t)NTE_FRAMES_PARAM_COUNT) || (cfg->rx_budget < 1u) ||
+        (cfg->rx_budget > 65535u)) {
+        return nte_node_err_bad_config;
+    }
+    if ((cfg->estimator[0].model != 1) || (cfg->estimator[1].model != 2) ||
+        (nte_config_check(&cfg->estimator[0]) != nte_err_ok) ||
+        (nte_config_check(&cfg->estimator[1]) != nte_err_ok)) {
+        return nte_node_err_estimator;
+    }
+    return nte_node_ok;
+}
+
+/* (Re)start the estimator with `model`; on failure the previous one is kept. */
+static bool nte_node_start_model(nte_node_t* self, int32_t model)
+{
+    if (nte_init(&self->est, &self->cfg.estimator[model - 1]) != nte_err_ok) {
+        return false;
+    }
+    self->model = model;
+    self->state = nte_node_state_init;
+    (void)memset(&self->last, 0, sizeof self->last);
+    self->last.adapting = true;
+    return true;
+}
+
+nte_node_err_t nte_node_init(nte_node_t* self, const nte_node_config_t* cfg,
+                             const nte_node_port_t* port)
+{
+    static const nte_frames_kind_t in_kinds[3] = {nte_frames_kind_depth, nte_frames_kind_force,
+                                                  nte_frames_kind_command};
+    static const nte_frames_kind_t out_kinds[3] = {
+        nte_frames_kind_estimate, nte_frames_kind_params, nte_frames_kind_heartbeat};
+    if ((self == NULL) || (cfg == NULL) || (port == NULL)) {
+        return nte_node_err_null;
+    }
+    const nte_node_err_t err = nte_node_check(cfg, port);
+    if (err != nte_node_ok) {
+        return err;
+    }
+    (void)memset(self, 0, sizeof *self);
+    self->cfg = *cfg;
+    self->port = *port;
+    for (uint32_t i = 0u; i < 3u; i++) {
+        (void)nte_frames_rx_init(&self->rx[i], in_kinds[i]);
+        (void)nte_frames_tx_init(&self->tx[i], out_kinds[i]);
+    }
+    nte_frames_clock_reset(&self->clock);
+    if (!nte_node_start_model(self, cfg->model)) {
+        return nte_node_err_estimator;
+    }
+    self->t_start_us = port->now_us(port->ctx);
+    self->next_heartbeat_us = self->t_start_us + cfg->heartbeat_period_us;
+    return nte_node_ok;
+}
+
+uint32_t nte_node_input_id(const nte_node_t* self, uint32_t kind)
+{
+    static const uint32_t offsets[3] = {NTE_FRAMES_OFFSET_DEPTH, NTE_FRAMES_OFFSET_FORCE,
+                                        NTE_FRAMES_OFFSET_COMMAND};
+    return self->cfg.base_id + offsets[(kind < 3u) ? kind : 0u];
+}
+
+int32_t nte_node_model(const nte_node_t* self)
+{
+    return self->model;
+}
+
+nte_node_state_t nte_node_state(const nte_node_t* self)
+{
+    return self->state;
+}
+
+uint64_t nte_node_next_deadline_us(const nte_node_t* self)
+{
+    return self->next_heartbeat_us;
+}
+
+const char* nte_node_event_name(uint32_t event)
+{
+    return (event < (uint32_t)NTE_NODE_EVENT_COUNT) ? nte_node_event_names[event] : "?";
+}
+
+/* ------------------------------------------------------------------------------------------ */
+/* Output                                                                                       */
+/* ------------------------------------------------------------------------------------------ */
+
+static void nte_node_send(nte_node_t* self, nte_frames_kind_t kind, uint32_t out_index,
+                          const uint8_t* data)
+{
+    nte_node_frame_t f;
+    uint32_t id = 0u;
+    (void)nte_frames_can_id(self->cfg.base_id, kind, &id);
+    (void)memset(&f, 0, sizeof f);
+    f.id = id;
+    f.len = NTE_FRAMES_LENGTH;
+    (void)memcpy(f.data, data, NTE_FRAMES_LENGTH);
+    if (self->port.send(self->port.ctx, &f) < 0) {
+        nte_node_count(self, nte_node_ev_send_failed);
+    } else {
+        self->counters.tx[out_index]++;
+    }
+}
+
+static void nte_node_publish_estimate(nte_node_t* self, const nte_frames_estimate_t* e)
+{
+    uint8_t data[NTE_FRAMES_LENGTH];
+    if (nte_frames_encode_estimate(e, &self->tx[NTE_NODE_OUT_ESTIMATE], data) != nte_frames_ok) {
+        nte_frames_estimate_t safe;
+        (void)memset(&safe, 0, sizeof safe);
+        safe.fault = true;
+        safe.stale = e->stale;
+        safe.adapting = e->adapting;
+        nte_node_count(self, nte_node_ev_encode_error);
+        if (nte_frames_encode_estimate(&safe, &self->tx[NTE_NODE_OUT_ESTIMATE], data) !=
+            nte_frames_ok) {
+            return;
+        }
+    }
+    nte_node_send(self, nte_frames_kind_estimate, NTE_NODE_OUT_ESTIMATE, data);
+}
+
+/* Every parameter (fixed ones: the configured value, sd 0), frame index order. */
+static void nte_node_all_params(const nte_node_t* self, float value[NTE_FRAMES_PARAM_COUNT],
+                                float sd[NTE_FRAMES_PARAM_COUNT])
+{
+    nte_param_estimate_t pe[NTE_IDENTIFIED_MAX];
+    const nte_config_t* c = &self->cfg.estimator[self->model - 1];
+    for (uint32_t j = 0u; j < (uint32_t)NTE_FRAMES_PARAM_COUNT; j++) {
+        value[j] = (float)c->nominal[j];
+        sd[j] = 0.0f;
+    }
+    if (self->model == 1) {
+        value[nte_param_beta] = (float)c->beta0;
+    }
+    const size_t n = nte_get_params(&self->est, pe, NTE_IDENTIFIED_MAX);
+    for (size_t k = 0u; (k < n) && (k < (size_t)NTE_IDENTIFIED_MAX); k++) {
+        const uint32_t j = (uint32_t)pe[k].id;
+        if (j < (uint32_t)NTE_FRAMES_PARAM_COUNT) {
+            value[j] = (float)pe[k].value;
+            sd[j] = (float)pe[k].sd;
+        }
+    }
+}
+
+static void nte_node_publish_params(nte_node_t* self)
+{
+    float value[NTE_FRAMES_PARAM_COUNT];
+    float sd[NTE_FRAMES_PARAM_COUNT];
+    nte_node_all_params(self, value, sd);
+    for (uint32_t k = 0u; k < self->cfg.params_per_step; k++) {
+        nte_frames_param_t p;
+        uint8_t data[NTE_FRAMES_LENGTH];
+        p.index = self->param_next;
+        p.value = value[p.index];
+        p.std = sd[p.index];
+        self->param_next =
+            (uint8_t)((self->param_next + 1u) % (uint32_t)NTE_FRAMES_PARAM_COUNT);
+        if (nte_frames_encode_param(&p, &self->tx[NTE_NODE_OUT_PARAMS], data) !=
+            nte_frames_ok) {
+            nte_node_count(self, nte_node_ev_encode_error);
+            continue;
+        }
+        nte_node_send(self, nte_frames_kind_params, NTE_NODE_OUT_PARAMS, data);
+    }
+}
+
+static void nte_node_heartbeat(nte_node_t* self, uint64_t now)
+{
+    nte_frames_heartbeat_t hb;
+    uint8_t data[NTE_FRAMES_LENGTH];
+    const uint32_t* ev = self->counters.events;
+    const uint64_t up_us = now - self->t_start_us;
+    hb.node_state = (uint8_t)self->state;
+    hb.active_model = (uint8_t)(self->model - 1);
+    hb.active_estimator = 0u;
+    /* 0.1 s steps, reduced modulo the frame's wrap (1048576 steps) before the float */
+    hb.uptime_s = (float)(uint32_t)((up_us / 100000u) % 1048576u) * 0.1f;
+    hb.e2e_errors = ev[nte_node_ev_wrong_dlc] + ev[nte_node_ev_bad_crc] +
+                    ev[nte_node_ev_counter_invalid] + ev[nte_node_ev_counter_repeated];
+    hb.range_errors = ev[nte_node_ev_out_of_range] + ev[nte_node_ev_time_backwards];
+    hb.step_time_s = (float)self->step_time_max_us * 1.0e-6f;
+    if (nte_frames_encode_heartbeat(&hb, &self->tx[NTE_NODE_OUT_HEARTBEAT], data) ==
+        nte_frames_ok) {
+        nte_node_send(self, nte_frames_kind_heartbeat, NTE_NODE_OUT_HEARTBEAT, data);
+    } else {
+        nte_node_count(self, nte_node_ev_encode_error);
+    }
+    self->step_time_max_us = 0u;
+}
+
+/* ------------------------------------------------------------------------------------------ */
+/* Estimation                                                                                   */
+/* ------------------------------------------------------------------------------------------ */
+
+static const nte_node_depth_t* nte_node_depth_at(const nte_node_t* self, uint32_t age)
+{
+    /* age 0 = newest */
+    const uint32_t n = (uint32_t)NTE_NODE_DEPTH_HISTORY;
+    return &self->depth[(self->depth_next + n - 1u - age) % n];
+}
+
+static void nte_node_hold(nte_node_t* self)
+{
+    nte_frames_estimate_t e = self->last;
+    e.stale = true;
+    e.saturated = false;
+    nte_node_count(self, nte_node_ev_stale);
+    nte_node_publish_estimate(self, &e);
+    nte_node_publish_params(self);
+}
+
+static void nte_node_step(nte_node_t* self, const nte_node_force_t* f, float depth_mm,
+                          float velocity_mm_s)
+{
+    nte_sample_t s;
+    nte_output_t o;
+    nte_frames_estimate_t e;
+    s.t_us = (int64_t)f->t * (int64_t)NTE_NODE_TICK_US;
+    s.depth_mm = (nte_real_t)depth_mm;
+    s.velocity_mm_s = (nte_real_t)velocity_mm_s;
+    s.force_n = (nte_real_t)f->force_n;
+    const uint64_t t0 = self->port.now_us(self->port.ctx);
+    (void)nte_step(&self->est, &s, &o);
+    const uint64_t dt = self->port.now_us(self->port.ctx) - t0;
+    const uint32_t dt32 = (dt > 0xFFFFFFFFu) ? 0xFFFFFFFFu : (uint32_t)dt;
+    if (dt32 > self->step_time_max_us) {
+        self->step_time_max_us = dt32;
+    }
+    self->counters.steps++;
+    (void)memset(&e, 0, sizeof e);
+    e.force_n = (float)o.force_hat_n;
+    e.innovation_n = (float)o.innovation_n;
+    e.z = (float)o.z;
+    e.in_tissue = depth_mm > 0.0f;
+    e.adapting = true;
+    e.fault = (o.status & NTE_STATUS_REJECTED) != 0u;
+    e.stale = false;
+    self->state = e.fault ? nte_node_state_fault : nte_node_state_running;
+    self->last = e;
+    nte_node_publish_estimate(self, &e);
+    nte_node_publish_params(self);
+}
+
+/* Decide the force sample at the head of the queue: 1 = done (stepped or held), 0 = wait. */
+static int nte_node_decide(nte_node_t* self, const nte_node_force_t* f)
+{
+    const int32_t timeout = (int32_t)(self->cfg.depth_timeout_us / NTE_NODE_TICK_US);
+    if (self->depth_count == 0u) {
+        /* no depth yet: wait until the force samples span more than the timeout */
+        if (nte_node_tdiff(self->last_force_t, f->t) > timeout) {
+            nte_node_hold(self);
+            return 1;
+        }
+        return 0;
+    }
+    const nte_node_depth_t* newest = nte_node_depth_at(self, 0u);
+    if (nte_node_tdiff(newest->t, f->t) < 0) {
+        /* no depth at or after t_f yet: wait unless the depth is too old already, or a later
+         * force sample shows that none came within the timeout */
+        if ((nte_node_tdiff(f->t, newest->t) > timeout) ||
+            (nte_node_tdiff(self->last_force_t, newest->t) > timeout)) {
+            nte_node_hold(self);
+            return 1;
+        }
+        return 0;
+    }
+    /* newest depth at or before t_f (a) and the one after it (b) */
+    const nte_node_depth_t* b = newest;
+    for (uint32_t age = 0u; age < self->depth_count; age++) {
+        const nte_node_depth_t* a = nte_node_depth_at(self, age);
+        if (nte_node_tdiff(a->t, f->t) <= 0) {
+            if (nte_node_tdiff(f->t, a->t) > timeout) {
+                nte_node_hold(self);
+            } else if (a->t == f->t) {
+                nte_node_step(self, f, a->depth_mm, a->velocity_mm_s);
+            } else {
+                const float w = (float)nte_node_tdiff(f->t, a->t) /
+                                (float)nte_node_tdiff(b->t, a->t);
+                const float d = a->depth_mm + (w * (b->depth_mm - a->depth_mm));
+                const float v = a->velocity_mm_s + (w * (b->velocity_mm_s - a->velocity_mm_s));
+                nte_node_step(self, f, d, v);
+            }
+            return 1;
+        }
+        b = a;
+    }
+    /* t_f is older than the whole depth history */
+    nte_node_hold(self);
+    return 1;
+}
+
+static void nte_node_process_forces(nte_node_t* self)
+{
+    while (self->force_count > 0u) {
+        const nte_node_force_t f = self->force[self->force_head];
+        if (nte_node_decide(self, &f) == 0) {
+            return;
+        }
+        self->force_head = (self->force_head + 1u) % (uint32_t)NTE_NODE_FORCE_QUEUE;
+        self->force_count--;
+    }
+}
+
+/* ------------------------------------------------------------------------------------------ */
+/* Input                                                                                        */
+/* ------------------------------------------------------------------------------------------ */
+
+/* Count a failed decode by cause; account a skipped counter on success. */
+static bool nte_node_decoded(nte_node_t* self, nte_frames_err_t err, nte_e2e_result_t e2e,
+                             uint8_t lost)
+{
+    if (err == nte_frames_ok) {
+        if (e2e == nte_e2e_skipped) {
+            nte_node_count(self, nte_node_ev_counter_skipped);
+            self->counters.frames_lost += lost;
+        }
+        return true;
+    }
+    if (err == nte_frames_err_e2e) {
+        switch (e2e) {
+        case nte_e2e_err_wrong_length: nte_node_count(self, nte_node_ev_wrong_dlc); break;
+        case nte_e2e_err_repeated: nte_node_count(self, nte_node_ev_counter_repeated); break;
+        case nte_e2e_err_bad_counter: nte_node_count(self, nte_node_ev_counter_invalid); break;
+        default: nte_node_count(self, nte_node_ev_bad_crc); break;
+        }
+    } else {
+        nte_node_count(self, nte_node_ev_out_of_range);
+    }
+    return false;
+}
+
+static void nte_node_on_depth(nte_node_t* self, const nte_node_frame_t* fr)
+{
+    nte_frames_depth_t d;
+    nte_e2e_result_t e2e = nte_e2e_ok;
+    uint8_t lost = 0u;
+    const nte_frames_err_t err = nte_frames_decode_depth(&self->rx[NTE_NODE_IN_DEPTH], fr->data,
+                                                         fr->len, &d, &e2e, &lost);
+    if (!nte_node_decoded(self, err, e2e, lost)) {
+        return;
+    }
+    nte_frames_clock_t clk = self->clock;
+    const uint32_t t = nte_frames_clock_unwrap(&clk, d.time_ticks);
+    if ((self->depth_count > 0u) && (nte_node_tdiff(t, nte_node_depth_at(self, 0u)->t) <= 0)) {
+        nte_node_count(self, nte_node_ev_time_backwards);
+        return;
+    }
+    self->clock = clk;
+    self->depth[self->depth_next].t = t;
+    self->depth[self->depth_next].depth_mm = d.depth_mm;
+    self->depth[self->depth_next].velocity_mm_s = d.velocity_mm_s;
+    self->depth_next = (self->depth_next + 1u) % (uint32_t)NTE_NODE_DEPTH_HISTORY;
+    if (self->depth_count < (uint32_t)NTE_NODE_DEPTH_HISTORY) {
+        self->depth_count++;
+    }
+    self->counters.rx_accepted[NTE_NODE_IN_DEPTH]++;
+    nte_node_process_forces(self);
+}
+
+static void nte_node_on_force(nte_node_t* self, const nte_node_frame_t* fr)
+{
+    nte_frames_force_t f;
+    nte_e2e_result_t e2e = nte_e2e_ok;
+    uint8_t lost = 0u;
+    const nte_frames_err_t err = nte_frames_decode_force(&self->rx[NTE_NODE_IN_FORCE], fr->data,
+                                                         fr->len, &f, &e2e, &lost);
+    if (!nte_node_decoded(self, err, e2e, lost)) {
+        return;
+    }
+    nte_frames_clock_t clk = self->clock;
+    const uint32_t t = nte_frames_clock_unwrap(&clk, f.time_ticks);
+    if (self->have_force && (nte_node_tdiff(t, self->last_force_t) <= 0)) {
+        nte_node_count(self, nte_node_ev_time_backwards);
+        return;
+    }
+    if (self->force_count >= (uint32_t)NTE_NODE_FORCE_QUEUE) {
+        nte_node_count(self, nte_node_ev_queue_overflow);
+        return;
+    }
+    self->clock = clk;
+    self->have_force = true;
+    self->last_force_t = t;
+    self->force[(self->force_head + self->force_count) % (uint32_t)NTE_NODE_FORCE_QUEUE].t = t;
+    self->force[(self->force_head + self->force_count) % (uint32_t)NTE_NODE_FORCE_QUEUE]
+        .force_n = f.force_n;
+    self->force_count++;
+    self->counters.rx_accepted[NTE_NODE_IN_FORCE]++;
+    nte_node_process_forces(self);
+}
+
+static void nte_node_on_command(nte_node_t* self, const nte_node_frame_t* fr)
+{
+    nte_frames_command_t c;
+    nte_e2e_result_t e2e = nte_e2e_ok;
+    uint8_t lost = 0u;
+    bool refused = false;
+    const nte_frames_err_t err = nte_frames_decode_command(
+        &self->rx[NTE_NODE_IN_COMMAND], fr->data, fr->len, &c, &e2e, &lost);
+    if (!nte_node_decoded(self, err, e2e, lost)) {
+        return;
+    }
+    self->counters.rx_accepted[NTE_NODE_IN_COMMAND]++;
+    if ((c.model_sel == NTE_FRAMES_MODEL_I) || (c.model_sel == NTE_FRAMES_MODEL_II)) {
+        const int32_t m = (c.model_sel == NTE_FRAMES_MODEL_I) ? 1 : 2;
+        if ((m != self->model) && !nte_node_start_model(self, m)) {
+            refused = true;
+        }
+    }
+    /* the library has no robust estimator and no way to freeze adaptation: refused */
+    if (c.estimator_sel == NTE_FRAMES_ESTIMATOR_ROBUST) {
+        refused = true;
+    }
+    if (c.adapt_cmd == NTE_FRAMES_ADAPT_FREEZE) {
+        refused = true;
+    }
+    if (c.reset) {
+        (void)nte_reset(&self->est);
+        self->state = nte_node_state_init;
+        (void)memset(&self->last, 0, sizeof self->last);
+        self->last.adapting = true;
+    }
+    if (refused) {
+        nte_node_count(self, nte_node_ev_command_refused);
+    } else {
+        self->counters.commands_applied++;
+    }
+}
+
+static void nte_node_on_frame(nte_node_t* self, const nte_node_frame_t* fr)
+{
+    if (fr->extended || fr->remote) {
+        nte_node_count(self, nte_node_ev_unknown_id);
+        return;
+    }
+    if (fr->id == nte_node_input_id(self, NTE_NODE_IN_DEPTH)) {
+        nte_node_on_depth(self, fr);
+    } else if (fr->id == nte_node_input_id(self, NTE_NODE_IN_FORCE)) {
+        nte_node_on_force(self, fr);
+    } else if (fr->id == nte_node_input_id(self, NTE_NODE_IN_COMMAND)) {
+        nte_node_on_command(self, fr);
+    } else {
+        nte_node_count(self, nte_node_ev_unknown_id);
+    }
+}
+
+int32_t nte_node_poll(nte_node_t* self)
+{
+    int32_t n = 0;
+    if (self == NULL) {
+        return (int32_t)nte_node_err_null;
+    }
+    while ((uint32_t)n < self->cfg.rx_budget) {
+        nte_node_frame_t fr;
+        (void)memset(&fr, 0, sizeof fr);
+        const int r = self->port.receive(self->port.ctx, &fr);
+        if (r < 0) {
+            nte_node_count(self, nte_node_ev_receive_error);
+            break;
+        }
+        if (r == 0) {
+            break;
+        }
+        n++;
+        nte_node_on_frame(self, &fr);
+    }
+    const uint64_t now = self->port.now_us(self->port.ctx);
+    if (now >= self->next_heartbeat_us) {
+        nte_node_heartbeat(self, now);
+        self->next_heartbeat_us += self->cfg.heartbeat_period_us;
+        if (self->next_heartbeat_us <= now) {
+            self->next_heartbeat_us = now + self->cfg.heartbeat_period_us;
+        }
+    }
+    return n;
+}

@@ -1,0 +1,236 @@
+/*
+ * nte_node.h -- the needle-tissue force estimator as a CAN node: the platform-free node loop.
+ *
+ * WHAT IT DOES
+ *   Receives the Depth, Force and Command frames of firmware/can/nte.dbc, checks them (length,
+ *   E2E CRC and alive counter, DBC ranges, sensor timestamps), and runs one estimator step
+ *   (firmware/include/nte.h) per accepted Force frame, with depth and velocity interpolated
+ *   linearly to the force sample's own timestamp.  After every step it sends one Estimate frame
+ *   and `params_per_step` Params frames (rotating through the seven multiplexer indices); every
+ *   `heartbeat_period_us` of the port's clock it sends a Heartbeat.  It counts every dropped or
+ *   rejected frame by cause (nte_node_event_t).
+ *
+ * TIME
+ *   Results depend only on the frames' SensorTime stamps (unwrapped, one clock for both streams),
+ *   never on arrival times: a force sample at t_f is processed once a depth sample with
+ *   t >= t_f has been received (interpolation between the newest depth at or before t_f and the
+ *   next one), or declared STALE when the newest depth at or before t_f is older than
+ *   `depth_timeout_us`, or when a later force sample shows that no bracketing depth sample came
+ *   within the timeout.  A stale force sample does not step the estimator: the Estimate frame
+ *   repeats the last estimate with the Stale bit set.  This is deterministic provided the two
+ *   streams are not skewed on the bus by more than the timeout.  The port clock is used only for
+ *   the heartbeat period, the uptime and the step-time measurement.
+ *
+ * THE PORT INTERFACE (bring the node to a board by writing these three functions)
+ *   nte_node_port_t holds three function pointers and a context pointer passed back to each:
+ *     receive(ctx, frame)  NON-BLOCKING: 1 = *frame filled with one received frame, 0 = nothing
+ *                          pending, negative = receive error (counted; the poll stops there).
+ *                          Error frames and remote frames may be passed with their flags set
+ *                          (they are counted as unknown ids) or filtered by the port.
+ *     send(ctx, frame)     NON-BLOCKING: 0 = queued for transmission, negative = not sent (bus
+ *                          or TX FIFO full, bus off, ...): the frame is dropped and counted.
+ *     now_us(ctx)          monotonic clock in microseconds (any epoch, must not go backwards).
+ *   A port for a microcontroller's CAN controller reads its RX FIFO in receive(), writes a TX
+ *   mailbox in send() and reads a free-running timer in now_us().  The Linux SocketCAN port is
+ *   firmware/port/linux/.  Hardware acceptance filters may pass only the node's three input ids
+ *   (nte_node_input_id); nothing else is needed.
+ *
+ * INTEGRATION
+ *   Compile nte_node.c with the estimator library (firmware/src) and the CAN layer
+ *   (firmware/can: nte_frames.c, nte_e2e.c, generated/nte_can.c); C99, -ffp-contract=off.
+ *   Call nte_node_init once, then nte_node_poll whenever a frame may have arrived and at least
+ *   every heartbeat period (a main loop, a CAN RX interrupt deferring to a task, or poll() on a
+ *   socket with a timeout of nte_node_next_deadline_us).
+ *
+ * MEMORY MODEL
+ *   The caller owns the instance (sizeof(nte_node_t) is about 2 KiB with the default sizes):
+ *   no allocation, no global or static mutable state; queues are fixed arrays in the instance
+ *   (sizes NTE_NODE_DEPTH_HISTORY and NTE_NODE_FORCE_QUEUE below, compile-time).
+ *
+ * THREAD SAFETY
+ *   None: call every function of one instance from one context.
+ *
+ * COST
+ *   nte_node_poll: per received frame one E2E CRC (8 bytes) and a few dozen operations; per
+ *   force sample one nte_step (see nte.h), a search of at most NTE_NODE_DEPTH_HISTORY entries,
+ *   1 + params_per_step encodes (one log10f each for Params).  At most `rx_budget` frames are
+ *   received per call, so one call is bounded.
+ */
+#ifndef NTE_NODE_H
+#define NTE_NODE_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "nte.h"
+#include "nte_frames.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/** Depth samples kept for interpolation (ring; the oldest is overwritten), 2..1024. */
+#ifndef NTE_NODE_DEPTH_HISTORY
+#define NTE_NODE_DEPTH_HISTORY 32
+#endif
+#if (NTE_NODE_DEPTH_HISTORY < 2) || (NTE_NODE_DEPTH_HISTORY > 1024)
+#error "NTE_NODE_DEPTH_HISTORY must be in 2..1024"
+#endif
+
+/** Force samples waiting for a later depth sample, 1..1024; a force frame arriving when it is
+ *  full is dropped and counted (nte_node_ev_queue_overflow). */
+#ifndef NTE_NODE_FORCE_QUEUE
+#define NTE_NODE_FORCE_QUEUE 16
+#endif
+#if (NTE_NODE_FORCE_QUEUE < 1) || (NTE_NODE_FORCE_QUEUE > 1024)
+#error "NTE_NODE_FORCE_QUEUE must be in 1..1024"
+#endif
+
+/** Classic CAN frame as the port passes it. */
+typedef struct nte_node_frame_t {
+    uint32_t id;      /**< 11-bit (or 29-bit if `extended`) identifier */
+    uint8_t len;      /**< data length, 0..8 */
+    bool extended;    /**< 29-bit identifier (never one of the node's) */
+    bool remote;      /**< remote request (never one of the node's) */
+    uint8_t data[8];
+} nte_node_frame_t;
+
+/** THE port interface: see "THE PORT INTERFACE" above. */
+typedef struct nte_node_port_t {
+    void* ctx;
+    int (*receive)(void* ctx, nte_node_frame_t* frame);
+    int (*send)(void* ctx, const nte_node_frame_t* frame);
+    uint64_t (*now_us)(void* ctx);
+} nte_node_port_t;
+
+/** Events counted by the node (nte_node_counters_t.events[]). */
+typedef enum nte_node_event_t {
+    nte_node_ev_wrong_dlc = 0,        /**< input frame whose length is not 8: dropped */
+    nte_node_ev_unknown_id = 1,       /**< id none of the node's inputs, extended or remote */
+    nte_node_ev_bad_crc = 2,          /**< E2E CRC wrong: dropped */
+    nte_node_ev_counter_invalid = 3,  /**< alive counter 15 (never sent): dropped */
+    nte_node_ev_counter_repeated = 4, /**< alive counter equal to the previous one: dropped */
+    nte_node_ev_counter_skipped = 5,  /**< counter jumped (frames lost upstream): ACCEPTED;
+                                           the number lost is in frames_lost */
+    nte_node_ev_out_of_range = 6,     /**< E2E-valid frame with a raw value outside the DBC
+                                           range, or a command selector undefined: dropped */
+    nte_node_ev_time_backwards = 7,   /**< sample not later than the previous one of its stream */
+    nte_node_ev_queue_overflow = 8,   /**< force frame dropped: force queue full */
+    nte_node_ev_send_failed = 9,      /**< port send() refused an output frame: dropped */
+    nte_node_ev_command_refused = 10, /**< valid command the node cannot carry out (robust
+                                           estimator, freeze adaptation): ignored */
+    nte_node_ev_stale = 11,           /**< force sample without recent depth: estimate held */
+    nte_node_ev_receive_error = 12,   /**< port receive() reported an error */
+    nte_node_ev_encode_error = 13     /**< an output could not be encoded (non-finite): the
+                                           Estimate is sent with Fault set instead */
+} nte_node_event_t;
+#define NTE_NODE_EVENT_COUNT 14
+
+/** Counters (monotonic, wrap modulo 2^32); public, the application may clear them. */
+typedef struct nte_node_counters_t {
+    uint32_t events[NTE_NODE_EVENT_COUNT]; /**< by nte_node_event_t */
+    uint32_t frames_lost;                  /**< frames missed upstream, from counter skips */
+    uint32_t rx_accepted[3];               /**< accepted depth, force, command frames */
+    uint32_t tx[3];                        /**< sent estimate, params, heartbeat frames */
+    uint32_t steps;                        /**< estimator steps (non-stale force samples) */
+    uint32_t commands_applied;             /**< commands carried out */
+} nte_node_counters_t;
+
+/** Node tuning; fill with nte_node_config_default, then change what you need. */
+typedef struct nte_node_config_t {
+    uint32_t base_id;             /**< CAN id base, 0..0x7FF - 0x12 (default 0x200) */
+    int32_t model;                /**< model at start: 1 or 2 */
+    nte_config_t estimator[2];    /**< estimator configuration for Model I [0] and II [1] */
+    uint32_t depth_timeout_us;    /**< depth older than this (sensor time) at a force sample
+                                       makes it stale, 100..3000000 us (default 50000) */
+    uint32_t heartbeat_period_us; /**< port clock, 1000..10000000 us (default 100000) */
+    uint32_t params_per_step;     /**< Params frames after each step, 1..7 (default 1) */
+    uint32_t rx_budget;           /**< frames received per nte_node_poll, 1..65535 (default 64) */
+} nte_node_config_t;
+
+/** Result of the node functions: 0 success, negative error. */
+typedef enum nte_node_err_t {
+    nte_node_ok = 0,
+    nte_node_err_null = -1,       /**< a pointer argument or port function is NULL */
+    nte_node_err_bad_config = -2, /**< a node field outside its range */
+    nte_node_err_estimator = -3   /**< an estimator configuration fails nte_config_check */
+} nte_node_err_t;
+
+/** Node state (as in the Heartbeat). */
+typedef enum nte_node_state_t {
+    nte_node_state_init = 0,    /**< no estimate yet (after start, reset or model change) */
+    nte_node_state_running = 1,
+    nte_node_state_fault = 2    /**< the last step was rejected by the estimator */
+} nte_node_state_t;
+
+typedef struct nte_node_depth_t {
+    uint32_t t;        /**< unwrapped sensor ticks (100 us) */
+    float depth_mm;
+    float velocity_mm_s;
+} nte_node_depth_t;
+
+typedef struct nte_node_force_t {
+    uint32_t t;
+    float force_n;
+} nte_node_force_t;
+
+/** One node.  Every field except `counters` is private. */
+typedef struct nte_node_t {
+    nte_node_config_t cfg;
+    nte_node_port_t port;
+    nte_t est;
+    int32_t model;
+    nte_e2e_rx_t rx[3];           /* depth, force, command */
+    nte_e2e_tx_t tx[3];           /* estimate, params, heartbeat */
+    nte_frames_clock_t clock;
+    nte_node_depth_t depth[NTE_NODE_DEPTH_HISTORY];
+    uint32_t depth_next;          /* ring write index */
+    uint32_t depth_count;
+    nte_node_force_t force[NTE_NODE_FORCE_QUEUE];
+    uint32_t force_head;
+    uint32_t force_count;
+    bool have_force;
+    uint32_t last_force_t;        /* newest accepted force time (queued or processed) */
+    nte_frames_estimate_t last;   /* last published estimate values (held when stale) */
+    uint8_t param_next;
+    nte_node_state_t state;
+    uint64_t t_start_us;
+    uint64_t next_heartbeat_us;
+    uint32_t step_time_max_us;
+    nte_node_counters_t counters;
+} nte_node_t;
+
+/** Defaults: base 0x200, the given model, nte_config_default for both models (schedule all),
+ *  50 ms depth timeout, 100 ms heartbeat, one Params frame per step, 64 frames per poll. */
+void nte_node_config_default(nte_node_config_t* cfg, int32_t model);
+
+/** Validate cfg and the port, initialise the estimator and every queue; the first heartbeat is
+ *  due one period after now_us().  On error self is unspecified.  Cost: one nte_init. */
+nte_node_err_t nte_node_init(nte_node_t* self, const nte_node_config_t* cfg,
+                             const nte_node_port_t* port);
+
+/** One pass of the loop: receive up to rx_budget frames (each handled at once, estimating and
+ *  publishing as force samples become ready), then send the heartbeat if it is due.  Never
+ *  blocks (beyond what the port's functions do).  Returns the number of frames received
+ *  (0 when none was pending), or nte_node_err_null. */
+int32_t nte_node_poll(nte_node_t* self);
+
+/** Port clock time of the next heartbeat: sleep at most until then between polls. */
+uint64_t nte_node_next_deadline_us(const nte_node_t* self);
+
+/** CAN id of input `kind` (0 depth, 1 force, 2 command) for the configured base. */
+uint32_t nte_node_input_id(const nte_node_t* self, uint32_t kind);
+
+/** Active model (1 or 2) and state. */
+int32_t nte_node_model(const nte_node_t* self);
+nte_node_state_t nte_node_state(const nte_node_t* self);
+
+/** Short name of an event ("wrong_dlc", ...), "?" if out of range.  Cost: O(1). */
+const char* nte_node_event_name(uint32_t event);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* NTE_NODE_H */

@@ -1,0 +1,304 @@
+/*
+ * nte-node: the estimator as a CAN node on Linux SocketCAN.
+ *
+ *   nte-node --iface vcan0 [--base-id 0x200] [--model 1|2] [--preset NAME]
+ *            [--depth-timeout-ms MS] [--heartbeat-ms MS] [--params-per-step N]
+ *            [--no-kernel-filter] [--ready FILE] [--stats FILE]
+ *
+ * Runs the node loop (firmware/node) until SIGINT or SIGTERM, then prints its counters on
+ * stderr, writes them as JSON to --stats FILE (also on SIGUSR1) and exits 0.
+ * Exit status: 0 clean stop, 2 bad arguments, 3 AF_CAN unavailable in this kernel,
+ * 4 no such CAN interface, 1 other failure.
+ */
+#include "nte_node.h"
+#include "nte_port_socketcan.h"
+#include "nte_presets.h"
+
+#include <errno.h>
+#include <poll.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#define PROG "nte-node"
+#define EXIT_USAGE 2
+#define EXIT_NO_AF_CAN 3
+#define EXIT_NO_IFACE 4
+
+static volatile sig_atomic_t g_stop = 0;
+static volatile sig_atomic_t g_dump = 0;
+
+static void on_stop(int sig)
+{
+    (void)sig;
+    g_stop = 1;
+}
+
+static void on_dump(int sig)
+{
+    (void)sig;
+    g_dump = 1;
+}
+
+typedef struct args_t {
+    const char* iface;
+    const char* preset;
+    const char* ready;
+    const char* stats;
+    unsigned long base_id;
+    int model;
+    unsigned long timeout_ms;
+    unsigned long heartbeat_ms;
+    unsigned long params_per_step;
+    int kernel_filter;
+} args_t;
+
+static int usage(const char* err)
+{
+    fprintf(stderr,
+            "usage: " PROG " --iface IFACE [--base-id 0x200] [--model 1|2] [--preset NAME]\n"
+            "       [--depth-timeout-ms 50] [--heartbeat-ms 100] [--params-per-step 1]\n"
+            "       [--no-kernel-filter] [--ready FILE] [--stats FILE]\n"
+            "The needle-tissue force estimator as a CAN node (frames: firmware/can/nte.dbc).\n"
+            "Stops on SIGINT/SIGTERM; SIGUSR1 rewrites --stats. Exit status: 0 stopped, 2 bad\n"
+            "arguments, 3 no AF_CAN in this kernel, 4 no such CAN interface, 1 other error.\n");
+    if (err != NULL) {
+        fprintf(stderr, PROG ": error: %s\n", err);
+    }
+    return EXIT_USAGE;
+}
+
+static int parse_ulong(const char* s, unsigned long* out)
+{
+    char* end = NULL;
+    errno = 0;
+    *out = strtoul(s, &end, 0);
+    return ((end == s) || (*end != '\0') || (errno != 0) || (s[0] == '-')) ? -1 : 0;
+}
+
+static int parse_args(int argc, char** argv, args_t* a)
+{
+    char msg[256];
+    memset(a, 0, sizeof *a);
+    a->preset = NTE_PRESET_DEFAULT;
+    a->base_id = NTE_FRAMES_BASE_ID_DEFAULT;
+    a->model = 2;
+    a->timeout_ms = 50u;
+    a->heartbeat_ms = 100u;
+    a->params_per_step = 1u;
+    a->kernel_filter = 1;
+    for (int i = 1; i < argc; i++) {
+        const char* o = argv[i];
+        if ((strcmp(o, "-h") == 0) || (strcmp(o, "--help") == 0)) {
+            (void)usage(NULL);
+            exit(0);
+        }
+        if (strcmp(o, "--no-kernel-filter") == 0) {
+            a->kernel_filter = 0;
+            continue;
+        }
+        if ((i + 1) >= argc) {
+            (void)snprintf(msg, sizeof msg, "argument %s: expected one argument", o);
+            return usage(msg);
+        }
+        const char* v = argv[++i];
+        unsigned long u = 0u;
+        if (strcmp(o, "--iface") == 0) {
+            a->iface = v;
+        } else if (strcmp(o, "--preset") == 0) {
+            a->preset = v;
+        } else if (strcmp(o, "--ready") == 0) {
+            a->ready = v;
+        } else if (strcmp(o, "--stats") == 0) {
+            a->stats = v;
+        } else if (strcmp(o, "--model") == 0) {
+            if ((strcmp(v, "1") != 0) && (strcmp(v, "2") != 0)) {
+                return usage("argument --model: 1 or 2");
+            }
+            a->model = (v[0] == '1') ? 1 : 2;
+        } else if ((strcmp(o, "--base-id") == 0) && (parse_ulong(v, &u) == 0)) {
+            a->base_id = u;
+        } else if ((strcmp(o, "--depth-timeout-ms") == 0) && (parse_ulong(v, &u) == 0)) {
+            a->timeout_ms = u;
+        } else if ((strcmp(o, "--heartbeat-ms") == 0) && (parse_ulong(v, &u) == 0)) {
+            a->heartbeat_ms = u;
+        } else if ((strcmp(o, "--params-per-step") == 0) && (parse_ulong(v, &u) == 0)) {
+            a->params_per_step = u;
+        } else {
+            (void)snprintf(msg, sizeof msg, "bad argument: %s %s", o, v);
+            return usage(msg);
+        }
+    }
+    if (a->iface == NULL) {
+        return usage("the following argument is required: --iface");
+    }
+    return 0;
+}
+
+static const nte_preset_t* find_preset(const char* name)
+{
+    for (size_t i = 0u; i < (size_t)NTE_PRESET_COUNT; i++) {
+        if (strcmp(nte_presets[i].name, name) == 0) {
+            return &nte_presets[i];
+        }
+    }
+    return NULL;
+}
+
+/* The estimator configuration nte-run uses: default profile, schedule all, nominal = preset,
+ * Model I's beta0 = the preset's beta, f1 excess computed in double. */
+static int estimator_config(nte_config_t* cfg, int32_t model, const nte_preset_t* p)
+{
+    nte_config_default(cfg, model, nte_schedule_all);
+    cfg->beta0 = (nte_real_t)p->values[6];
+    for (size_t j = 0u; j < (size_t)NTE_PARAM_COUNT; j++) {
+        cfg->nominal[j] = (nte_real_t)p->values[j];
+    }
+    const double kappa = (p->values[4] < 0.0) ? 1.0 : 0.0;
+    const double excess = p->values[3] - (kappa * (-p->values[4]));
+    if (!(excess > 0.0)) {
+        return -1;
+    }
+    cfg->f1_excess = (nte_real_t)excess;
+    return 0;
+}
+
+static void write_stats(const nte_node_t* n, const nte_port_socketcan_t* port, FILE* f)
+{
+    const nte_node_counters_t* c = &n->counters;
+    fprintf(f, "{\"events\": {");
+    for (uint32_t e = 0u; e < (uint32_t)NTE_NODE_EVENT_COUNT; e++) {
+        fprintf(f, "%s\"%s\": %u", (e > 0u) ? ", " : "", nte_node_event_name(e),
+                (unsigned)c->events[e]);
+    }
+    fprintf(f,
+            "}, \"frames_lost\": %u, \"rx_accepted\": {\"depth\": %u, \"force\": %u, "
+            "\"command\": %u}, \"tx\": {\"estimate\": %u, \"params\": %u, \"heartbeat\": %u}, "
+            "\"steps\": %u, \"commands_applied\": %u, \"model\": %d, \"state\": %d, "
+            "\"send_enobufs\": %u, \"last_errno\": %d}\n",
+            (unsigned)c->frames_lost, (unsigned)c->rx_accepted[0], (unsigned)c->rx_accepted[1],
+            (unsigned)c->rx_accepted[2], (unsigned)c->tx[0], (unsigned)c->tx[1],
+            (unsigned)c->tx[2], (unsigned)c->steps, (unsigned)c->commands_applied,
+            (int)nte_node_model(n), (int)nte_node_state(n), (unsigned)port->send_errors_enobufs,
+            port->last_errno);
+}
+
+static void dump_stats(const char* path, const nte_node_t* n, const nte_port_socketcan_t* port)
+{
+    char tmp[4096];
+    if (path == NULL) {
+        return;
+    }
+    (void)snprintf(tmp, sizeof tmp, "%s.tmp", path);
+    FILE* f = fopen(tmp, "w");
+    if (f == NULL) {
+        fprintf(stderr, PROG ": cannot write %s: %s\n", tmp, strerror(errno));
+        return;
+    }
+    write_stats(n, port, f);
+    if ((fclose(f) != 0) || (rename(tmp, path) != 0)) {
+        fprintf(stderr, PROG ": cannot write %s: %s\n", path, strerror(errno));
+    }
+}
+
+int main(int argc, char** argv)
+{
+    static nte_node_t node;
+    static nte_port_socketcan_t sock;
+    args_t a;
+    char msg[512];
+    nte_node_config_t cfg;
+    const int pr = parse_args(argc, argv, &a);
+    if (pr != 0) {
+        return pr;
+    }
+    const nte_preset_t* p = find_preset(a.preset);
+    if (p == NULL) {
+        (void)snprintf(msg, sizeof msg, "unknown preset '%s'", a.preset);
+        return usage(msg);
+    }
+    nte_node_config_default(&cfg, a.model);
+    cfg.base_id = (uint32_t)((a.base_id <= 0x7FFu) ? a.base_id : 0x800u);
+    cfg.depth_timeout_us = (uint32_t)((a.timeout_ms <= 3000u) ? a.timeout_ms * 1000u : 0u);
+    cfg.heartbeat_period_us = (uint32_t)((a.heartbeat_ms <= 10000u) ? a.heartbeat_ms * 1000u : 0u);
+    cfg.params_per_step = (uint32_t)((a.params_per_step <= 7u) ? a.params_per_step : 0u);
+    if ((estimator_config(&cfg.estimator[0], 1, p) != 0) ||
+        (estimator_config(&cfg.estimator[1], 2, p) != 0)) {
+        return usage("preset: f1 must exceed -f2");
+    }
+    /* the port is needed for validation: check the node config with a stand-in first */
+    uint32_t ids[3] = {(uint32_t)cfg.base_id + NTE_FRAMES_OFFSET_DEPTH,
+                       (uint32_t)cfg.base_id + NTE_FRAMES_OFFSET_FORCE,
+                       (uint32_t)cfg.base_id + NTE_FRAMES_OFFSET_COMMAND};
+    sock.fd = -1;
+    {
+        nte_node_port_t probe = nte_port_socketcan_port(&sock);
+        const nte_node_err_t err = nte_node_init(&node, &cfg, &probe);
+        if (err != nte_node_ok) {
+            (void)snprintf(msg, sizeof msg,
+                           "invalid node configuration (nte_node_err %d): base id <= 0x7ED, "
+                           "depth timeout 1..3000 ms, heartbeat 1..10000 ms, params per step "
+                           "1..7",
+                           (int)err);
+            return usage(msg);
+        }
+    }
+    const int rc = nte_port_socketcan_open(&sock, a.iface, ids, a.kernel_filter ? 3u : 0u, msg,
+                                           sizeof msg);
+    if (rc != nte_port_ok) {
+        fprintf(stderr, PROG ": error: %s\n", msg);
+        return (rc == nte_port_err_no_af_can) ? EXIT_NO_AF_CAN
+               : (rc == nte_port_err_no_iface) ? EXIT_NO_IFACE
+                                              : 1;
+    }
+    nte_node_port_t port = nte_port_socketcan_port(&sock);
+    if (nte_node_init(&node, &cfg, &port) != nte_node_ok) {
+        nte_port_socketcan_close(&sock);
+        return 1;
+    }
+    struct sigaction sa;
+    memset(&sa, 0, sizeof sa);
+    sa.sa_handler = on_stop;
+    (void)sigemptyset(&sa.sa_mask);
+    (void)sigaction(SIGINT, &sa, NULL);
+    (void)sigaction(SIGTERM, &sa, NULL);
+    sa.sa_handler = on_dump;
+    (void)sigaction(SIGUSR1, &sa, NULL);
+    if (a.ready != NULL) {
+        FILE* f = fopen(a.ready, "w");
+        if (f != NULL) {
+            fprintf(f, "%ld\n", (long)getpid());
+            (void)fclose(f);
+        }
+    }
+    fprintf(stderr, PROG ": %s, base 0x%03X, Model %s, preset %s, depth timeout %lu ms\n",
+            a.iface, (unsigned)cfg.base_id, (a.model == 1) ? "I" : "II", a.preset,
+            a.timeout_ms);
+    while (g_stop == 0) {
+        struct pollfd pfd;
+        pfd.fd = sock.fd;
+        pfd.events = POLLIN;
+        pfd.revents = 0;
+        const uint64_t now = port.now_us(port.ctx);
+        const uint64_t due = nte_node_next_deadline_us(&node);
+        const uint64_t wait_us = (due > now) ? (due - now) : 0u;
+        const int timeout_ms = (int)((wait_us + 999u) / 1000u);
+        const int pr2 = poll(&pfd, 1, timeout_ms);
+        if ((pr2 < 0) && (errno != EINTR)) {
+            fprintf(stderr, PROG ": poll: %s\n", strerror(errno));
+            break;
+        }
+        while (nte_node_poll(&node) >= (int32_t)cfg.rx_budget) {
+        }
+        if (g_dump != 0) {
+            g_dump = 0;
+            dump_stats(a.stats, &node, &sock);
+        }
+    }
+    dump_stats(a.stats, &node, &sock);
+    write_stats(&node, &sock, stderr);
+    nte_port_socketcan_close(&sock);
+    return 0;
+}

@@ -1,0 +1,690 @@
+/*
+ * Unit tests of the node loop (firmware/node) through its public API, with an in-memory port:
+ * the loop is platform-free, so a fake receive/send/clock is a legitimate port.
+ * Expected estimates come from a second, independent nte_t stepped directly with the same
+ * samples (depth interpolated by the formula documented in nte_node.h), then encoded with the
+ * CAN layer: the node's frames must match byte for byte.
+ */
+#include <setjmp.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <math.h>
+#include <string.h>
+
+#include <cmocka.h>
+
+#include "generated/nte_can.h"
+#include "nte_node.h"
+
+#define BASE 0x200u
+#define MAX_FRAMES 4096
+
+typedef struct fake_port_t {
+    nte_node_frame_t rx[MAX_FRAMES];
+    size_t rx_n;
+    size_t rx_pos;
+    nte_node_frame_t tx[MAX_FRAMES];
+    size_t tx_n;
+    uint64_t now;
+    int fail_send; /* send() fails while nonzero */
+} fake_port_t;
+
+static int fake_receive(void* ctx, nte_node_frame_t* f)
+{
+    fake_port_t* p = (fake_port_t*)ctx;
+    if (p->rx_pos >= p->rx_n) {
+        return 0;
+    }
+    *f = p->rx[p->rx_pos++];
+    return 1;
+}
+
+static int fake_send(void* ctx, const nte_node_frame_t* f)
+{
+    fake_port_t* p = (fake_port_t*)ctx;
+    if (p->fail_send != 0) {
+        return -1;
+    }
+    assert_true(p->tx_n < MAX_FRAMES);
+    p->tx[p->tx_n++] = *f;
+    return 0;
+}
+
+static uint64_t fake_now(void* ctx)
+{
+    return ((fake_port_t*)ctx)->now;
+}
+
+static fake_port_t g_port_a; /* large: kept out of the stack */
+static fake_port_t g_port_b;
+static nte_node_t g_node_a;
+static nte_node_t g_node_b;
+
+static nte_node_port_t port_of(fake_port_t* p)
+{
+    nte_node_port_t port = {p, fake_receive, fake_send, fake_now};
+    return port;
+}
+
+/* The bench side: one E2E sender per input message. */
+typedef struct bench_t {
+    nte_e2e_tx_t depth, force, command;
+} bench_t;
+
+static void bench_init(bench_t* b)
+{
+    assert_int_equal(nte_frames_tx_init(&b->depth, nte_frames_kind_depth), nte_frames_ok);
+    assert_int_equal(nte_frames_tx_init(&b->force, nte_frames_kind_force), nte_frames_ok);
+    assert_int_equal(nte_frames_tx_init(&b->command, nte_frames_kind_command), nte_frames_ok);
+}
+
+static nte_node_frame_t frame_of(uint32_t id, const uint8_t* data)
+{
+    nte_node_frame_t f;
+    memset(&f, 0, sizeof f);
+    f.id = id;
+    f.len = 8u;
+    memcpy(f.data, data, 8u);
+    return f;
+}
+
+static nte_node_frame_t depth_frame(bench_t* b, uint32_t ticks, float depth, float vel)
+{
+    nte_frames_depth_t d = {depth, vel, (uint16_t)(ticks & 0xFFFFu)};
+    uint8_t data[8];
+    assert_int_equal(nte_frames_encode_depth(&d, &b->depth, data), nte_frames_ok);
+    return frame_of(BASE + NTE_FRAMES_OFFSET_DEPTH, data);
+}
+
+static nte_node_frame_t force_frame(bench_t* b, uint32_t ticks, float force)
+{
+    nte_frames_force_t f = {force, (uint16_t)(ticks & 0xFFFFu)};
+    uint8_t data[8];
+    assert_int_equal(nte_frames_encode_force(&f, &b->force, data), nte_frames_ok);
+    return frame_of(BASE + NTE_FRAMES_OFFSET_FORCE, data);
+}
+
+static nte_node_frame_t command_frame(bench_t* b, bool reset, uint8_t model, uint8_t est,
+                                      uint8_t adapt)
+{
+    nte_frames_command_t c = {reset, model, est, adapt};
+    uint8_t data[8];
+    assert_int_equal(nte_frames_encode_command(&c, &b->command, data), nte_frames_ok);
+    return frame_of(BASE + NTE_FRAMES_OFFSET_COMMAND, data);
+}
+
+static void push(fake_port_t* p, nte_node_frame_t f)
+{
+    assert_true(p->rx_n < MAX_FRAMES);
+    p->rx[p->rx_n++] = f;
+}
+
+/* A synthetic insertion: depth every `depth_step` ticks, force every 50 ticks (200 Hz). */
+static float depth_at(uint32_t k)
+{
+    return 0.01f * (float)k; /* 10 mm/s with 100 us ticks -> 0.001 mm per tick */
+}
+
+static float force_at(uint32_t k)
+{
+    const float l = depth_at(k);
+    return (l > 0.0f) ? (0.02f * l + 0.0001f * (float)(k % 7u)) : 0.0f;
+}
+
+/* Quantise like the frames: the node and the expectation see the same decoded values. */
+static float q(float x, float step)
+{
+    return (float)(int32_t)roundf(x / step) * step;
+}
+
+/* Fill the port with `n_force` force samples, depth every depth_step ticks starting at t0. */
+static void scenario(fake_port_t* p, bench_t* b, uint32_t t0, uint32_t depth_step,
+                     uint32_t n_force, int force_first)
+{
+    const uint32_t t_end = t0 + (n_force - 1u) * 50u;
+    for (uint32_t t = t0; t <= t_end; t++) {
+        const bool dep = ((t - t0) % depth_step) == 0u;
+        const bool frc = ((t - t0) % 50u) == 0u;
+        if (frc && force_first) {
+            push(p, force_frame(b, t, force_at(t - t0)));
+        }
+        if (dep) {
+            push(p, depth_frame(b, t, depth_at(t - t0), 10.0f));
+        }
+        if (frc && !force_first) {
+            push(p, force_frame(b, t, force_at(t - t0)));
+        }
+    }
+}
+
+static void start(nte_node_t* n, fake_port_t* p, const nte_node_config_t* cfg)
+{
+    memset(p, 0, sizeof *p);
+    nte_node_port_t port = port_of(p);
+    assert_int_equal(nte_node_init(n, cfg, &port), nte_node_ok);
+}
+
+static void run_all(nte_node_t* n, fake_port_t* p)
+{
+    while (p->rx_pos < p->rx_n) {
+        assert_true(nte_node_poll(n) >= 0);
+    }
+    assert_int_equal(nte_node_poll(n), 0);
+}
+
+/* Estimate frames the node sent, in order. */
+static size_t estimates(const fake_port_t* p, nte_frames_estimate_t* out, size_t cap)
+{
+    nte_e2e_rx_t rx;
+    size_t n = 0u;
+    assert_int_equal(nte_frames_rx_init(&rx, nte_frames_kind_estimate), nte_frames_ok);
+    for (size_t i = 0u; i < p->tx_n; i++) {
+        if (p->tx[i].id == BASE + NTE_FRAMES_OFFSET_ESTIMATE) {
+            assert_true(n < cap);
+            assert_int_equal(nte_frames_decode_estimate(&rx, p->tx[i].data, p->tx[i].len,
+                                                        &out[n], NULL, NULL),
+                             nte_frames_ok);
+            n++;
+        }
+    }
+    return n;
+}
+
+static size_t count_id(const fake_port_t* p, uint32_t offset)
+{
+    size_t n = 0u;
+    for (size_t i = 0u; i < p->tx_n; i++) {
+        n += (p->tx[i].id == BASE + offset) ? 1u : 0u;
+    }
+    return n;
+}
+
+static void assert_same_estimates(const fake_port_t* a, const fake_port_t* b)
+{
+    static nte_frames_estimate_t ea[MAX_FRAMES];
+    static nte_frames_estimate_t eb[MAX_FRAMES];
+    const size_t na = estimates(a, ea, MAX_FRAMES);
+    const size_t nb = estimates(b, eb, MAX_FRAMES);
+    assert_int_equal(na, nb);
+    assert_true(na > 0u);
+    assert_memory_equal(ea, eb, na * sizeof ea[0]);
+}
+
+/* ---------------------------------------------------------------------------------------- */
+
+static void test_config_errors(void** state)
+{
+    nte_node_config_t cfg;
+    nte_node_port_t port = port_of(&g_port_a);
+    nte_node_port_t bad_port = port;
+    (void)state;
+    nte_node_config_default(&cfg, 2);
+    assert_int_equal(nte_node_init(NULL, &cfg, &port), nte_node_err_null);
+    assert_int_equal(nte_node_init(&g_node_a, NULL, &port), nte_node_err_null);
+    assert_int_equal(nte_node_init(&g_node_a, &cfg, NULL), nte_node_err_null);
+    bad_port.send = NULL;
+    assert_int_equal(nte_node_init(&g_node_a, &cfg, &bad_port), nte_node_err_null);
+    cfg.model = 3;
+    assert_int_equal(nte_node_init(&g_node_a, &cfg, &port), nte_node_err_bad_config);
+    nte_node_config_default(&cfg, 2);
+    cfg.base_id = 0x7F0u;
+    assert_int_equal(nte_node_init(&g_node_a, &cfg, &port), nte_node_err_bad_config);
+    nte_node_config_default(&cfg, 2);
+    cfg.params_per_step = 8u;
+    assert_int_equal(nte_node_init(&g_node_a, &cfg, &port), nte_node_err_bad_config);
+    nte_node_config_default(&cfg, 2);
+    cfg.depth_timeout_us = 0u;
+    assert_int_equal(nte_node_init(&g_node_a, &cfg, &port), nte_node_err_bad_config);
+    nte_node_config_default(&cfg, 2);
+    cfg.estimator[1].r_n2 = -1.0f;
+    assert_int_equal(nte_node_init(&g_node_a, &cfg, &port), nte_node_err_estimator);
+    nte_node_config_default(&cfg, 2);
+    cfg.estimator[0].model = 2;
+    assert_int_equal(nte_node_init(&g_node_a, &cfg, &port), nte_node_err_estimator);
+    nte_node_config_default(&cfg, 1);
+    assert_int_equal(nte_node_init(&g_node_a, &cfg, &port), nte_node_ok);
+    assert_int_equal(nte_node_model(&g_node_a), 1);
+    assert_int_equal(nte_node_state(&g_node_a), nte_node_state_init);
+    assert_int_equal(nte_node_input_id(&g_node_a, 2u), BASE + 2u);
+    assert_string_equal(nte_node_event_name(0u), "wrong_dlc");
+    assert_string_equal(nte_node_event_name(NTE_NODE_EVENT_COUNT), "?");
+    assert_int_equal(nte_node_poll(NULL), nte_node_err_null);
+}
+
+/* Every estimate equals a directly stepped estimator fed the decoded (quantised) samples,
+ * depth interpolated to the force time (depth every 3 ticks: most forces fall in between). */
+static void test_estimates_equal_library_with_interpolation(void** state)
+{
+    nte_node_config_t cfg;
+    bench_t b;
+    nte_t ref;
+    static nte_frames_estimate_t got[MAX_FRAMES];
+    (void)state;
+    for (int32_t model = 1; model <= 2; model++) {
+        nte_node_config_default(&cfg, model);
+        start(&g_node_a, &g_port_a, &cfg);
+        bench_init(&b);
+        scenario(&g_port_a, &b, 1000u, 3u, 40u, 0);
+        run_all(&g_node_a, &g_port_a);
+        const size_t n = estimates(&g_port_a, got, MAX_FRAMES);
+        assert_int_equal(n, 40u);
+        assert_int_equal(g_node_a.counters.steps, 40u);
+        assert_int_equal(count_id(&g_port_a, NTE_FRAMES_OFFSET_PARAMS), 40u);
+        assert_int_equal(nte_node_state(&g_node_a), nte_node_state_running);
+        assert_int_equal(nte_init(&ref, &cfg.estimator[model - 1]), nte_err_ok);
+        nte_e2e_tx_t tx;
+        nte_e2e_rx_t rx;
+        assert_int_equal(nte_frames_tx_init(&tx, nte_frames_kind_estimate), nte_frames_ok);
+        assert_int_equal(nte_frames_rx_init(&rx, nte_frames_kind_estimate), nte_frames_ok);
+        for (uint32_t i = 0u; i < 40u; i++) {
+            const uint32_t k = i * 50u;             /* ticks since t0 */
+            const uint32_t ka = (k / 3u) * 3u;      /* depth sample at or before */
+            const uint32_t kb = ka + 3u;
+            const float da = q(depth_at(ka), 0.001f);
+            const float db = q(depth_at(kb), 0.001f);
+            float d = da;
+            if (ka != k) {
+                const float w = (float)(k - ka) / (float)(kb - ka);
+                d = da + (w * (db - da));
+            }
+            nte_sample_t s = {(int64_t)(1000u + 65536u + k) * 100, d, q(10.0f, 0.01f),
+                              q(force_at(k), 0.0001f)};
+            nte_output_t o;
+            assert_int_equal(nte_step(&ref, &s, &o), nte_err_ok);
+            nte_frames_estimate_t e = {o.force_hat_n, o.innovation_n, o.z, d > 0.0f, true,
+                                       false, (o.status & NTE_STATUS_REJECTED) != 0u, false};
+            nte_frames_estimate_t back;
+            uint8_t data[8];
+            memset(&back, 0, sizeof back);
+            assert_int_equal(nte_frames_encode_estimate(&e, &tx, data), nte_frames_ok);
+            assert_int_equal(nte_frames_decode_estimate(&rx, data, 8u, &back, NULL, NULL),
+                             nte_frames_ok);
+            assert_memory_equal(&back, &got[i], sizeof back);
+        }
+        /* the last force sample moved the estimate away from its start */
+        assert_true(got[39].force_n > 0.0f);
+    }
+}
+
+/* Results depend on the frames' timestamps, not on their interleaving or the poll sizes. */
+static void test_independent_of_arrival_order(void** state)
+{
+    nte_node_config_t cfg;
+    bench_t b;
+    (void)state;
+    nte_node_config_default(&cfg, 2);
+    start(&g_node_a, &g_port_a, &cfg);
+    bench_init(&b);
+    scenario(&g_port_a, &b, 60000u, 10u, 60u, 0); /* sensor clock wraps inside */
+    run_all(&g_node_a, &g_port_a);
+
+    cfg.rx_budget = 1u;
+    start(&g_node_b, &g_port_b, &cfg);
+    bench_init(&b);
+    scenario(&g_port_b, &b, 60000u, 10u, 60u, 1); /* force before depth at equal times */
+    run_all(&g_node_b, &g_port_b);
+    assert_int_equal(g_node_b.counters.events[nte_node_ev_stale], 0u);
+    assert_same_estimates(&g_port_a, &g_port_b);
+}
+
+typedef enum {
+    bad_dlc, bad_unknown, bad_extended, bad_crc, bad_repeat, bad_counter15, bad_range,
+    bad_backwards, bad_count
+} bad_kind_t;
+
+/* Each kind of bad frame is dropped, counted under its cause, and changes no estimate. */
+static void test_bad_frames_counted_and_harmless(void** state)
+{
+    static const struct {
+        bad_kind_t kind;
+        nte_node_event_t ev;
+    } cases[] = {{bad_dlc, nte_node_ev_wrong_dlc},
+                 {bad_unknown, nte_node_ev_unknown_id},
+                 {bad_extended, nte_node_ev_unknown_id},
+                 {bad_crc, nte_node_ev_bad_crc},
+                 {bad_repeat, nte_node_ev_counter_repeated},
+                 {bad_counter15, nte_node_ev_counter_invalid},
+                 {bad_range, nte_node_ev_out_of_range},
+                 {bad_backwards, nte_node_ev_time_backwards}};
+    nte_node_config_t cfg;
+    bench_t b;
+    (void)state;
+    nte_node_config_default(&cfg, 2);
+    start(&g_node_a, &g_port_a, &cfg);
+    bench_init(&b);
+    scenario(&g_port_a, &b, 500u, 10u, 30u, 0);
+    run_all(&g_node_a, &g_port_a);
+    for (size_t c = 0u; c < sizeof cases / sizeof cases[0]; c++) {
+        start(&g_node_b, &g_port_b, &cfg);
+        bench_init(&b);
+        scenario(&g_port_b, &b, 500u, 10u, 30u, 0);
+        /* insert one bad frame of this kind after every 7th clean frame */
+        static nte_node_frame_t clean[MAX_FRAMES];
+        const size_t n = g_port_b.rx_n;
+        memcpy(clean, g_port_b.rx, n * sizeof clean[0]);
+        g_port_b.rx_n = 0u;
+        uint32_t inserted = 0u;
+        for (size_t i = 0u; i < n; i++) {
+            push(&g_port_b, clean[i]);
+            if ((i % 7u) != 6u) {
+                continue;
+            }
+            nte_node_frame_t f = clean[i];
+            switch (cases[c].kind) {
+            case bad_dlc: f.len = (uint8_t)(inserted % 8u); break;
+            case bad_unknown: f.id = (inserted % 2u == 0u) ? (BASE + 5u) : 0x123u; break;
+            case bad_extended: f.extended = true; break;
+            case bad_crc: f.data[3] ^= (uint8_t)(1u << (inserted % 8u)); break;
+            case bad_repeat: break; /* the same frame again: repeated counter */
+            case bad_counter15: {
+                f.data[1] = (uint8_t)(f.data[1] | 0x0Fu);
+                uint16_t did = 0u;
+                (void)nte_frames_data_id(
+                    (f.id == BASE) ? nte_frames_kind_depth : nte_frames_kind_force, &did);
+                f.data[0] = nte_e2e_frame_crc(did, f.data, 8u);
+                break;
+            }
+            case bad_range: break; /* built below with valid counters */
+            case bad_backwards: break;
+            default: break;
+            }
+            if (cases[c].kind == bad_range) {
+                continue; /* handled below with the bench's own sender */
+            }
+            if (cases[c].kind == bad_backwards) {
+                continue; /* handled below */
+            }
+            push(&g_port_b, f);
+            inserted++;
+        }
+        if ((cases[c].kind == bad_range) || (cases[c].kind == bad_backwards)) {
+            /* Rebuild the stream with the bench sender so that the bad frames carry valid,
+             * continuous counters: a depth frame out of range (raw 600 mm) or a force frame
+             * with a time before the previous one, after every 5th force sample. */
+            start(&g_node_b, &g_port_b, &cfg);
+            bench_init(&b);
+            const uint32_t t0 = 500u;
+            for (uint32_t t = t0; t <= t0 + 29u * 50u; t++) {
+                if (((t - t0) % 10u) == 0u) {
+                    push(&g_port_b, depth_frame(&b, t, depth_at(t - t0), 10.0f));
+                }
+                if (((t - t0) % 50u) == 0u) {
+                    push(&g_port_b, force_frame(&b, t, force_at(t - t0)));
+                    if ((((t - t0) / 50u) % 5u) == 4u) {
+                        if (cases[c].kind == bad_range) {
+                            struct nte_can_depth_t m;
+                            uint8_t data[8];
+                            memset(&m, 0, sizeof m);
+                            m.depth = 510000u; /* 510 mm: beyond the 500 mm range, fits 19 bits */
+                            m.sensor_time = (uint16_t)t;
+                            (void)nte_can_depth_pack(data, &m, 8u);
+                            assert_int_equal(nte_e2e_protect(&b.depth, data, 8u), nte_e2e_ok);
+                            push(&g_port_b, frame_of(BASE, data));
+                            /* the node drops it but its counter advanced: keep the depth
+                             * stream's next counter continuous from the node's view */
+                        } else {
+                            push(&g_port_b, force_frame(&b, t - 20u, 1.0f));
+                        }
+                        inserted++;
+                    }
+                }
+            }
+        }
+        run_all(&g_node_b, &g_port_b);
+        assert_true(inserted > 0u);
+        for (uint32_t e = 0u; e < (uint32_t)NTE_NODE_EVENT_COUNT; e++) {
+            const uint32_t expect = (e == (uint32_t)cases[c].ev) ? inserted : 0u;
+            if (g_node_b.counters.events[e] != expect) {
+                print_error("case %u event %s\n", (unsigned)c, nte_node_event_name(e));
+            }
+            assert_int_equal(g_node_b.counters.events[e], expect);
+        }
+        assert_int_equal(g_node_b.counters.frames_lost, 0u);
+        assert_same_estimates(&g_port_a, &g_port_b);
+    }
+}
+
+/* A skipped counter (frames lost upstream) is accepted and counted with the number lost. */
+static void test_skipped_counter(void** state)
+{
+    nte_node_config_t cfg;
+    bench_t b;
+    (void)state;
+    nte_node_config_default(&cfg, 2);
+    start(&g_node_a, &g_port_a, &cfg);
+    bench_init(&b);
+    push(&g_port_a, depth_frame(&b, 100u, 1.0f, 10.0f));
+    (void)depth_frame(&b, 101u, 1.0f, 10.0f); /* never delivered */
+    (void)depth_frame(&b, 102u, 1.0f, 10.0f); /* never delivered */
+    push(&g_port_a, depth_frame(&b, 103u, 1.0f, 10.0f));
+    run_all(&g_node_a, &g_port_a);
+    assert_int_equal(g_node_a.counters.events[nte_node_ev_counter_skipped], 1u);
+    assert_int_equal(g_node_a.counters.frames_lost, 2u);
+    assert_int_equal(g_node_a.counters.rx_accepted[0], 2u);
+}
+
+/* Depth missing longer than the timeout: stale frames hold the estimate; then recovery. */
+static void test_stale_then_recovery(void** state)
+{
+    nte_node_config_t cfg;
+    bench_t b;
+    static nte_frames_estimate_t got[MAX_FRAMES];
+    (void)state;
+    nte_node_config_default(&cfg, 2);
+    start(&g_node_a, &g_port_a, &cfg);
+    bench_init(&b);
+    /* 1 s of data; depth missing from 0.3 s to 0.6 s (force continues) */
+    for (uint32_t t = 0u; t < 10000u; t += 10u) {
+        if ((t < 3000u) || (t >= 6000u)) {
+            push(&g_port_a, depth_frame(&b, 200u + t, depth_at(t), 10.0f));
+        }
+        if ((t % 50u) == 0u) {
+            push(&g_port_a, force_frame(&b, 200u + t, force_at(t)));
+        }
+    }
+    run_all(&g_node_a, &g_port_a);
+    const size_t n = estimates(&g_port_a, got, MAX_FRAMES);
+    assert_int_equal(n, 200u); /* one Estimate per force sample, stale or not */
+    /* forces at 0.30 .. 0.55 s: the last depth is at 0.299 s; those within 50 ms of it are
+     * held too (no later depth came within the timeout), so 0.30..0.55 = 60 samples */
+    uint32_t stale = 0u;
+    for (size_t i = 0u; i < n; i++) {
+        const uint32_t t = (uint32_t)i * 50u;
+        const bool expect = (t >= 3000u) && (t < 6000u);
+        assert_int_equal(got[i].stale, expect);
+        if (expect) {
+            stale++;
+            assert_memory_equal(&got[i].force_n, &got[59].force_n, sizeof(float));
+            assert_memory_equal(&got[i].z, &got[59].z, sizeof(float));
+        }
+    }
+    assert_int_equal(stale, 60u);
+    assert_int_equal(g_node_a.counters.events[nte_node_ev_stale], 60u);
+    assert_int_equal(g_node_a.counters.steps, 140u);
+    /* recovery: the estimates move again */
+    assert_true(memcmp(&got[150].force_n, &got[199].force_n, sizeof(float)) != 0);
+}
+
+/* Forces without depth: the queue holds NTE_NODE_FORCE_QUEUE, the next is dropped, counted. */
+static void test_queue_overflow(void** state)
+{
+    nte_node_config_t cfg;
+    bench_t b;
+    (void)state;
+    nte_node_config_default(&cfg, 2);
+    start(&g_node_a, &g_port_a, &cfg);
+    bench_init(&b);
+    for (uint32_t i = 0u; i < (uint32_t)NTE_NODE_FORCE_QUEUE + 3u; i++) {
+        push(&g_port_a, force_frame(&b, 1000u + i, 0.5f)); /* 0.1 ms apart: within timeout */
+    }
+    run_all(&g_node_a, &g_port_a);
+    assert_int_equal(g_node_a.counters.events[nte_node_ev_queue_overflow], 3u);
+    assert_int_equal(count_id(&g_port_a, NTE_FRAMES_OFFSET_ESTIMATE), 0u);
+}
+
+/* send() failing (bus full): outputs dropped and counted; the loop goes on. */
+static void test_send_failure(void** state)
+{
+    nte_node_config_t cfg;
+    bench_t b;
+    (void)state;
+    nte_node_config_default(&cfg, 2);
+    start(&g_node_a, &g_port_a, &cfg);
+    bench_init(&b);
+    scenario(&g_port_a, &b, 100u, 10u, 10u, 0);
+    g_port_a.fail_send = 1;
+    run_all(&g_node_a, &g_port_a);
+    assert_int_equal(g_node_a.counters.events[nte_node_ev_send_failed], 20u); /* 10 x (E+P) */
+    assert_int_equal(g_port_a.tx_n, 0u);
+    g_port_a.fail_send = 0;
+    scenario(&g_port_a, &b, 100u + 10u * 50u, 10u, 5u, 0);
+    run_all(&g_node_a, &g_port_a);
+    assert_int_equal(count_id(&g_port_a, NTE_FRAMES_OFFSET_ESTIMATE), 5u);
+    assert_int_equal(g_node_a.counters.steps, 15u);
+}
+
+/* Commands: bad CRC ignored and counted; reset restarts the estimator; model select; refusals. */
+static void test_commands(void** state)
+{
+    nte_node_config_t cfg;
+    bench_t b;
+    bench_t b2;
+    (void)state;
+    nte_node_config_default(&cfg, 2);
+    /* reference: a fresh node given only the second half */
+    start(&g_node_b, &g_port_b, &cfg);
+    bench_init(&b2);
+    scenario(&g_port_b, &b2, 3000u, 10u, 20u, 0);
+    run_all(&g_node_b, &g_port_b);
+
+    start(&g_node_a, &g_port_a, &cfg);
+    bench_init(&b);
+    scenario(&g_port_a, &b, 1000u, 10u, 20u, 0);
+    nte_node_frame_t bad = command_frame(&b, true, 0u, 0u, 0u);
+    bad.data[0] ^= 0x5Au;
+    push(&g_port_a, bad);
+    run_all(&g_node_a, &g_port_a);
+    assert_int_equal(g_node_a.counters.events[nte_node_ev_bad_crc], 1u);
+    assert_int_equal(g_node_a.counters.commands_applied, 0u);
+    assert_int_equal(nte_node_state(&g_node_a), nte_node_state_running);
+    /* a valid reset */
+    push(&g_port_a, command_frame(&b, true, 0u, 0u, 0u));
+    run_all(&g_node_a, &g_port_a);
+    assert_int_equal(g_node_a.counters.commands_applied, 1u);
+    assert_int_equal(nte_node_state(&g_node_a), nte_node_state_init);
+    const size_t before = g_port_a.tx_n;
+    scenario(&g_port_a, &b, 3000u, 10u, 20u, 0);
+    run_all(&g_node_a, &g_port_a);
+    /* the estimates after the reset equal the fresh node's */
+    {
+        static fake_port_t tail;
+        memset(&tail, 0, sizeof tail);
+        for (size_t i = before; i < g_port_a.tx_n; i++) {
+            tail.tx[tail.tx_n++] = g_port_a.tx[i];
+        }
+        /* counters of the fresh node's frames start at 0; re-sync by decoding both */
+        static nte_frames_estimate_t ea[64];
+        static nte_frames_estimate_t eb[64];
+        nte_e2e_rx_t rx;
+        size_t na = 0u;
+        (void)nte_frames_rx_init(&rx, nte_frames_kind_estimate);
+        for (size_t i = 0u; i < tail.tx_n; i++) {
+            if (tail.tx[i].id == BASE + NTE_FRAMES_OFFSET_ESTIMATE) {
+                assert_true(nte_frames_decode_estimate(&rx, tail.tx[i].data, 8u, &ea[na++],
+                                                       NULL, NULL) == nte_frames_ok);
+            }
+        }
+        const size_t nb = estimates(&g_port_b, eb, 64u);
+        assert_int_equal(na, nb);
+        assert_memory_equal(ea, eb, na * sizeof ea[0]);
+    }
+    /* model I selected: the node restarts with Model I (heartbeat says so) */
+    push(&g_port_a, command_frame(&b, false, NTE_FRAMES_MODEL_I, 0u, 0u));
+    run_all(&g_node_a, &g_port_a);
+    assert_int_equal(nte_node_model(&g_node_a), 1);
+    assert_int_equal(g_node_a.counters.commands_applied, 2u);
+    /* robust and freeze are refused (the library has neither), counted */
+    push(&g_port_a, command_frame(&b, false, 0u, NTE_FRAMES_ESTIMATOR_ROBUST, 0u));
+    push(&g_port_a, command_frame(&b, false, 0u, 0u, NTE_FRAMES_ADAPT_FREEZE));
+    push(&g_port_a, command_frame(&b, false, 0u, NTE_FRAMES_ESTIMATOR_BANK,
+                                  NTE_FRAMES_ADAPT_RESUME));
+    run_all(&g_node_a, &g_port_a);
+    assert_int_equal(g_node_a.counters.events[nte_node_ev_command_refused], 2u);
+    assert_int_equal(g_node_a.counters.commands_applied, 3u);
+    assert_int_equal(nte_node_model(&g_node_a), 1);
+}
+
+/* Params rotate through all seven indices; fixed ones carry std 0; Heartbeat on the clock. */
+static void test_params_and_heartbeat(void** state)
+{
+    nte_node_config_t cfg;
+    bench_t b;
+    nte_e2e_rx_t rx;
+    nte_e2e_rx_t rxh;
+    uint32_t seen[7] = {0u};
+    (void)state;
+    nte_node_config_default(&cfg, 2);
+    start(&g_node_a, &g_port_a, &cfg);
+    bench_init(&b);
+    scenario(&g_port_a, &b, 100u, 10u, 14u, 0);
+    run_all(&g_node_a, &g_port_a);
+    assert_int_equal(count_id(&g_port_a, NTE_FRAMES_OFFSET_HEARTBEAT), 0u);
+    g_port_a.now += 100000u; /* one period */
+    (void)nte_node_poll(&g_node_a);
+    g_port_a.now += 250000u;
+    (void)nte_node_poll(&g_node_a);
+    assert_int_equal(count_id(&g_port_a, NTE_FRAMES_OFFSET_HEARTBEAT), 2u);
+    assert_int_equal(nte_node_next_deadline_us(&g_node_a), 450000u);
+    (void)nte_frames_rx_init(&rx, nte_frames_kind_params);
+    (void)nte_frames_rx_init(&rxh, nte_frames_kind_heartbeat);
+    uint32_t k = 0u;
+    for (size_t i = 0u; i < g_port_a.tx_n; i++) {
+        if (g_port_a.tx[i].id == BASE + NTE_FRAMES_OFFSET_PARAMS) {
+            nte_frames_param_t p;
+            assert_int_equal(nte_frames_decode_param(&rx, g_port_a.tx[i].data, 8u, &p, NULL,
+                                                     NULL),
+                             nte_frames_ok);
+            assert_int_equal(p.index, k % 7u);
+            seen[p.index]++;
+            const bool fixed = (p.index == NTE_FRAMES_PARAM_F2) ||
+                               (p.index == NTE_FRAMES_PARAM_ALPHA);
+            assert_int_equal(p.std > 0.0f, !fixed);
+            k++;
+        } else if (g_port_a.tx[i].id == BASE + NTE_FRAMES_OFFSET_HEARTBEAT) {
+            nte_frames_heartbeat_t h;
+            assert_int_equal(nte_frames_decode_heartbeat(&rxh, g_port_a.tx[i].data, 8u, &h,
+                                                         NULL, NULL),
+                             nte_frames_ok);
+            assert_int_equal(h.node_state, NTE_FRAMES_STATE_RUNNING);
+            assert_int_equal(h.active_model, 1u);
+        }
+    }
+    for (uint32_t j = 0u; j < 7u; j++) {
+        assert_int_equal(seen[j], 2u);
+    }
+    /* all seven per step */
+    cfg.params_per_step = 7u;
+    start(&g_node_a, &g_port_a, &cfg);
+    bench_init(&b);
+    scenario(&g_port_a, &b, 100u, 10u, 3u, 0);
+    run_all(&g_node_a, &g_port_a);
+    assert_int_equal(count_id(&g_port_a, NTE_FRAMES_OFFSET_PARAMS), 21u);
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_config_errors),
+        cmocka_unit_test(test_estimates_equal_library_with_interpolation),
+        cmocka_unit_test(test_independent_of_arrival_order),
+        cmocka_unit_test(test_bad_frames_counted_and_harmless),
+        cmocka_unit_test(test_skipped_counter),
+        cmocka_unit_test(test_stale_then_recovery),
+        cmocka_unit_test(test_queue_overflow),
+        cmocka_unit_test(test_send_failure),
+        cmocka_unit_test(test_commands),
+        cmocka_unit_test(test_params_and_heartbeat),
+    };
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}
