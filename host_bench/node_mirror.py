@@ -1,0 +1,355 @@
+"""What the node must publish for a given sequence of bus frames: the reference twin of
+firmware/node/nte_node.c.
+
+The mirror sees the frames in the order the node received them (the bench's own frames, or a
+capture of the whole bus) and repeats the node's input rules -- E2E (length, counter, CRC),
+DBC ranges on the raw values, one 16-bit sensor clock unwrapped for both streams, samples not
+later than their stream's previous one rejected, depth interpolated linearly to each force
+time in float32 (same operations, same order), the stale rule, the Command frame -- and runs
+reference_py's FilterBank in float32 with the node's configuration.  Its outputs are encoded
+as the C frame layer encodes them (float32 division by the scale, round half away from zero,
+clamping to the signal's range), so the node's frames are expected to match bit for bit.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Iterable
+
+import numpy as np
+
+from reference_py.bank import FilterBank
+from reference_py.estimate import make_config
+from reference_py.fmath import real_for
+from reference_py.params import MODEL_PARAMS, PARAM_NAMES, PRESETS
+
+from .dbc import FRAME_LENGTH, NteDatabase
+
+F32 = np.float32
+TICK_US = 100
+#: raw ranges of the input signals (the DBC's)
+DEPTH_RAW = (0, 500000)
+VELOCITY_RAW = (-50000, 50000)
+FORCE_RAW = (-500000, 500000)
+
+
+def roundf(x: np.float32) -> int:
+    """C roundf of a float32 to an integer (half away from zero)."""
+    v = float(x)
+    return int(math.floor(abs(v) + 0.5)) * (1 if v >= 0 else -1)
+
+
+def quantise(value: float, scale: float, lo: float, hi: float) -> tuple[int, bool]:
+    """The generated encoder after the frame layer's clamp: (raw, clamped)."""
+    v = F32(value)
+    clamped = False
+    if v < F32(lo):
+        v, clamped = F32(lo), True
+    elif v > F32(hi):
+        v, clamped = F32(hi), True
+    return roundf(F32(v / F32(scale))), clamped
+
+
+@dataclass
+class EstimateOut:
+    force_raw: int
+    innovation_raw: int
+    z_raw: int
+    in_tissue: int
+    adapting: int
+    saturated: int
+    fault: int
+    stale: int
+
+    def key(self) -> tuple[int, ...]:
+        return (self.force_raw, self.innovation_raw, self.z_raw, self.in_tissue, self.adapting,
+                self.saturated, self.fault, self.stale)
+
+
+@dataclass
+class ParamOut:
+    index: int
+    value: np.float32
+    std_raw: int
+
+
+@dataclass
+class NodeMirror:
+    preset: str = "paper-10mms"
+    model: int = 2
+    base_id: int | None = None
+    depth_timeout_us: int = 50000
+    params_per_step: int = 1
+    db: NteDatabase = field(init=False)
+    estimates: list[EstimateOut] = field(default_factory=list)
+    params: list[ParamOut] = field(default_factory=list)
+    #: per estimate: (t_s of the force sample, force_n, depth_mm used, params snapshot)
+    trace: list[tuple[float, float, float, list[float], list[float]]] = field(default_factory=list)
+    events: dict[str, int] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.db = NteDatabase(base_id=self.base_id)
+        self.R = real_for("float32")
+        self.rx = self.db.receiver()
+        self.clock_raw: int | None = None
+        self.clock_ticks = 0
+        self.depth: list[tuple[int, np.float32, np.float32]] = []   # (t, d, v), newest last
+        self.forces: list[tuple[int, np.float32]] = []
+        self.last_force_t: int | None = None
+        self.param_next = 0
+        self._start(self.model)
+
+    # ------------------------------------------------------------------ estimator
+    def _cfg(self, model: int):
+        p = PRESETS[self.preset]
+        return make_config(p, model, "default", "all"), p.params.as_list()
+
+    def _start(self, model: int) -> None:
+        cfg, nominal = self._cfg(model)
+        self.model = model
+        self.cfg = cfg
+        self.nominal = nominal
+        self.bank = FilterBank(self.R, cfg, [nominal])
+        self.stepped = False
+        self.last = EstimateOut(0, 0, 0, 0, 1, 0, 0, 0)
+        self.last_vals = (0.0, 0.0, 0.0)
+        self.par_vals = [0.0] * 7
+        self.par_sd = [0.0] * 7
+        self._fixed_params()
+
+    def _fixed_params(self) -> None:
+        vals = [F32(v) for v in self.nominal]
+        if self.model == 1:
+            vals[6] = F32(self.cfg.beta0)
+        self.fixed_vals = vals
+
+    def _all_params(self) -> tuple[list[np.float32], list[np.float32]]:
+        vals = list(self.fixed_vals)
+        sds = [F32(0.0)] * 7
+        for k, name in enumerate(MODEL_PARAMS[self.model]):
+            j = PARAM_NAMES.index(name)
+            vals[j] = F32(self.par_vals[k]) if self.stepped else F32(0.0)
+            sds[j] = F32(self.par_sd[k]) if self.stepped else F32(0.0)
+        return vals, sds
+
+    def _count(self, name: str) -> None:
+        self.events[name] = self.events.get(name, 0) + 1
+
+    # ------------------------------------------------------------------ outputs
+    def _publish(self, est: EstimateOut, t_s: float, force: float, depth: float) -> None:
+        self.estimates.append(est)
+        vals, sds = self._all_params()
+        for _ in range(self.params_per_step):
+            j = self.param_next
+            self.param_next = (j + 1) % 7
+            sd = sds[j]
+            if sd == 0:
+                std_raw = -32768
+            else:
+                lg = F32(np.log10(F32(sd)))
+                lg = min(max(lg, F32(-32.767)), F32(32.767))
+                std_raw = roundf(F32(lg / F32(0.001)))
+            self.params.append(ParamOut(j, vals[j], std_raw))
+        self.trace.append((t_s, force, depth, [float(v) for v in vals], [float(s) for s in sds]))
+
+    def _hold(self, t: int, force: np.float32) -> None:
+        self._count("stale")
+        e = EstimateOut(**{**self.last.__dict__, "stale": 1})
+        _, c0 = quantise(self.last_vals[0], 1e-4, -50.0, 50.0)
+        _, c1 = quantise(self.last_vals[1], 4e-4, -0.8192, 0.8188)
+        _, c2 = quantise(self.last_vals[2], 5e-4, -8.192, 8.1915)
+        e.saturated = int(c0 or c1 or c2)
+        self._publish(e, self._t_s(t), float(force), float("nan"))
+
+    def _step(self, t: int, force: np.float32, d: np.float32, v: np.float32) -> None:
+        o = self.bank.step(np.array([t * TICK_US], dtype=np.int64), np.array([d], dtype=F32),
+                           np.array([v], dtype=F32), np.array([force], dtype=F32))
+        self.stepped = True
+        fh, z, inn, st = F32(o.force_hat[0]), F32(o.z[0]), F32(o.innovation[0]), int(o.status[0])
+        self.par_vals = [float(x) for x in o.params[:, 0]]
+        self.par_sd = [float(x) for x in o.params_sd[:, 0]]
+        fr, c0 = quantise(fh, 1e-4, -50.0, 50.0)
+        ir, c1 = quantise(inn, 4e-4, -0.8192, 0.8188)
+        zr, c2 = quantise(z, 5e-4, -8.192, 8.1915)
+        e = EstimateOut(fr, ir, zr, int(d > 0), 1, int(c0 or c1 or c2), int((st & 2) != 0), 0)
+        self.last = e
+        self.last_vals = (fh, inn, z)
+        self._publish(e, self._t_s(t), float(force), float(d))
+
+    def _t_s(self, t: int) -> float:
+        return (t - 65536) * 1e-4
+
+    # ------------------------------------------------------------------ force scheduling
+    def _decide(self, t: int, force: np.float32) -> bool:
+        timeout = self.depth_timeout_us // TICK_US
+        if not self.depth:
+            if self.last_force_t is not None and self.last_force_t - t > timeout:
+                self._hold(t, force)
+                return True
+            return False
+        tn = self.depth[-1][0]
+        if tn < t:
+            if t - tn > timeout or (self.last_force_t or t) - tn > timeout:
+                self._hold(t, force)
+                return True
+            return False
+        b = self.depth[-1]
+        for a in reversed(self.depth):
+            if a[0] <= t:
+                if t - a[0] > timeout:
+                    self._hold(t, force)
+                elif a[0] == t:
+                    self._step(t, force, a[1], a[2])
+                else:
+                    w = F32(F32(t - a[0]) / F32(b[0] - a[0]))
+                    d = F32(a[1] + F32(w * F32(b[1] - a[1])))
+                    v = F32(a[2] + F32(w * F32(b[2] - a[2])))
+                    self._step(t, force, d, v)
+                return True
+            b = a
+        self._hold(t, force)
+        return True
+
+    def _process(self) -> None:
+        while self.forces:
+            t, f = self.forces[0]
+            if not self._decide(t, f):
+                return
+            self.forces.pop(0)
+
+    # ------------------------------------------------------------------ input
+    def _unwrap(self, raw: int) -> tuple[int, int]:
+        if self.clock_raw is None:
+            return raw + 65536, raw
+        d = (raw - self.clock_raw) & 0xFFFF
+        if d >= 0x8000:
+            d -= 0x10000
+        return self.clock_ticks + d, raw
+
+    def _e2e(self, name: str, data: bytes) -> dict | None:
+        status, lost = self.rx.check(name, data)
+        if status == "skipped":
+            self._count("counter_skipped")
+        if status not in ("ok", "skipped"):
+            self._count({"wrong_length": "wrong_dlc", "bad_crc": "bad_crc",
+                         "repeated": "counter_repeated",
+                         "bad_counter": "counter_invalid"}[status])
+            return None
+        return self.db.db.get_message_by_name(name).decode(bytes(data), scaling=False,
+                                                            decode_choices=False)
+
+    def feed(self, can_id: int, data: bytes, extended: bool = False, remote: bool = False) -> None:
+        """One frame as the node receives it."""
+        name = None if (extended or remote) else self.db.name_of(can_id)
+        if name not in ("Depth", "Force", "Command"):
+            self._count("unknown_id")
+            return
+        if len(data) != FRAME_LENGTH:
+            self._count("wrong_dlc")
+            return
+        sig = self._e2e(name, bytes(data))
+        if sig is None:
+            return
+        if name == "Command":
+            if not all(0 <= int(sig[k]) <= 2 for k in ("ModelSel", "EstimatorSel", "AdaptCmd")):
+                self._count("out_of_range")
+                return
+            refused = False
+            m = int(sig["ModelSel"])
+            if m in (1, 2) and m != self.model:
+                self._start(m)
+            if int(sig["EstimatorSel"]) == 2 or int(sig["AdaptCmd"]) == 1:
+                refused = True
+            if int(sig["Reset"]):
+                self.bank.reset()
+                self.stepped = False
+                self.last = EstimateOut(0, 0, 0, 0, 1, 0, 0, 0)
+                self.last_vals = (0.0, 0.0, 0.0)
+            if refused:
+                self._count("command_refused")
+            return
+        raw_t = int(sig["SensorTime"])
+        if name == "Depth":
+            dr, vr = int(sig["Depth"]), int(sig["Velocity"])
+            if not (DEPTH_RAW[0] <= dr <= DEPTH_RAW[1] and VELOCITY_RAW[0] <= vr <= VELOCITY_RAW[1]):
+                self._count("out_of_range")
+                return
+            t, raw = self._unwrap(raw_t)
+            if self.depth and t <= self.depth[-1][0]:
+                self._count("time_backwards")
+                return
+            self.clock_raw, self.clock_ticks = raw, t
+            self.depth.append((t, F32(F32(dr) * F32(0.001)), F32(F32(vr) * F32(0.01))))
+            if len(self.depth) > 32:
+                self.depth.pop(0)
+            self._process()
+            return
+        fr = int(sig["Force"])
+        if not FORCE_RAW[0] <= fr <= FORCE_RAW[1]:
+            self._count("out_of_range")
+            return
+        t, raw = self._unwrap(raw_t)
+        if self.last_force_t is not None and t <= self.last_force_t:
+            self._count("time_backwards")
+            return
+        if len(self.forces) >= 16:
+            self._count("queue_overflow")
+            return
+        self.clock_raw, self.clock_ticks = raw, t
+        self.last_force_t = t
+        self.forces.append((t, F32(F32(fr) * F32(0.0001))))
+        self._process()
+
+    def feed_all(self, frames: Iterable) -> "NodeMirror":
+        for m in frames:
+            self.feed(m.arbitration_id, bytes(m.data), m.is_extended_id, m.is_remote_frame)
+        return self
+
+
+def node_outputs(db: NteDatabase, messages: Iterable) -> tuple[list[EstimateOut], list[ParamOut], int]:
+    """The node's Estimate and Params frames (in order) as raw values; and the count of output
+    frames that failed their E2E check."""
+    rx = db.receiver()
+    est: list[EstimateOut] = []
+    par: list[ParamOut] = []
+    bad = 0
+    for m in messages:
+        name, sig, status = rx.decode(m.arbitration_id, bytes(m.data))
+        if name not in ("Estimate", "Params"):
+            continue
+        if sig is None:
+            bad += 1
+            continue
+        raw = db.db.get_message_by_name(name).decode(bytes(m.data), scaling=False,
+                                                     decode_choices=False)
+        if name == "Estimate":
+            est.append(EstimateOut(int(raw["ForceEst"]), int(raw["Innovation"]), int(raw["Z"]),
+                                   int(raw["InTissue"]), int(raw["Adapting"]),
+                                   int(raw["Saturated"]), int(raw["Fault"]), int(raw["Stale"])))
+        else:
+            j = int(raw["ParamIndex"])
+            vname, sname = ("Sigma0", "Sigma1", "Sigma2", "F1", "F2", "Alpha", "Beta")[j], None
+            sname = vname + "StdLog10"
+            par.append(ParamOut(j, F32(raw[vname]), int(raw[sname])))
+    return est, par, bad
+
+
+def compare(mirror: NodeMirror, est: list[EstimateOut], par: list[ParamOut]) -> dict:
+    """Mismatch counts between the node's outputs and the mirror's."""
+    n = min(len(est), len(mirror.estimates))
+    est_mis = sum(1 for a, b in zip(est, mirror.estimates) if a.key() != b.key())
+    m = min(len(par), len(mirror.params))
+    val_mis = sum(1 for a, b in zip(par, mirror.params)
+                  if a.index != b.index or a.value.tobytes() != b.value.tobytes())
+    std_mis = sum(1 for a, b in zip(par, mirror.params) if a.std_raw != b.std_raw)
+    std_off1 = sum(1 for a, b in zip(par, mirror.params) if abs(a.std_raw - b.std_raw) > 1)
+    first = next((i for i, (a, b) in enumerate(zip(est, mirror.estimates)) if a.key() != b.key()),
+                 None)
+    return {"estimates_node": len(est), "estimates_reference": len(mirror.estimates),
+            "estimates_compared": n, "estimate_mismatches": est_mis,
+            "first_mismatch": first,
+            "params_node": len(par), "params_reference": len(mirror.params),
+            "param_value_mismatches": val_mis, "param_std_mismatches": std_mis,
+            "param_std_beyond_1lsb": std_off1,
+            "stale_reference": sum(e.stale for e in mirror.estimates),
+            "stale_node": sum(e.stale for e in est)}
