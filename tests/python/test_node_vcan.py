@@ -1,0 +1,132 @@
+"""nte-node on a real vcan0 (host_bench/with-vcan): one user-mode kernel boot runs every case of
+tests/python/node_vcan_driver.py; each case starts and stops its own processes by PID.
+
+- full_rate: the paper scenario, 1 kHz depth + 200 Hz force driven by canplayer in real time:
+  no frame lost, every Estimate equals the reference (same quantised inputs, float32) bit for
+  bit after DBC quantisation, Params values bit for bit; the candump session replayed with
+  canplayer to a fresh node gives identical Estimate frames.
+- bad_traffic: wrong DLC, unknown id, bad CRC, repeated and skipped counters, out-of-range raw
+  value, time going backwards, 200 ms without depth (stale, then recovery), a Command with a bad
+  CRC (ignored, counted), a valid reset (what follows equals a fresh estimator).
+- cangen: 60 s of cangen random traffic (random id, length, data every 2 ms) concurrently with
+  a 57 s replay at full rate: every foreign frame counted, estimates equal to the reference.
+- enobufs: send() fails with ENOBUFS for 1 s (LD_PRELOAD shim): counted, the node carries on.
+- no_iface: an absent interface gives exit status 4 and a clear message.
+"""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from test_with_vcan import _available
+
+ROOT = Path(__file__).resolve().parents[2]
+CASES = ["full_rate", "bad_traffic", "cangen", "enobufs", "no_iface"]
+
+pytestmark = pytest.mark.skipif(not _available(), reason="no vcan (user-mode-linux kmod can-utils)")
+
+
+def _built(name: str) -> Path:
+    for d in ("build/host", "build/node"):
+        for sub in ("bin", "lib"):
+            p = ROOT / d / sub / name
+            if p.exists():
+                return p
+    pytest.skip(f"{name} not built (cmake -S tests/c_node -B build/node && cmake --build build/node)")
+
+
+@pytest.fixture(scope="module")
+def results(tmp_path_factory: pytest.TempPathFactory) -> dict:
+    out = tmp_path_factory.mktemp("node_vcan")
+    node = _built("nte-node")
+    shim = _built("libnte_enobufs_shim.so")
+    py = str(ROOT / ".venv/bin/python") if (ROOT / ".venv/bin/python").exists() else "python3"
+    env = dict(os.environ, TMPDIR=str(out), NTE_ENOBUFS_SHIM=str(shim), WITH_VCAN_TIMEOUT="400")
+    r = subprocess.run([str(ROOT / "host_bench/with-vcan"), py, "tests/python/node_vcan_driver.py",
+                        str(node), str(out), *CASES], cwd=ROOT, env=env, capture_output=True,
+                       text=True, timeout=450)
+    res = {}
+    for c in CASES:
+        f = out / f"{c}.json"
+        res[c] = json.loads(f.read_text()) if f.exists() else {"error": r.stdout + r.stderr}
+    return res
+
+
+def _ok(res: dict, case: str) -> dict:
+    r = res[case]
+    assert "error" not in r, r["error"]
+    print(f"\n{case}: " + json.dumps({k: v for k, v in r.items() if not isinstance(v, list)}))
+    return r
+
+
+def _exact(r: dict) -> None:
+    assert r["output_e2e_errors"] == 0
+    assert r["estimates_node"] == r["estimates_reference"] > 0
+    assert r["estimate_mismatches"] == 0, r["first_mismatch"]
+    assert r["params_node"] == r["params_reference"]
+    assert r["param_value_mismatches"] == 0
+    assert r["param_std_beyond_1lsb"] == 0
+
+
+def _events_equal_mirror(r: dict) -> None:
+    ev = r["stats"]["events"]
+    for k, v in ev.items():
+        if k in ("send_failed", "receive_error", "encode_error"):
+            continue
+        assert v == r["mirror_events"].get(k, 0), (k, v, r["mirror_events"])
+
+
+def test_full_rate_paper_scenario_bit_identical(results: dict) -> None:
+    r = _ok(results, "full_rate")
+    _exact(r)
+    assert r["inputs_captured"] == r["sent"]                      # nothing lost on the bus
+    assert r["stats"]["rx_accepted"]["force"] == r["forces_sent"] == r["estimates_node"]
+    assert r["stats"]["steps"] == r["forces_sent"]
+    assert all(v == 0 for v in r["stats"]["events"].values()), r["stats"]["events"]
+    assert r["node_exit"] == 0                                    # clean exit on SIGTERM
+    assert r["heartbeats"] >= 50                                  # 10 Hz over ~11 s
+    assert r["replayed_identical"] and r["replayed_estimates"] == r["estimates_node"]
+
+
+def test_bad_traffic_counted_estimates_unaffected(results: dict) -> None:
+    r = _ok(results, "bad_traffic")
+    _exact(r)
+    ev = r["stats"]["events"]
+    for k, n in r["expect"].items():
+        assert n > 0 and ev[k] == n, (k, ev[k], n)
+    assert ev["stale"] == r["stale_node"] == r["stale_reference"] > 0
+    assert ev["queue_overflow"] == ev["send_failed"] == 0
+    _events_equal_mirror(r)
+    assert r["stats"]["commands_applied"] == 1                     # the valid reset only
+    assert r["after_reset_node"] and r["after_reset_node"] == r["after_reset_fresh"]
+
+
+def test_cangen_random_traffic_during_replay(results: dict) -> None:
+    r = _ok(results, "cangen")
+    _exact(r)
+    assert r["cangen_s"] >= 59.0
+    assert r["foreign_frames"] > 10000
+    assert r["estimates_node"] == r["forces_sent"]
+    _events_equal_mirror(r)
+    ev = r["stats"]["events"]
+    assert ev["unknown_id"] + ev["wrong_dlc"] + ev["bad_crc"] > 0
+
+
+def test_enobufs_on_send_counted(results: dict) -> None:
+    r = _ok(results, "enobufs")
+    assert r["alive_after"]
+    st = r["stats"]
+    assert st["events"]["send_failed"] > 100
+    assert st["send_enobufs"] == st["events"]["send_failed"]
+    assert r["estimates_reference"] - r["estimates_node"] > 0     # those were lost
+    assert r["tail_equal"]
+
+
+def test_absent_interface(results: dict) -> None:
+    r = _ok(results, "no_iface")
+    assert r["exit"] == 4
+    assert "no CAN interface 'vcan9'" in r["stderr"]
