@@ -227,13 +227,14 @@ static nte_real_t lm(nte_t* self, const nte_real_t theta0[NTE_PARAM_COUNT],
     nte_real_t lam = rc->lm_lambda0;
     const nte_real_t umax = self->cfg.u_max;
     for (int32_t it = 0; it < rc->fit_iterations; it++) {
+        nte_robust_mat_t M; /* the damped system (scratch of this iteration) */
         for (size_t a = 0U; a < n; a++) {
             for (size_t b = 0U; b < n; b++) {
-                rb->M[a][b] = rb->A[a][b] + ((a == b) ? (lam * rb->A[a][a]) : NTE_C(0.0));
+                M[a][b] = rb->A[a][b] + ((a == b) ? (lam * rb->A[a][a]) : NTE_C(0.0));
             }
         }
         nte_real_t delta[NTE_IDENTIFIED_MAX];
-        const bool ok = nte_robust_ldlt_solve(n, rb->M, rb->g, delta);
+        const bool ok = nte_robust_ldlt_solve(n, M, rb->g, delta);
         for (size_t a = 0U; a < n; a++) {
             /* np.clip = minimum(maximum(x, -umax), umax); NaN passes through */
             nte_real_t x = rb->v[a] + delta[a];
