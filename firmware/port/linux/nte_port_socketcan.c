@@ -120,6 +120,15 @@ int nte_port_socketcan_open(nte_port_socketcan_t* self, const char* iface, const
             return nte_port_err_other;
         }
     }
+    /* A deep receive queue: a loaded host may not schedule the node for a while (1 kHz depth
+     * + 200 Hz force fill the default ~200-frame queue in 150 ms).  SO_RCVBUFFORCE needs
+     * CAP_NET_ADMIN; otherwise SO_RCVBUF, capped by net.core.rmem_max. */
+    {
+        const int rcvbuf = NTE_PORT_SOCKETCAN_RCVBUF;
+        if (setsockopt(fd, SOL_SOCKET, SO_RCVBUFFORCE, &rcvbuf, (socklen_t)sizeof rcvbuf) != 0) {
+            (void)setsockopt(fd, SOL_SOCKET, SO_RCVBUF, &rcvbuf, (socklen_t)sizeof rcvbuf);
+        }
+    }
     memset(&addr, 0, sizeof addr);
     addr.can_family = AF_CAN;
     addr.can_ifindex = (int)idx;

@@ -14,6 +14,11 @@
 
 #include "nte_node.h"
 
+/** Receive buffer requested, bytes (about 1 KiB of kernel memory per queued frame). */
+#ifndef NTE_PORT_SOCKETCAN_RCVBUF
+#define NTE_PORT_SOCKETCAN_RCVBUF (8 * 1024 * 1024)
+#endif
+
 /** Open results (0 = success). */
 enum {
     nte_port_ok = 0,
