@@ -50,6 +50,21 @@ class RobustConfig:
     converged_confidence: float = 0.75
     converged_change: float = 0.05
 
+    def validate(self) -> None:
+        """Raise ValueError naming the first invalid field (the C library checks the same)."""
+        if not (4 <= self.buffer_len <= 4096 and self.buffer_len % 2 == 0):
+            raise ValueError("robust buffer_len must be even and in 4..4096")
+        if not 1 <= self.fit_substeps <= 16:
+            raise ValueError("robust fit_substeps must be in 1..16")
+        if not 1 <= self.fit_iterations <= 200:
+            raise ValueError("robust fit_iterations must be in 1..200")
+        if not 2 <= self.min_entries <= self.buffer_len:
+            raise ValueError("robust min_entries must be in 2..buffer_len")
+        for name in ("restart_p0_u", "lm_lambda0", "converged_confidence", "converged_change"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v > 0):
+                raise ValueError(f"robust {name} must be finite and > 0 (got {v!r})")
+
 
 class RobustEstimator:
     """Bank + per-insertion refinement, on a batch axis like the bank."""
@@ -58,10 +73,19 @@ class RobustEstimator:
                  rcfg: RobustConfig | None = None) -> None:
         self.R, self.cfg = R, cfg
         self.rcfg = rcfg or RobustConfig()
+        self.rcfg.validate()
         self.bank = FilterBank(R, cfg, nominal)
-        B = self.bank.batch
-        self.batch = B
+        self.batch = self.bank.batch
         self.names = MODEL_PARAMS[cfg.model]
+        self.reset_record()
+
+    def reset(self) -> None:
+        """Back to the configured nominal: the bank's reset plus an empty record."""
+        self.bank.reset()
+        self.reset_record()
+
+    def reset_record(self) -> None:
+        R, B = self.R, self.batch
         n = self.rcfg.buffer_len
         self.buf = np.zeros((4, n, B), dtype=R.dtype)     # t_rel s, depth, velocity, force
         self.count = np.zeros(B, dtype=np.int64)          # entries in the buffer

@@ -12,8 +12,8 @@ from reference_py.trajectory import TrajectorySpec, lspb_profile
 PRESET = get_preset("paper-10mms")
 
 
-def _scenario(cycles=1, depth=20.0):
-    t, l, v, _ = lspb_profile(TrajectorySpec(depth_mm=depth, dwell_s=0.3, cycles=cycles))
+def _scenario(cycles=1, depth=20.0, dwell=0.3):
+    t, l, v, _ = lspb_profile(TrajectorySpec(depth_mm=depth, dwell_s=dwell, cycles=cycles))
     f = simulate_force(PRESET.params, t, l, v)[0][0]
     f = f + np.random.default_rng(9).normal(0, 2e-3, len(f))
     return np.floor(t * 1e6 + 0.5).astype(np.int64), l, v, f
@@ -67,11 +67,31 @@ def test_refines_once_per_insertion_and_restarts_the_bank():
 
 
 def test_short_insertion_is_not_refined():
-    t, l, v, f = _scenario(depth=0.5)
+    t, l, v, f = _scenario(depth=0.5, dwell=0.0)
+    assert (l > 0).sum() < 90
     est = rb.RobustEstimator(F64, default_config(), [PRESET.params.as_list()],
-                             rb.RobustConfig(min_entries=200))
+                             rb.RobustConfig(min_entries=96))
     outs = _run(est, t, l, v, f)
     assert not any(o.status[0] & rb.STATUS_REFINED for o in outs)
+
+
+def test_invalid_robust_config_is_refused():
+    for bad in (dict(buffer_len=33), dict(buffer_len=2), dict(min_entries=97),
+                dict(fit_substeps=0), dict(restart_p0_u=0.0), dict(lm_lambda0=float("nan"))):
+        with pytest.raises(ValueError):
+            rb.RobustEstimator(F64, default_config(), [PRESET.params.as_list()],
+                               rb.RobustConfig(**bad))
+
+
+def test_reset_clears_the_record():
+    t, l, v, f = _scenario()
+    est = rb.RobustEstimator(F64, default_config(), [PRESET.params.as_list()],
+                             rb.RobustConfig(fit_iterations=2))
+    _run(est, t, l, v, f)
+    assert est.has_refined[0]
+    est.reset()
+    assert est.count[0] == 0 and not est.has_refined[0] and est.confidence[0] == 0.0
+    assert not est.inside[0] and est.decim[0] == 1
 
 
 def test_reset_restores_the_configured_nominal():
@@ -80,5 +100,5 @@ def test_reset_restores_the_configured_nominal():
     est = rb.RobustEstimator(F64, default_config(), [start], rb.RobustConfig(fit_iterations=3))
     _run(est, t, l, v, f)
     assert est.bank.th.sigma0[0] != pytest.approx(start[0])
-    est.bank.reset()
+    est.reset()
     assert est.bank.th.sigma0[0] == pytest.approx(start[0], rel=1e-15)
