@@ -98,6 +98,25 @@ def time_filterpy(preset, t_us, l, v, f) -> float:  # type: ignore[no-untyped-de
     return time.perf_counter() - t0
 
 
+def time_c_program(exe, preset, t_us, l, v, f) -> float | None:  # type: ignore[no-untyped-def]
+    """Seconds for the C host program on the same samples (whole process, CSV I/O included)."""
+    import os
+    import subprocess
+    import tempfile
+    if not os.path.exists(exe):
+        return None
+    with tempfile.TemporaryDirectory() as tmp:
+        src, out = os.path.join(tmp, "in.csv"), os.path.join(tmp, "out.csv")
+        with open(src, "w") as fh:
+            fh.write("t_s,depth_mm,velocity_mm_s,force_n\n")
+            for row in zip(t_us / 1e6, l, v, f):
+                fh.write("%.17g,%.17g,%.17g,%.17g\n" % row)
+        t0 = time.perf_counter()
+        subprocess.run([exe, src, "--model", "2", "--preset", preset.name, "--out", out],
+                       check=True, capture_output=True)
+        return time.perf_counter() - t0
+
+
 def run_bench(samples: int = 10_000) -> dict[str, float]:
     preset, t_us, l, v, f = bench_scenario(samples)
     n = len(t_us)
@@ -112,8 +131,15 @@ def run_bench(samples: int = 10_000) -> dict[str, float]:
     m = min(n, 1000)
     results["reference float64, batch of 100"] = (
         100 * m / time_reference(F64, preset, t_us[:m], l[:m], v[:m], f[:m], batch=100))
+    from pathlib import Path
+    bindir = Path(__file__).resolve().parents[1] / "build" / "host" / "bin"
+    for label, exe in (("C nte-run float (whole process)", "nte-run"),
+                       ("C nte-run-double (whole process)", "nte-run-double")):
+        secs = time_c_program(str(bindir / exe), preset, t_us, l, v, f)
+        if secs is not None:
+            results[label] = n / secs
     base = results["reference float64"]
-    print(f"{'implementation':32s} {'samples/s':>10s} {'vs reference float64':>22s}")
+    print(f"{'implementation':34s} {'samples/s':>10s} {'vs reference float64':>22s}")
     for name, rate in results.items():
-        print(f"{name:32s} {rate:10.0f} {rate / base:21.2f}x")
+        print(f"{name:34s} {rate:10.0f} {rate / base:21.2f}x")
     return results
