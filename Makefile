@@ -41,12 +41,14 @@ build: deps
 	cmake -S . -B $(BUILD) -DCMAKE_BUILD_TYPE=Release > /dev/null
 	cmake --build $(BUILD) -j2
 
+# the whole chain: the C node on a real vcan0 (a user-mode Linux kernel when the host has no CAN),
+# fed by the host bench with a paper insertion, compared bit for bit with the reference
 demo: venv build
 	mkdir -p $(DEMO_DIR)
-	$(VENV)/bin/nte-ref simulate --preset paper-10mms --depth 50 --dwell 1 --seed 1 \
-	  --out $(DEMO_DIR)/insertion.csv
-	$(VENV)/bin/nte-ref estimate $(DEMO_DIR)/insertion.csv --model 2 --preset paper-10mms \
-	  --init-seed 7 --init-factor 1.25 --out $(DEMO_DIR)/estimate.csv --plot $(DEMO_DIR)/estimate.png
+	host_bench/with-vcan host_bench/demo.sh $(CURDIR)/$(DEMO_DIR)/can
+	$(VENV)/bin/nte-ref estimate $(DEMO_DIR)/can/insertion.csv --model 2 --estimator robust \
+	  --preset paper-10mms --init-seed 7 --init-factor 5 --out $(DEMO_DIR)/robust.csv \
+	  --plot $(DEMO_DIR)/robust.png
 
 test: venv build
 	cd $(BUILD) && ctest --output-on-failure

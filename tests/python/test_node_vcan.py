@@ -115,17 +115,27 @@ def test_bad_traffic_counted_estimates_unaffected(results: dict) -> None:
 
 def test_cangen_random_traffic_during_replay(results: dict) -> None:
     """The node runs with its kernel filters (production setting): random frames that hit its
-    input ids reach it and must all be rejected (an 8-bit CRC lets 1/256 of well-sized random
-    frames through: with ~5 such frames per run the chance is ~2 %, which would show up as a
-    mismatch here).  Random frames on its OUTPUT ids show up in the capture as E2E errors."""
+    input ids reach it and must be rejected.  An 8-bit CRC lets 1/256 of well-sized random
+    frames through (with ~5 such frames per run, ~2 % of runs): the node then acts on an input
+    the reference never saw.  The node's own acceptance counters tell which case this run is:
+    with no random frame accepted, the outputs must equal the reference bit for bit; with one
+    accepted (a legitimate CRC collision, counted), only the frame bookkeeping is asserted."""
     r = _ok(results, "cangen")
     r = dict(r, output_e2e_errors=0)
-    _exact(r)
-    assert r["cangen_s"] >= 59.0
-    assert r["estimates_node"] == r["forces_sent"]
     st = r["stats"]
-    assert st["rx_accepted"]["force"] == r["forces_sent"]
-    assert st["rx_accepted"]["depth"] == r["sent"] - r["forces_sent"]
+    depth_sent = r["sent"] - r["forces_sent"]
+    extra_force = st["rx_accepted"]["force"] - r["forces_sent"]
+    extra_depth = st["rx_accepted"]["depth"] - depth_sent
+    assert extra_force >= 0 and extra_depth >= 0          # no replayed frame was lost
+    assert r["cangen_s"] >= 59.0
+    if extra_force == 0 and extra_depth == 0:
+        _exact(r)
+        assert r["estimates_node"] == r["forces_sent"]
+    else:
+        print(f"a random frame passed the CRC ({extra_force} force, {extra_depth} depth): "
+              "exact comparison skipped for this run")
+        assert extra_force + extra_depth <= 3
+        assert r["estimates_node"] == r["forces_sent"] + extra_force
     ev = st["events"]
     assert ev["wrong_dlc"] + ev["bad_crc"] + ev["counter_invalid"] + ev["out_of_range"] > 0
     assert ev["stale"] == ev["queue_overflow"] == ev["send_failed"] == 0
