@@ -1,0 +1,28 @@
+# Toolchain file: bare-metal Arm Cortex-M4F (hard-float ABI), GNU Arm Embedded (Debian package
+# gcc-arm-none-eabi, with libnewlib-arm-none-eabi for newlib-nano).
+#
+#   cmake -S firmware/port/mps2-an386 -B build/m4 -DCMAKE_TOOLCHAIN_FILE=cmake/arm-none-eabi.cmake
+#
+# -ffp-contract=off on every target: fused multiply-adds would change the float bits
+# (the library is bit-identical to the float32 reference only without them).
+set(CMAKE_SYSTEM_NAME Generic)
+set(CMAKE_SYSTEM_PROCESSOR arm)
+
+set(CMAKE_C_COMPILER arm-none-eabi-gcc)
+set(CMAKE_ASM_COMPILER arm-none-eabi-gcc)
+find_program(CMAKE_OBJCOPY arm-none-eabi-objcopy)
+find_program(CMAKE_SIZE arm-none-eabi-size)
+find_program(NTE_ARM_NM arm-none-eabi-nm)
+
+# A bare-metal compiler cannot link a test program without a linker script.
+set(CMAKE_TRY_COMPILE_TARGET_TYPE STATIC_LIBRARY)
+
+set(NTE_M4_FLAGS "-mcpu=cortex-m4 -mthumb -mfpu=fpv4-sp-d16 -mfloat-abi=hard -ffp-contract=off")
+set(CMAKE_C_FLAGS_INIT "${NTE_M4_FLAGS} -ffunction-sections -fdata-sections")
+set(CMAKE_ASM_FLAGS_INIT "${NTE_M4_FLAGS}")
+set(CMAKE_EXE_LINKER_FLAGS_INIT "${NTE_M4_FLAGS} --specs=nano.specs -nostartfiles -Wl,--gc-sections")
+
+# Search the host for programs only; libraries and headers come from the toolchain.
+set(CMAKE_FIND_ROOT_PATH_MODE_PROGRAM NEVER)
+set(CMAKE_FIND_ROOT_PATH_MODE_LIBRARY ONLY)
+set(CMAKE_FIND_ROOT_PATH_MODE_INCLUDE ONLY)

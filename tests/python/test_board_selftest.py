@@ -1,0 +1,195 @@
+"""The board image (issue 7): the float library on the Cortex-M4F under QEMU (mps2-an386)
+prints the same bits as the host's float build, and the image holds no allocation and no
+double-precision routine.
+
+Builds firmware/port/mps2-an386 twice (cross: build/m4, host twin: build/m4-host) unless
+NTE_BOARD_NO_BUILD=1 (then both must already be built).  Skips only when arm-none-eabi-gcc or
+qemu-system-arm is missing (the Makefile's board target installs them).  QEMU is started and
+stopped by its PID, also on failure.
+"""
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+PORT = ROOT / "firmware" / "port" / "mps2-an386"
+M4 = ROOT / "build" / "m4"
+HOST = ROOT / "build" / "m4-host"
+SELFTEST = M4 / "bin" / "nte-selftest.elf"
+BOARD = M4 / "bin" / "nte-board.elf"
+TWIN = HOST / "bin" / "nte-selftest-host"
+QEMU_TIMEOUT_S = 120
+
+MISSING = [t for t in ("arm-none-eabi-gcc", "arm-none-eabi-nm", "qemu-system-arm")
+           if shutil.which(t) is None]
+pytestmark = pytest.mark.skipif(
+    bool(MISSING), reason=f"{', '.join(MISSING)} not installed (apt-get install -y "
+    "--no-install-recommends gcc-arm-none-eabi libnewlib-arm-none-eabi qemu-system-arm; "
+    "`make board` does it)")
+
+
+def _run(args: list[str]) -> None:
+    r = subprocess.run(args, cwd=ROOT, capture_output=True, text=True)
+    if r.returncode != 0:
+        pytest.fail(f"{' '.join(args)} failed ({r.returncode}):\n{r.stdout}\n{r.stderr}")
+
+
+@pytest.fixture(scope="module")
+def built() -> None:
+    if os.environ.get("NTE_BOARD_NO_BUILD") != "1":
+        _run(["cmake", "-S", str(PORT), "-B", str(M4),
+              "-DCMAKE_TOOLCHAIN_FILE=cmake/arm-none-eabi.cmake"])
+        _run(["cmake", "--build", str(M4), "-j2"])
+        _run(["cmake", "-S", str(PORT), "-B", str(HOST)])
+        _run(["cmake", "--build", str(HOST), "-j2"])
+    for f in (SELFTEST, BOARD, TWIN):
+        assert f.exists(), f"{f} not built"
+
+
+def run_qemu(elf: Path, timeout_s: float = QEMU_TIMEOUT_S) -> tuple[int, str, str]:
+    """Runs an image that exits through semihosting; returns (status, stdout, stderr)
+    (semihosting writes to QEMU's stderr).  Stops QEMU by its PID on a timeout."""
+    args = ["qemu-system-arm", "-M", "mps2-an386", "-cpu", "cortex-m4", "-display", "none",
+            "-monitor", "none", "-serial", "null", "-semihosting-config",
+            "enable=on,target=native", "-kernel", str(elf)]
+    p = subprocess.Popen(args, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        out, err = p.communicate(timeout=timeout_s)
+    except subprocess.TimeoutExpired:
+        p.send_signal(signal.SIGTERM)
+        try:
+            out, err = p.communicate(timeout=10)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            out, err = p.communicate()
+        pytest.fail(f"QEMU did not exit within {timeout_s} s (did the image boot?)\n"
+                    f"stdout:\n{out[-4000:]}\nstderr:\n{err[-4000:]}")
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+    return p.returncode, out, err
+
+
+@pytest.fixture(scope="module")
+def board_run(built) -> tuple[int, str, str]:
+    return run_qemu(SELFTEST)
+
+
+@pytest.fixture(scope="module")
+def host_lines(built) -> list[str]:
+    r = subprocess.run([str(TWIN)], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    return r.stdout.splitlines()
+
+
+def test_selftest_boots_and_exits_zero(board_run) -> None:
+    status, out, err = board_run
+    assert status == 0, f"QEMU exit status {status}\nstdout:\n{out[-4000:]}\nstderr:\n{err[-4000:]}"
+    assert "FAULT" not in err
+    lines = err.splitlines()
+    assert lines and lines[0].startswith("R 0 "), f"no self-test output:\n{err[-4000:]}"
+    assert lines[-1].startswith("F stack_used="), lines[-1]
+
+
+def test_selftest_bit_identical_to_host(board_run, host_lines) -> None:
+    status, _out, err = board_run
+    assert status == 0
+    board = [ln for ln in err.splitlines() if not ln.startswith("F ")]
+    assert len(board) == len(host_lines)
+    for k, (b, h) in enumerate(zip(board, host_lines)):
+        assert b == h, f"line {k + 1} differs:\n  board {b}\n  host  {h}"
+    # three runs over the whole scenario, every sample printed
+    n_samples = int(re.search(r"#define NTE_SCENARIO_LEN (\d+)",
+                              (PORT / "scenario.h").read_text()).group(1))
+    assert sum(1 for ln in board if ln.startswith("S ")) == 3 * n_samples
+    assert sum(1 for ln in board if ln.startswith("E ")) == 3
+
+
+def test_selftest_exercises_the_refinement(host_lines) -> None:
+    """The robust run refines once, at the sample that leaves the tissue (status bit 9)."""
+    refined = [ln for ln in host_lines
+               if ln.startswith("S 2 ") and int(ln.split()[7], 16) & (1 << 9)]
+    assert len(refined) == 1
+
+
+def test_stack_high_water_mark(board_run) -> None:
+    _status, _out, err = board_run
+    m = re.search(r"^F stack_used=(\d+) stack_size=(\d+) sizeof_nte_t=(\d+)$", err, re.M)
+    assert m, err[-2000:]
+    used, size = int(m.group(1)), int(m.group(2))
+    assert 0 < used < size // 2, f"stack high-water {used} of {size} bytes"
+
+
+ALLOCATION = re.compile(r"^(malloc|free|calloc|realloc|_malloc_r|_free_r|_calloc_r|"
+                        r"_realloc_r|_sbrk|_sbrk_r)$")
+DOUBLE = re.compile(r"^(__aeabi_d\w+|__aeabi_f2d|__aeabi_[il]2d|__aeabi_ui2d|__aeabi_ul2d|"
+                    r"__\w*df[23]?|__\w*df\w+|__ieee754_(exp|log|pow|sqrt|fmod|log10)|"
+                    r"exp|log|log10|pow|sqrt|fmod|sin|cos|tan|atan2?|_printf_float)$")
+
+
+def _symbols(elf: Path) -> list[str]:
+    nm = subprocess.run(["arm-none-eabi-nm", str(elf)], capture_output=True, text=True,
+                        check=True).stdout
+    return [ln.split()[-1] for ln in nm.splitlines() if ln.strip()]
+
+
+@pytest.mark.parametrize("elf", [SELFTEST, BOARD], ids=["selftest", "board"])
+def test_image_has_no_allocation(built, elf: Path) -> None:
+    bad = sorted(n for n in _symbols(elf) if ALLOCATION.match(n))
+    assert not bad, f"{elf.name} links {bad}"
+    text = elf.with_suffix(".map").read_text()
+    for sym in ("malloc", "free", "_sbrk"):
+        assert re.search(rf"^{sym}\s", text, re.M) is None, f"{elf.name}.map lists {sym}"
+
+
+def test_float_image_has_no_double_routine(built) -> None:
+    """The self-test image is the float library alone: no double routine may be linked
+    (soft-float helpers __aeabi_d*, __adddf3, ..., or a double libm function)."""
+    bad = sorted(n for n in _symbols(SELFTEST) if DOUBLE.match(n))
+    assert not bad, f"{SELFTEST.name} links {bad}"
+    text = SELFTEST.with_suffix(".map").read_text()
+    for sym in ("__aeabi_dadd", "__aeabi_dmul", "__aeabi_ddiv", "__aeabi_f2d", "__adddf3",
+                "__muldf3", "__divdf3", "__extendsfdf2"):
+        assert re.search(rf"^{sym}\s", text, re.M) is None, f"map lists {sym}"
+
+
+@pytest.mark.xfail(strict=True, reason="the CAN layer pulls in double routines: the generated "
+                   "firmware/can/generated/nte_can.c converts float to uint64_t (__aeabi_f2ulz), "
+                   "and libgcc's _fixunssfdi.o implements that with __aeabi_dmul/__aeabi_dsub/"
+                   "__aeabi_d2uiz (pulling in _arm_addsubdf3.o and _arm_muldf3.o); remove "
+                   "this xfail when the CAN layer converts without uint64_t")
+def test_board_image_has_no_double_routine(built) -> None:
+    bad = sorted(n for n in _symbols(BOARD) if DOUBLE.match(n))
+    assert not bad, f"{BOARD.name} links {bad}"
+
+
+def test_vector_table_at_zero_and_fpu_enabled_first(built) -> None:
+    """The reset vector points at the reset handler, whose first stores enable CP10/CP11."""
+    nm = subprocess.run(["arm-none-eabi-nm", str(SELFTEST)], capture_output=True, text=True,
+                        check=True).stdout
+    syms = {ln.split()[-1]: int(ln.split()[0], 16) for ln in nm.splitlines()
+            if len(ln.split()) == 3}
+    assert syms["nte_vectors"] == 0
+    assert syms["__stack_top"] >= 0x20000000
+    dis = subprocess.run(["arm-none-eabi-objdump", "-d", "--disassemble=nte_reset_handler",
+                          str(SELFTEST)], capture_output=True, text=True, check=True).stdout
+    body = [ln for ln in dis.splitlines() if re.match(r"^\s+[0-9a-f]+:\t", ln)]
+    mnemonics = [ln.split("\t")[2].split()[0] for ln in body[:8]]
+    assert mnemonics[:6] == ["ldr", "ldr", "orr.w", "str", "dsb", "isb"], mnemonics
+
+
+def test_generated_scenario_is_current() -> None:
+    pytest.importorskip("numpy")
+    r = subprocess.run([sys.executable, str(PORT / "gen_scenario.py"), "--check"], cwd=ROOT,
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
