@@ -1,0 +1,194 @@
+#!/usr/bin/env python3
+"""Figures of the board image (MPS2 AN386, Cortex-M4F): flash and RAM, sizeof(nte_t), the
+worst-case stack from the compiler's call graph (-fstack-usage + -fcallgraph-info=su) and the
+measured high-water mark of the painted stack after the self-test under QEMU; with --insns,
+also the instructions executed per nte_step (QEMU -singlestep -d exec trace, counted between
+the marker functions nte_mark_step_begin/end; slow: about a minute).
+
+    python3 firmware/port/mps2-an386/figures.py [--build build/m4] [--insns]
+
+Needs the cross build (cmake -S firmware/port/mps2-an386 -B build/m4
+-DCMAKE_TOOLCHAIN_FILE=cmake/arm-none-eabi.cmake && cmake --build build/m4) and
+qemu-system-arm.
+"""
+from __future__ import annotations
+
+import argparse
+import pathlib
+import re
+import subprocess
+import sys
+
+ROOT = pathlib.Path(__file__).resolve().parents[3]
+QEMU = ["qemu-system-arm", "-M", "mps2-an386", "-cpu", "cortex-m4", "-display", "none",
+        "-monitor", "none", "-serial", "null", "-semihosting-config", "enable=on,target=native"]
+
+
+def size(elf: pathlib.Path) -> dict[str, int]:
+    out = subprocess.run(["arm-none-eabi-size", "-A", str(elf)], capture_output=True,
+                         text=True, check=True).stdout
+    sec = {}
+    for ln in out.splitlines():
+        f = ln.split()
+        if len(f) == 3 and f[1].isdigit():
+            sec[f[0]] = int(f[1])
+    return sec
+
+
+def symbols(elf: pathlib.Path) -> dict[str, int]:
+    out = subprocess.run(["arm-none-eabi-nm", str(elf)], capture_output=True, text=True,
+                         check=True).stdout
+    return {f[2]: int(f[0], 16) for f in (ln.split() for ln in out.splitlines()) if len(f) == 3}
+
+
+# object directories of each image, and the targets of its calls through pointers
+IMAGES = {
+    "nte-selftest": (["nte-selftest.elf.dir", "nte_selftest.dir", "nte_board.dir", "nte_f32.dir"],
+                     ["emit_semihost", "mark"]),
+    "nte-board": (["nte-board.elf.dir", "nte_board.dir", "nte_node.dir", "nte_can.dir",
+                   "nte_f32.dir"], ["nte_slcan_receive", "nte_slcan_send", "port_now_us"]),
+}
+
+
+def call_graph(build: pathlib.Path, dirs: list[str], indirect: list[str]
+               ) -> tuple[dict[str, int], dict[str, set[str]]]:
+    frame: dict[str, int] = {}
+    calls: dict[str, set[str]] = {}
+    node_re = re.compile(r'node: \{ title: "([^"]+)" label: "[^"]*?\\n[^"]*?\\n(\d+) bytes')
+    edge_re = re.compile(r'edge: \{ sourcename: "([^"]+)" targetname: "([^"]+)"')
+    cis = [ci for d in dirs for ci in (build / "CMakeFiles" / d).rglob("*.ci")]
+    for ci in cis:
+        text = ci.read_text()
+        for name, nbytes in node_re.findall(text):
+            frame[name] = max(frame.get(name, 0), int(nbytes))
+        for src, dst in edge_re.findall(text):
+            calls.setdefault(src, set()).add(dst)
+    # calls through pointers: every known target (static functions carry "file:" prefixes)
+    calls["__indirect_call"] = {f for f in frame if f.split(":")[-1] in indirect}
+    return frame, calls
+
+
+def worst_path(root: str, frame: dict[str, int], calls: dict[str, set[str]]
+               ) -> tuple[int, list[str], set[str]]:
+    memo: dict[str, tuple[int, list[str]]] = {}
+    unknown: set[str] = set()
+
+    def go(fn: str, seen: frozenset[str]) -> tuple[int, list[str]]:
+        if fn in memo:
+            return memo[fn]
+        if fn in seen:
+            raise RuntimeError(f"recursion through {fn}")
+        if fn not in frame:
+            unknown.add(fn)
+        best = (0, [])
+        for callee in calls.get(fn, ()):
+            cand = go(callee, seen | {fn})
+            if cand[0] > best[0]:
+                best = cand
+        res = (frame.get(fn, 0) + best[0], [fn] + best[1])
+        memo[fn] = res
+        return res
+
+    total, path = go(root, frozenset())
+    return total, path, unknown
+
+
+def run_selftest(elf: pathlib.Path) -> dict[str, int]:
+    r = subprocess.run(QEMU + ["-kernel", str(elf)], capture_output=True, text=True,
+                       timeout=300, stdin=subprocess.DEVNULL)
+    if r.returncode != 0:
+        sys.exit(f"self-test failed under QEMU ({r.returncode}):\n{r.stderr[-2000:]}")
+    m = re.search(r"^F stack_used=(\d+) stack_size=(\d+) sizeof_nte_t=(\d+)$", r.stderr, re.M)
+    if m is None:
+        sys.exit("no F line in the self-test output")
+    steps = {}
+    for ln in r.stderr.splitlines():
+        if ln.startswith("R "):
+            steps[ln.split()[1]] = ln
+    return {"stack_used": int(m.group(1)), "stack_size": int(m.group(2)),
+            "sizeof_nte_t": int(m.group(3)), "runs": steps}  # type: ignore[dict-item]
+
+
+def count_insns(elf: pathlib.Path) -> list[int]:
+    """Instructions between each nte_mark_step_begin and nte_mark_step_end (QEMU traces every
+    executed instruction with -singlestep -d exec,nochain; the trace is streamed, not kept)."""
+    sym = symbols(elf)
+    begin = sym["nte_mark_step_begin"] & ~1
+    end = sym["nte_mark_step_end"] & ~1
+    p = subprocess.Popen(QEMU + ["-singlestep", "-d", "exec,nochain", "-D", "/dev/stdout",
+                                 "-kernel", str(elf)], stdout=subprocess.PIPE,
+                         stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL)
+    pc_re = re.compile(rb"/([0-9a-f]{8})/")
+    counts: list[int] = []
+    n = -1
+    assert p.stdout is not None
+    try:
+        for ln in p.stdout:
+            m = pc_re.search(ln)
+            if m is None:
+                continue
+            pc = int(m.group(1), 16)
+            if pc == begin:
+                n = 0
+            elif pc == end:
+                if n >= 0:
+                    counts.append(n)
+                n = -1
+            elif n >= 0:
+                n += 1
+    finally:
+        if p.poll() is None:
+            p.kill()
+        p.wait()
+    return counts
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--build", default=str(ROOT / "build" / "m4"))
+    ap.add_argument("--insns", action="store_true", help="also count instructions per step")
+    a = ap.parse_args()
+    build = pathlib.Path(a.build)
+    bindir = build / "bin"
+    print("# Board image figures (mps2-an386, Cortex-M4F, arm-none-eabi-gcc -O2, newlib-nano)")
+    for name in ("nte-selftest", "nte-board"):
+        elf = bindir / f"{name}.elf"
+        sec = size(elf)
+        sym = symbols(elf)
+        stack = sym["__stack_top"] - sym["__stack_bottom"]
+        text = sec.get(".text", 0) + sec.get(".ARM.exidx", 0)
+        data = sec.get(".data", 0)
+        bss = sec.get(".bss", 0)
+        print(f"{name}.elf: flash {text + data} B (text {text}, data {data}); "
+              f"RAM {data + bss} B static (data {data}, bss {bss}) + stack {stack} B")
+        frame, calls = call_graph(build, *IMAGES[name])
+        total, path, unknown = worst_path("main", frame, calls)
+        path = [f.split(":")[-1] for f in path]
+        ext = sorted(u for u in unknown if u != "__indirect_call")
+        print(f"  worst-case stack from -fstack-usage (static call graph from main): {total} B")
+        print(f"    path: {' > '.join(path)}")
+        print(f"    not counted: library functions without stack data ({', '.join(ext)}), "
+              "and an exception frame (SysTick: 104 B with the FPU context); calls through "
+              f"pointers counted as any of {', '.join(IMAGES[name][1])}")
+    st = run_selftest(bindir / "nte-selftest.elf")
+    print(f"sizeof(nte_t) on the M4: {st['sizeof_nte_t']} B (NTE_ROBUST_BUFFER_LEN default)")
+    print(f"painted-stack high-water mark after the self-test (3 runs, incl. one robust "
+          f"refinement): {st['stack_used']} B of {st['stack_size']} B")
+    if a.insns:
+        counts = count_insns(bindir / "nte-selftest.elf")
+        runs = st["runs"]  # type: ignore[assignment]
+        n = len(counts) // max(1, len(runs))
+        for r, label in sorted(runs.items()):  # type: ignore[union-attr]
+            c = counts[int(r) * n:(int(r) + 1) * n]
+            if not c:
+                continue
+            srt = sorted(c)
+            what = label.split(" ", 2)[2].split(" sizeof")[0]
+            print(f"instructions per nte_step, {what}: median {srt[len(srt) // 2]}, "
+                  f"min {srt[0]}, max {srt[-1]}, second largest {srt[-2]} ({len(c)} steps; "
+                  f"{srt[-1] / 25e3:.1f} ms at 25 MHz and 1 instruction per cycle)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
