@@ -551,7 +551,6 @@ void nte_frames_clock_reset(nte_frames_clock_t* self)
 
 uint32_t nte_frames_clock_unwrap(nte_frames_clock_t* self, uint16_t raw)
 {
-    uint16_t diff;
     if (self == NULL) {
         return 0u;
     }
@@ -559,7 +558,7 @@ uint32_t nte_frames_clock_unwrap(nte_frames_clock_t* self, uint16_t raw)
         self->started = true;
         self->ticks = (uint32_t)raw + 65536u;
     } else {
-        diff = (uint16_t)(raw - self->last_raw);
+        const uint16_t diff = (uint16_t)(raw - self->last_raw);
         if (diff < 0x8000u) {
             self->ticks += diff;
         } else {
