@@ -193,3 +193,147 @@ def test_generated_scenario_is_current() -> None:
     r = subprocess.run([sys.executable, str(PORT / "gen_scenario.py"), "--check"], cwd=ROOT,
                        capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
+
+
+# ------------------------------------------------------------------ the node over SLCAN
+def _free_port() -> int:
+    import socket
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class _Slcan:
+    """A minimal SLCAN host on a TCP socket (what python-can's slcan interface writes; no
+    pyserial needed): commands, 'tIIIL<data>\\r' frames out, received lines parsed."""
+
+    def __init__(self, port: int, deadline_s: float = 10.0) -> None:
+        import socket
+        import time
+        end = time.monotonic() + deadline_s
+        while True:
+            try:
+                self.sock = socket.create_connection(("127.0.0.1", port), timeout=1.0)
+                break
+            except OSError:
+                if time.monotonic() > end:
+                    raise
+                time.sleep(0.05)
+        self.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        self.buf = b""
+        self.lines: list[bytes] = []
+
+    def write(self, data: bytes) -> None:
+        self.sock.sendall(data)
+
+    def pump(self, timeout: float) -> None:
+        import socket
+        self.sock.settimeout(timeout)
+        try:
+            chunk = self.sock.recv(65536)
+        except socket.timeout:
+            return
+        if not chunk:
+            raise ConnectionError("QEMU closed the serial socket")
+        self.buf += chunk
+        while True:
+            cut = [i for i in (self.buf.find(b"\r"), self.buf.find(b"\a")) if i >= 0]
+            if not cut:
+                break
+            i = min(cut)
+            self.lines.append(self.buf[:i + 1])
+            self.buf = self.buf[i + 1:]
+
+    def frames(self):
+        import can
+        out = []
+        for ln in self.lines:
+            if ln.startswith(b"t") and ln.endswith(b"\r"):
+                ident, dlc = int(ln[1:4], 16), int(ln[4:5])
+                out.append(can.Message(arbitration_id=ident, is_extended_id=False,
+                                       data=bytes.fromhex(ln[5:5 + 2 * dlc].decode())))
+        return out
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+def test_board_node_over_slcan_matches_mirror(built, tmp_path: Path) -> None:
+    """nte-board.elf under QEMU, UART0 on a TCP socket: the SLCAN open sequence is answered
+    with '\\r', and the node's Estimate/Params frames for a short paper insertion equal the
+    Python node mirror's (host_bench/node_mirror.py) bit for bit."""
+    import time
+    can = pytest.importorskip("can")
+    pytest.importorskip("numpy")
+    sys.path.insert(0, str(ROOT))
+    from host_bench.cli import scenario_frames
+    from host_bench.dbc import NteDatabase
+    from host_bench.node_mirror import NodeMirror, compare, node_outputs
+
+    csv = tmp_path / "s.csv"
+    subprocess.run([sys.executable, "-m", "reference_py", "simulate", "--preset", "paper-10mms",
+                    "--depth", "8", "--dwell", "0.1", "--seed", "1", "--out", str(csv)],
+                   cwd=ROOT, check=True, stdout=subprocess.DEVNULL)
+    db = NteDatabase()
+    frames = [m for _t, m in scenario_frames(str(csv), db, 200.0)]
+    heartbeat = b"t%03X" % db.frame_id("Heartbeat")
+
+    port = _free_port()
+    args = ["qemu-system-arm", "-M", "mps2-an386", "-cpu", "cortex-m4", "-display", "none",
+            "-monitor", "none", "-serial",
+            f"tcp:127.0.0.1:{port},server=on,wait=off,nodelay=on", "-kernel", str(BOARD)]
+    log = tmp_path / "qemu.log"
+    with open(log, "w") as qlog:
+        qemu = subprocess.Popen(args, stdin=subprocess.DEVNULL, stdout=qlog, stderr=qlog,
+                                start_new_session=True)
+    link = None
+    try:
+        try:
+            link = _Slcan(port)
+        except OSError as e:
+            pytest.fail(f"cannot connect to QEMU's serial port ({e}); QEMU exit "
+                        f"{qemu.poll()}:\n{log.read_text()[-4000:]}")
+        # python-can's open sequence: C, S6, a bare CR, O twice -- five '\r' replies
+        link.write(b"C\rS6\r\rO\rO\r")
+        end = time.monotonic() + 10
+        while len(link.lines) < 5 and time.monotonic() < end:
+            link.pump(0.2)
+        assert link.lines[:5] == [b"\r"] * 5, (link.lines, log.read_text()[-2000:])
+        link.lines.clear()
+        for m in frames:
+            link.write(b"t%03X%d%s\r" % (m.arbitration_id, len(m.data),
+                                         bytes(m.data).hex().upper().encode()))
+            link.pump(0.0005)
+        # until no Estimate/Params frame for 1 s (heartbeats keep coming every 100 ms)
+        hard_end = time.monotonic() + 120
+        last_n, last_change = -1, time.monotonic()
+        while time.monotonic() - last_change < 1.0 and time.monotonic() < hard_end:
+            link.pump(0.1)
+            n = sum(1 for ln in link.lines if not ln.startswith(heartbeat))
+            if n != last_n:
+                last_n, last_change = n, time.monotonic()
+        assert qemu.poll() is None, f"QEMU stopped:\n{log.read_text()[-4000:]}"
+        assert b"\a" not in b"".join(link.lines), "the board answered BEL to a frame"
+        out = link.frames()
+        est, par, bad = node_outputs(db, out)
+        mirror = NodeMirror()
+        mirror.feed_all(frames)
+        res = compare(mirror, est, par)
+        assert bad == 0
+        forces = sum(1 for m in frames if m.arbitration_id == db.frame_id("Force"))
+        assert res["estimates_node"] == res["estimates_reference"] == forces, res
+        assert res["estimate_mismatches"] == 0, res
+        assert res["params_node"] == res["params_reference"], res
+        assert res["param_value_mismatches"] == 0 and res["param_std_mismatches"] == 0, res
+        print(f"board node over SLCAN: {res['estimates_node']} estimates, "
+              f"{res['params_node']} params frames, all equal to the mirror")
+    finally:
+        if link is not None:
+            link.close()
+        if qemu.poll() is None:
+            qemu.terminate()
+            try:
+                qemu.wait(10)
+            except subprocess.TimeoutExpired:
+                qemu.kill()
+                qemu.wait()
