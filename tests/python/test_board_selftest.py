@@ -30,10 +30,9 @@ QEMU_TIMEOUT_S = 120
 
 MISSING = [t for t in ("arm-none-eabi-gcc", "arm-none-eabi-nm", "qemu-system-arm")
            if shutil.which(t) is None]
-pytestmark = pytest.mark.skipif(
-    bool(MISSING), reason=f"{', '.join(MISSING)} not installed (apt-get install -y "
-    "--no-install-recommends gcc-arm-none-eabi libnewlib-arm-none-eabi qemu-system-arm; "
-    "`make board` does it)")
+SKIP_REASON = (f"{', '.join(MISSING)} not installed (apt-get install -y "
+               "--no-install-recommends gcc-arm-none-eabi libnewlib-arm-none-eabi "
+               "qemu-system-arm; `make board` does it)")
 
 
 def _run(args: list[str]) -> None:
@@ -44,6 +43,8 @@ def _run(args: list[str]) -> None:
 
 @pytest.fixture(scope="module")
 def built() -> None:
+    if MISSING:
+        pytest.skip(SKIP_REASON)
     if os.environ.get("NTE_BOARD_NO_BUILD") != "1":
         _run(["cmake", "-S", str(PORT), "-B", str(M4),
               "-DCMAKE_TOOLCHAIN_FILE=cmake/arm-none-eabi.cmake"])
@@ -337,3 +338,44 @@ def test_board_node_over_slcan_matches_mirror(built, tmp_path: Path) -> None:
             except subprocess.TimeoutExpired:
                 qemu.kill()
                 qemu.wait()
+
+
+@pytest.mark.parametrize("run,args", [
+    (0, ["--model", "1"]),
+    (1, ["--model", "2", "--schedule", "rotate"]),
+    (2, ["--model", "2", "--estimator", "robust"]),
+], ids=["model1-bank-all", "model2-bank-rotate", "model2-robust"])
+def test_selftest_equals_float32_reference(host_lines, tmp_path: Path, run: int,
+                                           args: list[str]) -> None:
+    """The self-test's lines (= the board's, bit for bit) equal `nte-ref estimate --precision
+    float32` on the scenario gen_scenario.py was generated from: every output, every bit."""
+    np = pytest.importorskip("numpy")
+    csv = tmp_path / "s.csv"
+    est = tmp_path / "e.csv"
+    subprocess.run([sys.executable, "-m", "reference_py", "simulate", "--preset", "paper-10mms",
+                    "--depth", "8", "--dwell", "0.1", "--rate", "200", "--noise", "0.002",
+                    "--seed", "1", "--out", str(csv)], cwd=ROOT, check=True,
+                   stdout=subprocess.DEVNULL)
+    subprocess.run([sys.executable, "-m", "reference_py", "estimate", str(csv),
+                    "--precision", "float32", *args, "--out", str(est)], cwd=ROOT, check=True,
+                   stdout=subprocess.DEVNULL)
+    ref_rows = [r.split(",") for r in est.read_text().splitlines()[1:]]
+    mine = [ln.split() for ln in host_lines if ln.startswith(f"S {run} ")]
+    assert len(mine) == len(ref_rows)
+
+    def bits(x: str) -> str:
+        return "%08x" % int(np.array([float(x)], dtype=np.float32).view(np.uint32)[0])
+
+    robust = "robust" in args
+    for k, (m, r) in enumerate(zip(mine, ref_rows)):
+        # S run k force z innov nis status confidence n {id value sd}
+        n = int(m[9])
+        got = [m[3], m[4], m[5], "%d" % int(m[7], 16)]
+        want = [bits(r[1]), bits(r[2]), bits(r[3]), r[4]]
+        for j in range(n):
+            got += [m[11 + 3 * j], m[12 + 3 * j]]
+            want += [bits(r[5 + 2 * j]), bits(r[6 + 2 * j])]
+        if robust:
+            got.append(m[8])
+            want.append(bits(r[5 + 2 * n]))
+        assert got == want, f"run {run} sample {k}:\n  C   {got}\n  ref {want}"
