@@ -13,9 +13,11 @@ DEMO_DIR := out/demo
 
 # Debian packages the build and the tests need
 APT_PACKAGES := python3 python3-venv python3-dev gcc make cmake libcmocka-dev cppcheck \
-                user-mode-linux kmod can-utils iproute2
+                user-mode-linux kmod can-utils iproute2 \
+                gcc-arm-none-eabi libnewlib-arm-none-eabi qemu-system-arm \
+                clang clang-tidy libclang-rt-14-dev
 
-.PHONY: all build demo test deps venv clean
+.PHONY: all build board board-figures demo test deps venv clean
 
 all: build
 
@@ -41,6 +43,17 @@ build: deps
 	cmake -S . -B $(BUILD) -DCMAKE_BUILD_TYPE=Release > /dev/null
 	cmake --build $(BUILD) -j2
 
+# the Cortex-M4F board image (build/m4/bin/nte-board.elf, .bin, .hex) and the self-test, plus
+# their host twin (build/m4-host)
+board: deps
+	cmake -S firmware/port/mps2-an386 -B build/m4 -DCMAKE_TOOLCHAIN_FILE=cmake/arm-none-eabi.cmake > /dev/null
+	cmake --build build/m4 -j2
+	cmake -S firmware/port/mps2-an386 -B build/m4-host > /dev/null
+	cmake --build build/m4-host -j2
+
+board-figures: venv board
+	$(PY) firmware/port/mps2-an386/figures.py --insns
+
 # the whole chain: the C node on a real vcan0 (a user-mode Linux kernel when the host has no CAN),
 # fed by the host bench with a paper insertion, compared bit for bit with the reference
 demo: venv build
@@ -50,7 +63,7 @@ demo: venv build
 	  --preset paper-10mms --init-seed 7 --init-factor 5 --out $(DEMO_DIR)/robust.csv \
 	  --plot $(DEMO_DIR)/robust.png
 
-test: venv build
+test: venv build board
 	cd $(BUILD) && ctest --output-on-failure
 	$(PY) -m pytest -q -n 2 --dist loadfile tests
 
