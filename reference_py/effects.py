@@ -14,9 +14,12 @@ effect adds columns (linear parameters) and/or changes the inputs the base model
 parameters):
 
 ``dwell_relaxation`` (viscoelastic stress relaxation while the needle rests)
-    f += -sum_k R_k,i (1 - exp(-(t - t0)/tau_k)),  k in {fast, slow}, during each dwell of trial i
-    (t0 = start of the dwell).  Parameters: tau_fast_s in [0.05, 1] s, tau_slow_s in [1, 30] s,
-    R_fast,i, R_slow,i in N (per trial: the force that relaxes depends on the dwell depth).
+    f += H_i - sum_k R_k,i (1 - exp(-(t - t0)/tau_k)),  k in {fast, slow}, during each dwell of
+    trial i (t0 = start of the dwell).  H_i is the stress the tissue still holds when the needle
+    stops (the base model drops its friction the instant s = 0; measured force is continuous at
+    the stop), the R terms its two-element Prony relaxation.  Parameters: tau_fast_s in
+    [0.05, 1] s, tau_slow_s in [1, 30] s, H_i, R_fast,i, R_slow,i in N (per trial: the force that
+    relaxes depends on the dwell depth).
     Reported drop fraction = force lost by the end of the dwell / force at its start.
 ``reversal_presliding`` (friction needs travel to build up after a reversal: Dahl-like pre-sliding)
     s -> s (1 - exp(-d/delta)), d = tissue depth travelled (mm) since the direction last changed.
@@ -258,7 +261,8 @@ def design(trials: list[TrialGrid], effects: tuple[str, ...], nl: dict[str, Arra
     if "sensor_drift" in effects:
         labels.append("drift")
     if "dwell_relaxation" in effects:
-        labels += [f"relax_fast[{i}]" for i in range(n_tr)] + \
+        labels += [f"relax_hold[{i}]" for i in range(n_tr)] + \
+                  [f"relax_fast[{i}]" for i in range(n_tr)] + \
                   [f"relax_slow[{i}]" for i in range(n_tr)]
     col = {name: j for j, name in enumerate(labels)}
     blocks = []
@@ -290,6 +294,10 @@ def design(trials: list[TrialGrid], effects: tuple[str, ...], nl: dict[str, Arra
         if "sensor_drift" in effects:
             m[:, col["drift"]] = tr.t_s - tr.t_mid
         if "dwell_relaxation" in effects:
+            hold = np.zeros(n)
+            for i0, i1 in tr.dwells:
+                hold[i0:i1] = 1.0
+            m[:, col[f"relax_hold[{i}]"]] = hold
             for k, tau_name in (("fast", "tau_fast_s"), ("slow", "tau_slow_s")):
                 tau = float(nl[tau_name])
                 c = np.zeros(n)
@@ -333,8 +341,8 @@ def simulate_extended(params: ParamSet, effect_params: dict[str, dict[str, float
 
     ``effect_params`` maps effect name -> its parameters by the names used in :func:`design`
     (nonlinear: EFFECT_NL names; linear: column labels without the trial index), e.g.
-    ``{"dwell_relaxation": {"tau_fast_s": .3, "tau_slow_s": 3, "relax_fast": .02,
-    "relax_slow": .05}}``.  Depth is measured from the surface (surface = 0).
+    ``{"dwell_relaxation": {"tau_fast_s": .3, "tau_slow_s": 3, "relax_hold": .05,
+    "relax_fast": .02, "relax_slow": .05}}``.  Depth is measured from the surface (surface = 0).
     """
     effects = tuple(e for e in VOCABULARY if e in effect_params)
     nl, coef = from_paramset(params, 1)

@@ -32,7 +32,7 @@ class Fit:
     resid: Array
 
 
-def solve_linear(m: Array, y: Array) -> Array:
+def solve_linear(m: Array, y: Array, rcond: float = 1e-12) -> Array:
     """Least-squares coefficients with column scaling (columns may be all zero).
 
     Solved through the small Gram matrix of the unit-scaled columns: LAPACK's tall least squares
@@ -43,7 +43,7 @@ def solve_linear(m: Array, y: Array) -> Array:
     scale = np.where(norms > 0, 1.0 / np.where(norms > 0, norms, 1.0), 0.0)
     ms = m * scale
     gram = ms.T @ ms
-    coef, *_ = np.linalg.lstsq(gram, ms.T @ y, rcond=1e-12)
+    coef, *_ = np.linalg.lstsq(gram, ms.T @ y, rcond=rcond)
     return coef * scale
 
 

@@ -20,6 +20,11 @@ from .fit import Fit, solve_linear
 
 BLOCK_S = 0.5
 N_FOLDS = 3
+#: pseudo-inverse cut-off (on the Gram matrix of unit columns) of the held-out refits: a short dwell
+#: split into blocks leaves near-collinear per-trial relaxation columns (hold, fast, slow) on a
+#: second or two of training data, and an unregularised solve extrapolates them wildly into the
+#: held-out block (held-out errors 100x the fit's).  1e-8 here is a 1e-4 cut on the columns.
+HELDOUT_RCOND = 1e-8
 
 
 def lag1(resid: Array, bounds: list[tuple[int, int]]) -> float:
@@ -65,7 +70,7 @@ def heldout_sse(grids: list[TrialGrid], y: Array, f: Fit, masks: list[Array],
     total = 0.0
     for mask in masks:
         train = ~mask
-        c = solve_linear(m[train], y[train])
+        c = solve_linear(m[train], y[train], HELDOUT_RCOND)
         pred = m @ c
         r = y - pred
         for i in range(len(grids)):
@@ -77,7 +82,7 @@ def heldout_sse(grids: list[TrialGrid], y: Array, f: Fit, masks: list[Array],
             if not (train[starts[i]:starts[i + 1]]).any():
                 cols = own_cols[i]
                 sub = m[np.ix_(rows, cols)]
-                r_i = r[rows] - sub @ solve_linear(sub, r[rows])
+                r_i = r[rows] - sub @ solve_linear(sub, r[rows], HELDOUT_RCOND)
             else:
                 r_i = r[rows]
             total += float(r_i @ r_i)

@@ -2,11 +2,11 @@
 
 Simulates measured-looking insertions from the base force model plus hidden effects, written here
 independently of reference_py/effects.py and deliberately not in the library's functional forms
-where the physics allows another (two-exponential relaxation, tanh pre-sliding, power-law layer
-ramp with a finite drop, tissue motion as a sinusoidal displacement).  Magnitudes are drawn from
-the ranges of model-notes §8.  Recordings are messy: the stage meets the tissue 2-10 mm after
-zero, samples arrive at 76-100 Hz with occasional gaps, the force carries a tare offset, and the
-velocity column is present in only half of the trials.
+where the physics allows another (two-exponential relaxation of the force held at the stop, tanh
+pre-sliding, power-law layer ramp with a finite drop, tissue motion as a sinusoidal displacement).
+Magnitudes are drawn from the ranges of model-notes §8.  Recordings are messy: the stage meets the
+tissue 2-10 mm after zero, samples arrive at 76-100 Hz with occasional gaps, the force carries a
+tare offset, and the velocity column is present in only half of the trials.
 """
 from __future__ import annotations
 
@@ -159,7 +159,12 @@ def make_case(effects: tuple[str, ...], seed: int) -> Case:
                 tau_t = t[i0:i1] - t[i0]
                 shape = sum(wk / (1 - np.exp(-5.0 / tk)) * (1 - np.exp(-tau_t / tk))
                             for wk, tk in zip(weights, taus))
-                f[i0:i1] -= f[i0] * relax_drop5 * shape
+                # model-notes §8.1: the *measured* force at the stop decays by relax_drop5 in 5 s.
+                # The tissue holds the stress it carried when the needle stopped (the base model
+                # drops its friction term the instant s = 0), then relaxes: the force stays
+                # continuous at the stop and loses relax_drop5 of it within 5 s.
+                f_stop = f[i0 - 1] if i0 > 0 else f[i0]
+                f[i0:i1] = f_stop * (1.0 - relax_drop5 * shape)
         if "layer_puncture" in effects:
             first = (np.maximum.accumulate(li) <= layer_depth + 0.2) & (v > 0) & (li > 0)
             up = np.clip((li - (layer_depth - layer_w)) / layer_w, 0.0, 1.0) ** 1.5
