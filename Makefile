@@ -65,7 +65,7 @@ demo: venv build
 
 test: venv build board
 	cd $(BUILD) && ctest --output-on-failure
-	$(PY) -m pytest -q -n 2 --dist loadfile tests
+	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q -n 2 --dist loadfile tests
 
 clean:
 	rm -rf build out
