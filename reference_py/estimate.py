@@ -9,7 +9,7 @@ from .bank import FilterBank
 from .config import EstimatorConfig, profile_config
 from .csvio import Trial, format_real, time_us
 from .fmath import Array, real_for
-from .params import IDX, MODEL_PARAMS, Preset
+from .params import MODEL_PARAMS, Preset
 from .starts import start_values
 
 ESTIMATORS = ("bank", "robust")
@@ -100,4 +100,4 @@ def estimate_csv_lines(run: EstimateRun) -> list[str]:
     return lines
 
 
-__all__ = ["EstimateRun", "run_estimate", "estimate_csv_lines", "make_config", "IDX"]
+__all__ = ["EstimateRun", "run_estimate", "estimate_csv_lines", "make_config"]

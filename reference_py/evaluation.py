@@ -21,7 +21,7 @@ from .bank import FilterBank
 from .config import EstimatorConfig
 from .fmath import Array, Real
 from . import starts
-from .params import IDX, MODEL_PARAMS, PARAM_NAMES, ParamSet, Preset
+from .params import MODEL_PARAMS, PARAM_NAMES, ParamSet, Preset
 from .simulate import simulate_force
 from .trajectory import TrajectorySpec, lspb_profile
 

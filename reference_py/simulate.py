@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from .fmath import F64, Array, Real
-from .model import clamp_depth, depth_terms, exact_sign, output, smooth_sign
+from .model import Theta, clamp_depth, depth_terms, exact_sign, output, smooth_sign
 from .params import PARAM_NAMES, ParamSet
 
 SIM_SUBSTEPS = 10
@@ -81,7 +81,6 @@ def _theta_direct(R: Real, cols: list[Array]):  # type: ignore[no-untyped-def]
     """Theta from physical values (u = 0 with the values themselves as nominal)."""
     f2 = cols[PARAM_NAMES.index("f2")]
     f1 = cols[PARAM_NAMES.index("f1")]
-    from .model import Theta
     zero = R.c(0.0)
     kappa = np.where(f2 < zero, R.c(1.0), zero)
     mkf2 = -(kappa * f2)
