@@ -2,6 +2,7 @@
 #   make demo   - simulate a paper insertion, run the estimator on it, print and plot the result
 #   make test   - every test: C unit tests (ctest) and the Python suite (pytest)
 #   make        - build the firmware for the host (build/host)
+#   make board  - the Cortex-M4F board images (build/m4)
 # Each target installs what it needs (Debian packages, the .venv) and is quick when it is there.
 
 SHELL := /bin/bash
@@ -17,7 +18,7 @@ APT_PACKAGES := python3 python3-venv python3-dev gcc make cmake libcmocka-dev cp
                 gcc-arm-none-eabi libnewlib-arm-none-eabi qemu-system-arm \
                 clang clang-tidy libclang-rt-14-dev
 
-.PHONY: all build board board-figures demo test deps venv clean
+.PHONY: all build board board-figures products clang demo test deps venv clean
 
 all: build
 
@@ -43,13 +44,28 @@ build: deps
 	cmake -S . -B $(BUILD) -DCMAKE_BUILD_TYPE=Release > /dev/null
 	cmake --build $(BUILD) -j2
 
-# the Cortex-M4F board image (build/m4/bin/nte-board.elf, .bin, .hex) and the self-test, plus
-# their host twin (build/m4-host)
+# the Cortex-M4F board image (build/m4/bin/nte-board.elf, .bin, .hex) and the self-test (the
+# self-test's host twin, nte-selftest-host, is part of build/host)
 board: deps
-	cmake -S firmware/port/mps2-an386 -B build/m4 -DCMAKE_TOOLCHAIN_FILE=cmake/arm-none-eabi.cmake > /dev/null
+	cmake -S . -B build/m4 -DCMAKE_TOOLCHAIN_FILE=cmake/arm-none-eabi.cmake > /dev/null
 	cmake --build build/m4 -j2
-	cmake -S firmware/port/mps2-an386 -B build/m4-host > /dev/null
-	cmake --build build/m4-host -j2
+
+# CI: what users need builds without the tests (and without cmocka), from a fresh tree: the
+# host programs and the Linux node, and the board image
+products: deps
+	rm -rf build/products
+	cmake -S . -B build/products/host -DCMAKE_BUILD_TYPE=Release -DNTE_BUILD_TESTS=OFF > /dev/null
+	! grep -q '^CMOCKA_' build/products/host/CMakeCache.txt
+	cmake --build build/products/host -j2 --target nte-node nte-run
+	cmake -S . -B build/products/m4 -DCMAKE_TOOLCHAIN_FILE=cmake/arm-none-eabi.cmake \
+	  -DNTE_BUILD_TESTS=OFF > /dev/null
+	cmake --build build/products/m4 -j2 --target nte-board
+
+# CI: the same tree with clang (same strict flags, -Werror), and its C tests
+clang: deps
+	cmake -S . -B build/clang -DCMAKE_C_COMPILER=clang -DCMAKE_BUILD_TYPE=Release > /dev/null
+	cmake --build build/clang -j2
+	cd build/clang && ctest --output-on-failure -j2
 
 board-figures: venv board
 	$(PY) firmware/port/mps2-an386/figures.py --insns
@@ -63,7 +79,7 @@ demo: venv build
 	  --preset paper-10mms --init-seed 7 --init-factor 5 --out $(DEMO_DIR)/robust.csv \
 	  --plot $(DEMO_DIR)/robust.png
 
-test: venv build board
+test: venv build board products clang
 	cd $(BUILD) && ctest --output-on-failure
 	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q -n 2 --dist loadfile tests
 

@@ -1,7 +1,9 @@
 # Toolchain file: bare-metal Arm Cortex-M4F (hard-float ABI), GNU Arm Embedded (Debian package
-# gcc-arm-none-eabi, with libnewlib-arm-none-eabi for newlib-nano).
+# gcc-arm-none-eabi, with libnewlib-arm-none-eabi for newlib-nano).  With it the top-level
+# project builds the board images (firmware/port/mps2-an386); tests are off in a cross build:
 #
-#   cmake -S firmware/port/mps2-an386 -B build/m4 -DCMAKE_TOOLCHAIN_FILE=cmake/arm-none-eabi.cmake
+#   cmake -S . -B build/m4 -DCMAKE_TOOLCHAIN_FILE=cmake/arm-none-eabi.cmake
+#   cmake --build build/m4 -j2
 #
 # -ffp-contract=off on every target: fused multiply-adds would change the float bits
 # (the library is bit-identical to the float32 reference only without them).
@@ -18,9 +20,19 @@ find_program(NTE_ARM_NM arm-none-eabi-nm)
 set(CMAKE_TRY_COMPILE_TARGET_TYPE STATIC_LIBRARY)
 
 set(NTE_M4_FLAGS "-mcpu=cortex-m4 -mthumb -mfpu=fpv4-sp-d16 -mfloat-abi=hard -ffp-contract=off")
-set(CMAKE_C_FLAGS_INIT "${NTE_M4_FLAGS} -ffunction-sections -fdata-sections")
+# -fstack-usage and -fcallgraph-info=su: per-function stack and the call graph of every object
+# (.su, .ci), from which figures.py computes the worst-case stack.
+set(CMAKE_C_FLAGS_INIT
+    "${NTE_M4_FLAGS} -ffunction-sections -fdata-sections -fstack-usage -fcallgraph-info=su")
+# -O2 (not CMake's -O3 -DNDEBUG): the size, stack and cycle figures are of this build
+set(CMAKE_C_FLAGS_RELEASE "-O2" CACHE STRING "C flags of the Release board build")
 set(CMAKE_ASM_FLAGS_INIT "${NTE_M4_FLAGS}")
 set(CMAKE_EXE_LINKER_FLAGS_INIT "${NTE_M4_FLAGS} --specs=nano.specs -nostartfiles -Wl,--gc-sections")
+# newlib-nano's libc, libm and libgcc last on every link line (sqrtf; the compiler's helpers)
+set(CMAKE_C_STANDARD_LIBRARIES_INIT "-Wl,--start-group -lm -lc_nano -lgcc -Wl,--end-group")
+if(NOT CMAKE_BUILD_TYPE)
+  set(CMAKE_BUILD_TYPE Release CACHE STRING "Build type (the board image: Release, -O2)")
+endif()
 
 # Search the host for programs only; libraries and headers come from the toolchain.
 set(CMAKE_FIND_ROOT_PATH_MODE_PROGRAM NEVER)

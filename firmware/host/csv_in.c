@@ -218,7 +218,7 @@ int nte_trial_read(const char* path, nte_trial_t* tr, char* err, const size_t es
     int fi = -1;
     int vi = -1;
     size_t cap = 0U;
-    double prev_t = -INFINITY;
+    double prev_t = -HUGE_VAL;
     int rc = 0;
     char* line = text;
     for (size_t lineno = 1U; (lineno <= n_lines) && (rc == 0); lineno++) {

@@ -41,7 +41,7 @@ static void spoil_r_zero(nte_config_t* c) { c->r_n2 = 0; }
 static void spoil_p0z(nte_config_t* c) { c->p0_z = -1; }
 static void spoil_gate(nte_config_t* c) { c->gate_sigma = 0; }
 static void spoil_floor(nte_config_t* c) { c->var_floor_u = 0; }
-static void spoil_qz(nte_config_t* c) { c->q_z = -1e-9f; }
+static void spoil_qz(nte_config_t* c) { c->q_z = (nte_real_t)-1e-9f; }
 static void spoil_qu_inf(nte_config_t* c) { c->q_u[2] = (nte_real_t)INFINITY; }
 static void spoil_vstill(nte_config_t* c) { c->v_still_mm_s = (nte_real_t)NAN; }
 static void spoil_dmin_nan(nte_config_t* c) { c->depth_min_mm = (nte_real_t)NAN; }
@@ -154,7 +154,7 @@ static void test_every_status_flag_and_counter(void** state)
 
     /* REJECTED, by each cause: outputs hold, counters count */
     const nte_output_t before = est.last;
-    const double bad[3][3] = {{NAN, 10, 0.1}, {depth, INFINITY, 0.1}, {depth, 10, -INFINITY}};
+    const double bad[3][3] = {{(double)NAN, 10, 0.1}, {depth, (double)INFINITY, 0.1}, {depth, 10, -(double)INFINITY}};
     for (int i = 0; i < 3; i++) {
         s = sample(t, bad[i][0], bad[i][1], bad[i][2]);
         nte_step(&est, &s, &o);

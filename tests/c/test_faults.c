@@ -82,15 +82,15 @@ static void run(const fault_t fault, const nte_schedule_t sch, result_t* r)
         }
         if (k == FAULT_K) {
             switch (fault) {
-            case fault_nan: f = NAN; break;
-            case fault_inf: l = INFINITY; break;
+            case fault_nan: f = (double)NAN; break;
+            case fault_inf: l = (double)INFINITY; break;
             case fault_huge: f = 1e30; break;
             case fault_negative_dt: t = t_s[k - 1] - 0.5; break;
             default: break;
             }
         }
         if (fault == fault_inf && k == FAULT_K + 1) {
-            v = -INFINITY;
+            v = -(double)INFINITY;
         }
         if (fault == fault_huge && k == FAULT_K + 1) {
             f = 40.0; /* in range, absurd: gated */

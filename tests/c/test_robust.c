@@ -56,7 +56,7 @@ static void test_ldlt_table(void** state)
         /* negative last pivot of a 3x3 */
         {3, {{1, 0, 0}, {0, 1, 0}, {0, 0, -1}}, {1, 1, 1}, {0, 0, 0}, false},
         /* NaN on the diagonal: the pivot test is false, not positive */
-        {1, {{NAN, 0, 0}, {0, 0, 0}, {0, 0, 0}}, {1, 0, 0}, {0, 0, 0}, false},
+        {1, {{(double)NAN, 0, 0}, {0, 0, 0}, {0, 0, 0}}, {1, 0, 0}, {0, 0, 0}, false},
     };
     for (size_t c = 0; c < sizeof cases / sizeof cases[0]; c++) {
         nte_robust_mat_t M;

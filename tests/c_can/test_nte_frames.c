@@ -325,11 +325,11 @@ static void test_params(void** state)
         assert_int_equal(nte_frames_encode_param(&tiny, &l.tx, l.frame), nte_frames_ok);
         assert_int_equal(nte_frames_decode_param(&l.rx, l.frame, 8, &out, NULL, NULL),
                          nte_frames_ok);
-        assert_near(log10(out.std), -32.767, 1e-3);
+        assert_near(log10((double)out.std), -32.767, 1e-3);
         assert_int_equal(nte_frames_encode_param(&huge, &l.tx, l.frame), nte_frames_ok);
         assert_int_equal(nte_frames_decode_param(&l.rx, l.frame, 8, &out, NULL, NULL),
                          nte_frames_ok);
-        assert_near(log10(out.std), 32.767, 1e-3);
+        assert_near(log10((double)out.std), 32.767, 1e-3);
     }
     /* a received index 7..15 is a selector error */
     memset(l.frame, 0, 8);

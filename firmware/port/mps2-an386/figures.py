@@ -7,7 +7,7 @@ the marker functions nte_mark_step_begin/end; slow: about a minute).
 
     python3 firmware/port/mps2-an386/figures.py [--build build/m4] [--insns]
 
-Needs the cross build (cmake -S firmware/port/mps2-an386 -B build/m4
+Needs the cross build (`make board`, i.e. cmake -S . -B build/m4
 -DCMAKE_TOOLCHAIN_FILE=cmake/arm-none-eabi.cmake && cmake --build build/m4) and
 qemu-system-arm.
 """
@@ -56,7 +56,8 @@ def call_graph(build: pathlib.Path, dirs: list[str], indirect: list[str]
     calls: dict[str, set[str]] = {}
     node_re = re.compile(r'node: \{ title: "([^"]+)" label: "[^"]*?\\n[^"]*?\\n(\d+) bytes')
     edge_re = re.compile(r'edge: \{ sourcename: "([^"]+)" targetname: "([^"]+)"')
-    cis = [ci for d in dirs for ci in (build / "CMakeFiles" / d).rglob("*.ci")]
+    cis = [ci for ci in sorted(build.rglob("*.ci"))
+           if any(part in dirs for part in ci.relative_to(build).parts)]
     for ci in cis:
         text = ci.read_text()
         for name, nbytes in node_re.findall(text):

@@ -3,6 +3,6 @@
 #   firmware/port/mps2-an386/figures.sh [--insns]
 set -eu
 cd "$(dirname "$0")/../../.."
-cmake -S firmware/port/mps2-an386 -B build/m4 -DCMAKE_TOOLCHAIN_FILE=cmake/arm-none-eabi.cmake >/dev/null
+cmake -S . -B build/m4 -DCMAKE_TOOLCHAIN_FILE=cmake/arm-none-eabi.cmake >/dev/null
 cmake --build build/m4 -j2 >/dev/null
 exec python3 firmware/port/mps2-an386/figures.py --build build/m4 "$@"
