@@ -125,12 +125,45 @@ def test_selftest_exercises_the_refinement(host_lines) -> None:
     assert len(refined) == 1
 
 
+def _figures():
+    import importlib.util
+    spec = importlib.util.spec_from_file_location("nte_board_figures", PORT / "figures.py")
+    mod = importlib.util.module_from_spec(spec)
+    assert spec.loader is not None
+    spec.loader.exec_module(mod)
+    return mod
+
+
+FLASH_BUDGET_B = 32 * 1024
+RAM_BUDGET_B = 8 * 1024
+
+
 def test_stack_high_water_mark(board_run) -> None:
+    """The painted high-water mark of the self-test (incl. a robust refinement) is within the
+    call graph's bound, and the stack region holds it plus an exception frame and the deepest
+    handler with the stated margin (mps2.ld: >= 20 %)."""
     _status, _out, err = board_run
     m = re.search(r"^F stack_used=(\d+) stack_size=(\d+) sizeof_nte_t=(\d+)$", err, re.M)
     assert m, err[-2000:]
     used, size = int(m.group(1)), int(m.group(2))
-    assert 0 < used < size // 2, f"stack high-water {used} of {size} bytes"
+    fig = _figures()
+    f = fig.image_figures(M4, "nte-selftest")
+    assert 0 < used <= f["main_stack"], (used, f["main_stack"])
+    worst = used + fig.EXCEPTION_FRAME_B + f["handler_stack"]
+    assert size == f["stack"]
+    assert size >= fig.STACK_MARGIN * worst, f"stack {size} B for a worst case of {worst} B"
+
+
+@pytest.mark.parametrize("name", ["nte-board", "nte-selftest"])
+def test_image_fits_flash_and_ram_budget(built, name: str) -> None:
+    """arm-none-eabi-size: flash (text + data) <= 32 KiB and RAM (data + bss, the stack
+    region included) <= 8 KiB; the stack region >= 1.2 x the call graph's worst case."""
+    fig = _figures()
+    f = fig.image_figures(M4, name)
+    assert f["flash"] <= FLASH_BUDGET_B, f
+    assert f["ram"] <= RAM_BUDGET_B, f
+    worst = f["main_stack"] + fig.EXCEPTION_FRAME_B + f["handler_stack"]
+    assert f["stack"] >= fig.STACK_MARGIN * worst, f
 
 
 ALLOCATION = re.compile(r"^(malloc|free|calloc|realloc|_malloc_r|_free_r|_calloc_r|"
@@ -333,6 +366,56 @@ def test_board_node_over_slcan_matches_mirror(built, tmp_path: Path) -> None:
     finally:
         if link is not None:
             link.close()
+        if qemu.poll() is None:
+            qemu.terminate()
+            try:
+                qemu.wait(10)
+            except subprocess.TimeoutExpired:
+                qemu.kill()
+                qemu.wait()
+
+
+def test_bench_replay_over_python_can_slcan(built, tmp_path: Path) -> None:
+    """The user's command against the board under QEMU: `nte-bench replay --interface slcan
+    --channel socket://127.0.0.1:PORT` (python-can's slcan interface through pyserial) replays
+    a paper insertion, records the board node's frames and compares them with the node mirror:
+    every estimate and parameter bit-identical, exit status 0."""
+    pytest.importorskip("can")
+    pytest.importorskip("serial")  # pyserial: python-can's slcan interface opens the URL with it
+    csv = tmp_path / "s.csv"
+    subprocess.run([sys.executable, "-m", "reference_py", "simulate", "--preset", "paper-10mms",
+                    "--depth", "8", "--dwell", "0.1", "--seed", "1", "--out", str(csv)],
+                   cwd=ROOT, check=True, stdout=subprocess.DEVNULL)
+    port = _free_port()
+    args = ["qemu-system-arm", "-M", "mps2-an386", "-cpu", "cortex-m4", "-display", "none",
+            "-monitor", "none", "-serial",
+            f"tcp:127.0.0.1:{port},server=on,wait=off,nodelay=on", "-kernel", str(BOARD)]
+    log = tmp_path / "qemu.log"
+    with open(log, "w") as qlog:
+        qemu = subprocess.Popen(args, stdin=subprocess.DEVNULL, stdout=qlog, stderr=qlog,
+                                start_new_session=True)
+    try:
+        _Slcan(port).close()  # QEMU listens: the bench may connect
+        out = tmp_path / "out"
+        # --speed 0: as fast as the link takes them (the node's results depend on the frames'
+        # own timestamps); --tail: the board answers within well under a second of the last
+        # frame, 5 s leaves room on a loaded machine.
+        r = subprocess.run([sys.executable, "-m", "host_bench.cli", "replay", str(csv),
+                            "--interface", "slcan", "--channel", f"socket://127.0.0.1:{port}",
+                            "--depth-rate", "200", "--speed", "0", "--tail", "5", "--no-plot",
+                            "--no-progress", "--out", str(out)],
+                           cwd=ROOT, capture_output=True, text=True, timeout=180)
+        assert qemu.poll() is None, f"QEMU stopped:\n{log.read_text()[-4000:]}"
+        assert r.returncode == 0, r.stdout + r.stderr[-4000:]
+        import json
+        res = json.loads((out / "summary.json").read_text())
+        forces = sum(1 for ln in csv.read_text().splitlines()[1:] if ln.strip())
+        assert res["estimates_node"] == res["estimates_reference"] == forces, res
+        assert res["estimate_mismatches"] == 0 and res["output_e2e_errors"] == 0, res
+        assert res["params_node"] == res["params_reference"] > 0, res
+        assert res["param_value_mismatches"] == 0 and res["param_std_mismatches"] == 0, res
+        print(r.stdout)
+    finally:
         if qemu.poll() is None:
             qemu.terminate()
             try:
