@@ -68,7 +68,8 @@ clang: deps
 	cd build/clang && ctest --output-on-failure -j2
 
 board-figures: venv board
-	$(PY) firmware/port/mps2-an386/figures.py --insns
+	$(PY) firmware/port/mps2-an386/figures.py
+	$(PY) firmware/port/mps2-an386/cycles.py
 
 # the whole chain: the C node on a real vcan0 (a user-mode Linux kernel when the host has no CAN),
 # fed by the host bench with a paper insertion, compared bit for bit with the reference

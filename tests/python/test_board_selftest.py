@@ -111,11 +111,11 @@ def test_selftest_bit_identical_to_host(board_run, host_lines) -> None:
     assert len(board) == len(host_lines)
     for k, (b, h) in enumerate(zip(board, host_lines)):
         assert b == h, f"line {k + 1} differs:\n  board {b}\n  host  {h}"
-    # three runs over the whole scenario, every sample printed
+    # four runs over the whole scenario, every sample printed
     n_samples = int(re.search(r"#define NTE_SCENARIO_LEN (\d+)",
                               (PORT / "scenario.h").read_text()).group(1))
-    assert sum(1 for ln in board if ln.startswith("S ")) == 3 * n_samples
-    assert sum(1 for ln in board if ln.startswith("E ")) == 3
+    assert sum(1 for ln in board if ln.startswith("S ")) == 4 * n_samples
+    assert sum(1 for ln in board if ln.startswith("E ")) == 4
 
 
 def test_selftest_exercises_the_refinement(host_lines) -> None:
@@ -429,7 +429,8 @@ def test_bench_replay_over_python_can_slcan(built, tmp_path: Path) -> None:
     (0, ["--model", "1"]),
     (1, ["--model", "2", "--schedule", "rotate"]),
     (2, ["--model", "2", "--estimator", "robust"]),
-], ids=["model1-bank-all", "model2-bank-rotate", "model2-robust"])
+    (3, ["--model", "2", "--schedule", "all"]),
+], ids=["model1-bank-all", "model2-bank-rotate", "model2-robust", "model2-bank-all"])
 def test_selftest_equals_float32_reference(host_lines, tmp_path: Path, run: int,
                                            args: list[str]) -> None:
     """The self-test's lines (= the board's, bit for bit) equal `nte-ref estimate --precision
@@ -464,3 +465,72 @@ def test_selftest_equals_float32_reference(host_lines, tmp_path: Path, run: int,
             got.append(m[8])
             want.append(bits(r[5 + 2 * n]))
         assert got == want, f"run {run} sample {k}:\n  C   {got}\n  ref {want}"
+
+
+# ------------------------------------------------------------------ the cycle model
+def _cycles():
+    import importlib.util
+    spec = importlib.util.spec_from_file_location("nte_board_cycles", PORT / "cycles.py")
+    mod = importlib.util.module_from_spec(spec)
+    assert spec.loader is not None
+    spec.loader.exec_module(mod)
+    return mod
+
+
+# Upper-bound cycles measured by cycles.py on this image (arm-none-eabi-gcc 12.2 -O2, QEMU
+# 7.2): the model is deterministic, so a step that gets more than 5 % slower fails here
+# (update the figure, and the README's table, when a change is meant to cost cycles).
+MEASURED_WORST_HI = {
+    "Model I bank, all": 15_445,
+    "Model II bank, all": 13_632,
+    "Model II bank, rotate": 10_894,
+    "Model II robust, normal sample": 15_794,
+    "Model II robust, refinement": 25_313_769,
+}
+CYCLE_TOLERANCE = 1.05
+
+
+@pytest.fixture(scope="module")
+def cycle_model(built) -> dict:
+    return _cycles().model(SELFTEST)
+
+
+def test_cycle_model_covers_every_configuration(cycle_model) -> None:
+    assert set(cycle_model) == set(MEASURED_WORST_HI), sorted(cycle_model)
+    for label, s in cycle_model.items():
+        assert 0 < s["median_lo"] <= s["median_hi"] <= s["worst_hi"], (label, s)
+        assert s["worst_lo"] <= s["worst_hi"] <= 2 * s["worst_lo"], (label, s)
+        # at least one cycle per instruction (the IT instruction aside)
+        assert s["worst_hi"] >= s["worst_insns"], (label, s)
+    n_samples = int(re.search(r"#define NTE_SCENARIO_LEN (\d+)",
+                              (PORT / "scenario.h").read_text()).group(1))
+    robust = [s["steps"] for label, s in cycle_model.items() if "robust" in label]
+    assert sum(robust) == n_samples
+    assert all(s["steps"] == n_samples for label, s in cycle_model.items()
+               if "robust" not in label)
+
+
+@pytest.mark.parametrize("label", sorted(MEASURED_WORST_HI))
+def test_cycles_per_step_within_measured_bound(cycle_model, label: str) -> None:
+    """The worst step's upper-bound cycles stay within 5 % of the figure measured today."""
+    got = cycle_model[label]["worst_hi"]
+    bound = MEASURED_WORST_HI[label] * CYCLE_TOLERANCE
+    assert got <= bound, f"{label}: worst step {got} cycles > {bound:.0f} (measured " \
+                         f"{MEASURED_WORST_HI[label]} x {CYCLE_TOLERANCE})"
+
+
+@pytest.mark.parametrize("mnemonic,operands,lo,hi", [
+    ("vmla.f32", "s0, s1, s2", 3, 3),
+    ("vdiv.f32", "s0, s1, s2", 14, 14),
+    ("vadd.f32", "s0, s1, s2", 1, 1),
+    ("bls.n", "1f0 <x>", 2, 4),           # b + ls, not bl + s
+    ("pop", "{r4, r5, r6, pc}", 1 + 4 + 1, 1 + 4 + 3),
+    ("vpush", "{d8-d9}", 5, 5),           # two d registers = four words
+    ("ldr.w", "pc, [sp], #4", 3, 5),
+    ("mvnsne", "r0, r1", 1, 1),
+    ("itte", "eq", 0, 1),
+    ("udiv", "r0, r1, r2", 2, 12),
+])
+def test_cycle_table_entries(mnemonic: str, operands: str, lo: int, hi: int) -> None:
+    ins = _cycles().Insn(0, 4, mnemonic, operands)
+    assert (ins.lo, ins.hi) == (lo, hi)

@@ -2,7 +2,8 @@
  * selftest.h -- the board self-test, shared by the M4 image and its host twin.
  *
  * nte_selftest_run() runs the float library over the built-in scenario (scenario.h, generated
- * from the Python reference by gen_scenario.py) in three configurations and hands every output
+ * from the Python reference by gen_scenario.py) in four configurations (Model I bank, Model II
+ * bank rotating, Model II robust, Model II bank with every filter every sample) and hands every output
  * to `emit` as one text line: reals as the hex bits of their IEEE-754 float32 pattern, so the
  * board and the host must print the same bytes.  No printf, no double, no allocation.
  */
