@@ -1,11 +1,10 @@
 #!/usr/bin/env python3
 """Figures of the board image (MPS2 AN386, Cortex-M4F): flash and RAM, sizeof(nte_t), the
 worst-case stack from the compiler's call graph (-fstack-usage + -fcallgraph-info=su) and the
-measured high-water mark of the painted stack after the self-test under QEMU; with --insns,
-also the instructions executed per nte_step (QEMU -singlestep -d exec trace, counted between
-the marker functions nte_mark_step_begin/end; slow: about a minute).
+measured high-water mark of the painted stack after the self-test under QEMU.  Instructions and
+cycles per nte_step: cycles.py beside this file.
 
-    python3 firmware/port/mps2-an386/figures.py [--build build/m4] [--insns]
+    python3 firmware/port/mps2-an386/figures.py [--build build/m4]
 
 Needs the cross build (`make board`, i.e. cmake -S . -B build/m4
 -DCMAKE_TOOLCHAIN_FILE=cmake/arm-none-eabi.cmake && cmake --build build/m4) and
@@ -118,40 +117,6 @@ def run_selftest(elf: pathlib.Path) -> dict[str, int]:
             "sizeof_nte_t": int(m.group(3)), "runs": steps}  # type: ignore[dict-item]
 
 
-def count_insns(elf: pathlib.Path) -> list[int]:
-    """Instructions between each nte_mark_step_begin and nte_mark_step_end (QEMU traces every
-    executed instruction with -singlestep -d exec,nochain; the trace is streamed, not kept)."""
-    sym = symbols(elf)
-    begin = sym["nte_mark_step_begin"] & ~1
-    end = sym["nte_mark_step_end"] & ~1
-    p = subprocess.Popen(QEMU + ["-singlestep", "-d", "exec,nochain", "-D", "/dev/stdout",
-                                 "-kernel", str(elf)], stdout=subprocess.PIPE,
-                         stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL)
-    pc_re = re.compile(rb"/([0-9a-f]{8})/")
-    counts: list[int] = []
-    n = -1
-    assert p.stdout is not None
-    try:
-        for ln in p.stdout:
-            m = pc_re.search(ln)
-            if m is None:
-                continue
-            pc = int(m.group(1), 16)
-            if pc == begin:
-                n = 0
-            elif pc == end:
-                if n >= 0:
-                    counts.append(n)
-                n = -1
-            elif n >= 0:
-                n += 1
-    finally:
-        if p.poll() is None:
-            p.kill()
-        p.wait()
-    return counts
-
-
 #: an exception entry pushes 26 words with the FPU context (lazy stacking reserves the space)
 EXCEPTION_FRAME_B = 104
 #: the stack region must exceed the worst case by this factor (mps2.ld states the rule)
@@ -183,7 +148,6 @@ def image_figures(build: pathlib.Path, name: str) -> dict:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--build", default=str(ROOT / "build" / "m4"))
-    ap.add_argument("--insns", action="store_true", help="also count instructions per step")
     a = ap.parse_args()
     build = pathlib.Path(a.build)
     bindir = build / "bin"
@@ -204,21 +168,8 @@ def main() -> int:
               f"{', '.join(IMAGES[name][1])}")
     st = run_selftest(bindir / "nte-selftest.elf")
     print(f"sizeof(nte_t) on the M4: {st['sizeof_nte_t']} B (NTE_ROBUST_BUFFER_LEN default)")
-    print(f"painted-stack high-water mark after the self-test (3 runs, incl. one robust "
+    print(f"painted-stack high-water mark after the self-test (4 runs, incl. one robust "
           f"refinement): {st['stack_used']} B of {st['stack_size']} B")
-    if a.insns:
-        counts = count_insns(bindir / "nte-selftest.elf")
-        runs = st["runs"]  # type: ignore[assignment]
-        n = len(counts) // max(1, len(runs))
-        for r, label in sorted(runs.items()):  # type: ignore[union-attr]
-            c = counts[int(r) * n:(int(r) + 1) * n]
-            if not c:
-                continue
-            srt = sorted(c)
-            what = label.split(" ", 2)[2].split(" sizeof")[0]
-            print(f"instructions per nte_step, {what}: median {srt[len(srt) // 2]}, "
-                  f"min {srt[0]}, max {srt[-1]}, second largest {srt[-2]} ({len(c)} steps; "
-                  f"{srt[-1] / 25e3:.1f} ms at 25 MHz and 1 instruction per cycle)")
     return 0
 
 
