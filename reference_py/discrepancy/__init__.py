@@ -3,5 +3,6 @@ name the physical effect that is missing, add it to the model and show how much 
 
 Entry points: :func:`reference_py.discrepancy.workflow.run` (library) and
 ``python -m reference_py.discrepancy.cli`` (command line).  The method is described in
-``reference_py/DISCREPANCY.md``; the effect library is :mod:`reference_py.effects`.
+``reference_py/discrepancy/DISCREPANCY.md``; the effect library is
+:mod:`reference_py.discrepancy.effects`.
 """

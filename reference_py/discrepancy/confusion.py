@@ -19,7 +19,7 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from ..effects import NONE, VOCABULARY  # noqa: E402
+from .effects import NONE, VOCABULARY  # noqa: E402
 
 SHORT = {"dwell_relaxation": "relax", "reversal_presliding": "presl", "velocity_friction": "visc",
          "direction_asymmetry": "asym", "layer_puncture": "layer", "sensor_drift": "drift",

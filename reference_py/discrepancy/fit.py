@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
-from ..effects import NLParam, StateCache, TrialGrid, design, nl_specs
+from .effects import NLParam, StateCache, TrialGrid, design, nl_specs
 from ..fmath import Array
 
 

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..effects import V_REST_MM_S, direction, find_dwells, travel_since_reversal
+from .effects import V_REST_MM_S, direction, find_dwells, travel_since_reversal
 from ..fmath import Array
 from .io import Trial
 

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from ..effects import EFFECT_MEANING, EFFECT_NL, EFFECT_PHASES, NONE
+from .effects import EFFECT_MEANING, EFFECT_NL, EFFECT_PHASES, NONE
 from .prep import PHASES
 from .workflow import Result, base_paramset
 

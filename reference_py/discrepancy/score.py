@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..effects import StateCache, TrialGrid, design
+from .effects import StateCache, TrialGrid, design
 from ..fmath import Array
 from .fit import Fit, solve_linear
 

@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..effects import (EFFECT_NL, NONE, VOCABULARY, StateCache, TrialGrid, design, find_dwells,
+from .effects import (EFFECT_NL, NONE, VOCABULARY, StateCache, TrialGrid, design, find_dwells,
                        nl_defaults, nl_specs, to_paramset)
 from ..fmath import Array
 from .fit import Fit, evaluate, fit, solve_linear

@@ -48,9 +48,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .fmath import Array
-from .params import BETA0_DEFAULT, ParamSet
-from .discrepancy.fastsim import state_trajectory
+from ..fmath import Array
+from ..params import BETA0_DEFAULT, ParamSet
+from .fastsim import state_trajectory
 
 #: the fixed vocabulary of effect names (report.json and text); "none" when nothing is missing
 VOCABULARY: tuple[str, ...] = ("dwell_relaxation", "reversal_presliding", "velocity_friction",
