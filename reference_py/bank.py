@@ -12,6 +12,9 @@ Schedule "rotate": filter (k mod 3) alone updates at sample k; one prediction (w
 sensitivities to every identified parameter) serves all three, and the two idle filters only
 propagate their covariances.
 
+Each filter of a sample runs _predict -> _measure -> _update_and_guard (the C library's
+predict, measure and update_and_guard in nte_bank.c, one for one).
+
 Everything runs on a batch axis: element b of every array is an independent run.
 """
 from __future__ import annotations
@@ -23,10 +26,10 @@ import numpy as np
 from .config import EstimatorConfig
 from .ekf import Matrix, joseph_update, positive_definite, predict_covariance
 from .fmath import Array, Real
-from .model import (Theta, ScaledParams, clamp_depth, depth_terms, output, output_du,
-                    output_dz, smooth_sign, steady_state_z)
+from .model import (DepthTerms, Theta, ScaledParams, clamp_depth, depth_terms, output,
+                    output_du, output_dz, smooth_sign, steady_state_z)
 from .params import FILTER_SUBSETS, IDX, MODEL_PARAMS, PARAM_NAMES
-from .rk3 import rk3_step
+from .rk3 import Rk3Result, rk3_step
 
 # Status bits of one sample (the C library uses the same values)
 STATUS_INIT = 1 << 0            # first sample: nothing to predict from, estimate not yet updated
@@ -174,7 +177,6 @@ class FilterBank:
         status |= np.where(surface, np.uint32(STATUS_OUT_OF_TISSUE), np.uint32(0))
         status |= np.where(gap, np.uint32(STATUS_GAP), np.uint32(0))
         z_prev = self.z
-        zero = R.c(0.0)
         z_post = z_prev
         innovation0 = R.full(B, 0.0)
         nis0 = R.full(B, 0.0)
@@ -191,58 +193,16 @@ class FilterBank:
                 pred = rk3_step(R, self.th, z_prev, l_prev, l, dt, cfg.substeps, names)
                 active = run
             d = depth_terms(R, self.th, l)
-            # out of tissue z is 0; after a gap it has relaxed to its steady state: either way
-            # the prior z carries no memory of z(k-1)
-            restart = gap | surface
-            z_restart = np.where(surface, zero, steady_state_z(R, self.th, d))
-            zp = np.where(restart, z_restart, pred.z)
-            F: Matrix = [[np.where(restart, zero, pred.dz_dz0)] +
-                         [np.where(restart, zero, pred.dz_du[nm]) for nm in names]]
-            for a in range(len(names)):
-                F.append([R.full(B, 0.0)] + [R.full(B, 1.0 if a == b else 0.0)
-                                             for b in range(len(names))])
-            q = [c.q_z] + [c.q_u[nm] for nm in names]
-            P_pred = predict_covariance(self.P[i], F, q)
-            x = [zp] + [self.u[IDX[nm]] for nm in names]
-
-            o = output(self.th, d, zp, s)
-            hrow = [output_dz(self.th, d, o)] + [output_du(self.th, d, zp, o, nm) for nm in names]
-            r_eff = c.r
-            if cfg.sign_inflation:
-                # the data follow the true direction sign(v), the model tanh(v/eps): their
-                # difference is at most (1 - |s|) l fr, treated as extra measurement noise
-                w = (R.c(1.0) - np.abs(s)) * (d.l * o.fr)
-                moving = np.abs(v) >= c.v_still
-                r_eff = c.r + np.where(moving, w * w, zero)
-                status |= np.where(active & moving & (w * w > c.r), np.uint32(STATUS_SIGN_UNCERTAIN),
-                                   np.uint32(0))
-            innovation = y - o.h
-            # a gate that has refused too many samples in a row would lock the filter out for
-            # good (its collapsed covariance never admits the data again): open it once
-            open_gate = self.gated_run[i] >= cfg.gate_reopen_after
-            upd = joseph_update(R, x, P_pred, hrow, innovation, r_eff, c.gate2, open_gate)
-            gated = active & ~upd.accepted
-            status |= np.where(gated, np.uint32(STATUS_GATED), np.uint32(0))
-            self.gated_run[i] = np.where(gated, self.gated_run[i] + 1,
-                                         np.where(active, 0, self.gated_run[i]))
-            newx = [np.where(active, upd.x[a], x[a]) for a in range(len(x))]
-            newP = [[np.where(active, upd.P[a][b], P_pred[a][b]) for b in range(len(x))]
-                    for a in range(len(x))]
-            # a prior that is not positive definite (or a non-positive innovation variance)
-            # can still yield a plausible-looking posterior: judge the filter on both
-            prior_ok = positive_definite(R, P_pred) & (upd.s > zero)
-            newx, newP, st = self._guard(newx, newP, x, prior_ok)
-            status |= np.where(run, st, np.uint32(0))
-            # commit: every filter of a running sample keeps its propagated covariance
-            self.P[i] = [[np.where(run, newP[a][b], self.P[i][a][b]) for b in range(len(x))]
-                         for a in range(len(x))]
-            for a, nm in enumerate(names):
-                self.u[IDX[nm]] = np.where(run, newx[a + 1], self.u[IDX[nm]])
-            self.th = self.scaled.refresh(self.th, self.u, names)
-            z_post = np.where(active, newx[0], z_post)
+            x, P_pred = self._predict(i, names, pred, d, gap | surface, surface)
+            innovation, hrow, r_eff, st = self._measure(names, d, x[0], s, v, y, active)
+            status |= st
+            z_i, nis, st = self._update_and_guard(i, names, x, P_pred, hrow, innovation, r_eff,
+                                                  active, run)
+            status |= st
+            z_post = np.where(active, z_i, z_post)
             if rotate or i == 0:
                 innovation0 = np.where(active, innovation, innovation0)
-                nis0 = np.where(active, upd.nis, nis0)
+                nis0 = np.where(active, nis, nis0)
 
         z_post = np.where(surface & run, R.c(0.0), z_post)
         self.z = np.where(run, z_post, np.where(first, R.c(0.0), self.z))
@@ -253,6 +213,80 @@ class FilterBank:
         nis = np.where(run, nis0, R.c(0.0))
         params, sds = self.parameter_estimates()
         return StepOutput(o.h, self.z, innov, nis, status, params, sds)
+
+    def _predict(self, i: int, names: tuple[str, ...], pred: Rk3Result, d: DepthTerms,
+                 restart: Array, surface: Array) -> tuple[list[Array], Matrix]:
+        """Filter i's prior state (z restarted at the surface or after a gap) and its
+        predicted covariance F P F^T + Q."""
+        R, c = self.R, self.c
+        B = self.batch
+        zero = R.c(0.0)
+        # out of tissue z is 0; after a gap it has relaxed to its steady state: either way
+        # the prior z carries no memory of z(k-1)
+        z_restart = np.where(surface, zero, steady_state_z(R, self.th, d))
+        zp = np.where(restart, z_restart, pred.z)
+        F: Matrix = [[np.where(restart, zero, pred.dz_dz0)] +
+                     [np.where(restart, zero, pred.dz_du[nm]) for nm in names]]
+        for a in range(len(names)):
+            F.append([R.full(B, 0.0)] + [R.full(B, 1.0 if a == b else 0.0)
+                                         for b in range(len(names))])
+        q = [c.q_z] + [c.q_u[nm] for nm in names]
+        P_pred = predict_covariance(self.P[i], F, q)
+        x = [zp] + [self.u[IDX[nm]] for nm in names]
+        return x, P_pred
+
+    def _measure(self, names: tuple[str, ...], d: DepthTerms, zp: Array, s: Array, v: Array,
+                 y: Array, active: Array) -> tuple[Array, list[Array], Array, Array]:
+        """The predicted force's innovation, its Jacobian row and the effective R."""
+        R, c, cfg = self.R, self.c, self.cfg
+        zero = R.c(0.0)
+        status = np.zeros(self.batch, dtype=np.uint32)
+        o = output(self.th, d, zp, s)
+        hrow = [output_dz(self.th, d, o)] + [output_du(self.th, d, zp, o, nm) for nm in names]
+        r_eff = c.r
+        if cfg.sign_inflation:
+            # the data follow the true direction sign(v), the model tanh(v/eps): their
+            # difference is at most (1 - |s|) l fr, treated as extra measurement noise
+            w = (R.c(1.0) - np.abs(s)) * (d.l * o.fr)
+            moving = np.abs(v) >= c.v_still
+            r_eff = c.r + np.where(moving, w * w, zero)
+            status |= np.where(active & moving & (w * w > c.r), np.uint32(STATUS_SIGN_UNCERTAIN),
+                               np.uint32(0))
+        innovation = y - o.h
+        return innovation, hrow, r_eff, status
+
+    def _update_and_guard(self, i: int, names: tuple[str, ...], x: list[Array], P_pred: Matrix,
+                          hrow: list[Array], innovation: Array, r_eff: Array, active: Array,
+                          run: Array) -> tuple[Array, Array, Array]:
+        """The gated Joseph update (active filters), the guard, and the commit of filter i's
+        covariance and parameters to the shared model.  Returns its posterior z, the NIS and
+        the status bits."""
+        R, c, cfg = self.R, self.c, self.cfg
+        zero = R.c(0.0)
+        status = np.zeros(self.batch, dtype=np.uint32)
+        # a gate that has refused too many samples in a row would lock the filter out for
+        # good (its collapsed covariance never admits the data again): open it once
+        open_gate = self.gated_run[i] >= cfg.gate_reopen_after
+        upd = joseph_update(R, x, P_pred, hrow, innovation, r_eff, c.gate2, open_gate)
+        gated = active & ~upd.accepted
+        status |= np.where(gated, np.uint32(STATUS_GATED), np.uint32(0))
+        self.gated_run[i] = np.where(gated, self.gated_run[i] + 1,
+                                     np.where(active, 0, self.gated_run[i]))
+        newx = [np.where(active, upd.x[a], x[a]) for a in range(len(x))]
+        newP = [[np.where(active, upd.P[a][b], P_pred[a][b]) for b in range(len(x))]
+                for a in range(len(x))]
+        # a prior that is not positive definite (or a non-positive innovation variance)
+        # can still yield a plausible-looking posterior: judge the filter on both
+        prior_ok = positive_definite(R, P_pred) & (upd.s > zero)
+        newx, newP, st = self._guard(newx, newP, x, prior_ok)
+        status |= np.where(run, st, np.uint32(0))
+        # commit: every filter of a running sample keeps its propagated covariance
+        self.P[i] = [[np.where(run, newP[a][b], self.P[i][a][b]) for b in range(len(x))]
+                     for a in range(len(x))]
+        for a, nm in enumerate(names):
+            self.u[IDX[nm]] = np.where(run, newx[a + 1], self.u[IDX[nm]])
+        self.th = self.scaled.refresh(self.th, self.u, names)
+        return newx[0], upd.nis, status
 
     def _guard(self, x: list[Array], P: Matrix, x_prior: list[Array], prior_ok: Array
                ) -> tuple[list[Array], Matrix, Array]:

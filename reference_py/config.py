@@ -29,6 +29,34 @@ PAPER_Q_SCALE = 0.05 * 1e-18
 
 SCHEDULES = ("all", "rotate")
 
+# ---------------------------------------------------------------------------------------------
+# The valid ranges: the one source of both validations.  EstimatorConfig.validate and
+# RobustConfig.validate (robust.py) read these tables; firmware/tools/gen_constants.py writes
+# them into firmware/src/nte_constants.h, from which nte_config.c builds nte_config_check.
+# ---------------------------------------------------------------------------------------------
+#: integer fields, inclusive (min, max)
+INT_RANGES: dict[str, tuple[int, int]] = {
+    "substeps": (1, 16),
+    "gate_reopen_after": (1, 1000),
+}
+#: real fields that must be finite and > 0
+POSITIVE_FIELDS = ("eps_mm_s", "beta0", "r_n2", "p0_z", "p0_u", "gate_sigma", "u_max",
+                   "var_floor_z", "var_floor_u", "dt_max_s", "depth_max_mm", "speed_max_mm_s",
+                   "force_max_n")
+#: real fields that must be finite and >= 0
+NONNEGATIVE_FIELDS = ("q_z", "q_u_default", "v_still_mm_s")
+#: the robust estimator's integer fields, inclusive (min, max); buffer_len must also be even
+#: (and, in C, at most NTE_ROBUST_BUFFER_LEN), min_entries at most buffer_len
+ROBUST_INT_RANGES: dict[str, tuple[int, int]] = {
+    "buffer_len": (4, 4096),
+    "fit_substeps": (1, 16),
+    "fit_iterations": (1, 200),
+    "min_entries": (2, 4096),
+}
+#: the robust estimator's real fields that must be finite and > 0
+ROBUST_POSITIVE_FIELDS = ("restart_p0_u", "lm_lambda0", "converged_confidence",
+                          "converged_change")
+
 
 @dataclass(frozen=True)
 class EstimatorConfig:
@@ -70,15 +98,13 @@ class EstimatorConfig:
             raise ValueError(f"config field model must be 1 or 2 (got {self.model!r})")
         if self.schedule not in SCHEDULES:
             raise ValueError(f"config field schedule must be one of {SCHEDULES}")
-        if not 1 <= self.gate_reopen_after <= 1000:
-            raise ValueError("config field gate_reopen_after must be in 1..1000")
-        if not 1 <= self.substeps <= 16:
-            raise ValueError("config field substeps must be in 1..16")
-        for name in ("eps_mm_s", "beta0", "r_n2", "p0_z", "p0_u", "gate_sigma", "u_max",
-                     "var_floor_z", "var_floor_u", "dt_max_s", "depth_max_mm",
-                     "speed_max_mm_s", "force_max_n"):
+        for name in ("gate_reopen_after", "substeps"):
+            lo, hi = INT_RANGES[name]
+            if not lo <= getattr(self, name) <= hi:
+                raise ValueError(f"config field {name} must be in {lo}..{hi}")
+        for name in POSITIVE_FIELDS:
             positive(name)
-        for name in ("q_z", "q_u_default", "v_still_mm_s"):
+        for name in NONNEGATIVE_FIELDS:
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0):
                 raise ValueError(f"config field {name} must be finite and >= 0 (got {v!r})")

@@ -26,8 +26,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .bank import FilterBank, StepOutput
-from .config import EstimatorConfig
+from .bank import STATUS_REJECTED, FilterBank, StepOutput
+from .config import ROBUST_INT_RANGES, ROBUST_POSITIVE_FIELDS, EstimatorConfig
 from .fmath import Array, Real
 from .model import (ScaledParams, Theta, clamp_depth, depth_terms, output, output_du, output_dz,
                     smooth_sign)
@@ -51,16 +51,19 @@ class RobustConfig:
     converged_change: float = 0.05
 
     def validate(self) -> None:
-        """Raise ValueError naming the first invalid field (the C library checks the same)."""
-        if not (4 <= self.buffer_len <= 4096 and self.buffer_len % 2 == 0):
-            raise ValueError("robust buffer_len must be even and in 4..4096")
-        if not 1 <= self.fit_substeps <= 16:
-            raise ValueError("robust fit_substeps must be in 1..16")
-        if not 1 <= self.fit_iterations <= 200:
-            raise ValueError("robust fit_iterations must be in 1..200")
-        if not 2 <= self.min_entries <= self.buffer_len:
-            raise ValueError("robust min_entries must be in 2..buffer_len")
-        for name in ("restart_p0_u", "lm_lambda0", "converged_confidence", "converged_change"):
+        """Raise ValueError naming the first invalid field.  The ranges are config.py's
+        ROBUST_INT_RANGES and ROBUST_POSITIVE_FIELDS, from which the C checks are generated."""
+        lo, hi = ROBUST_INT_RANGES["buffer_len"]
+        if not (lo <= self.buffer_len <= hi and self.buffer_len % 2 == 0):
+            raise ValueError(f"robust buffer_len must be even and in {lo}..{hi}")
+        for name in ("fit_substeps", "fit_iterations"):
+            lo, hi = ROBUST_INT_RANGES[name]
+            if not lo <= getattr(self, name) <= hi:
+                raise ValueError(f"robust {name} must be in {lo}..{hi}")
+        lo, hi = ROBUST_INT_RANGES["min_entries"]
+        if not lo <= self.min_entries <= min(hi, self.buffer_len):
+            raise ValueError(f"robust min_entries must be in {lo}..buffer_len")
+        for name in ROBUST_POSITIVE_FIELDS:
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
                 raise ValueError(f"robust {name} must be finite and > 0 (got {v!r})")
@@ -105,7 +108,7 @@ class RobustEstimator:
     def step(self, t_us: Array, depth: Array, velocity: Array, force: Array) -> StepOutput:
         R = self.R
         out = self.bank.step(t_us, depth, velocity, force)
-        valid = (out.status & np.uint32(2)) == 0          # not STATUS_REJECTED
+        valid = (out.status & np.uint32(STATUS_REJECTED)) == 0
         l = R.arr(depth)
         at_surface = valid & ~(l > R.c(0.0))
         entering = valid & (l > R.c(0.0)) & ~self.inside

@@ -34,6 +34,25 @@
  *   files as C99 with -ffp-contract=off, link with libm (sqrtf/sqrt in nte_get_params only).
  *   No other dependency, no configuration header.
  *
+ * FILES AND THEIR PYTHON TWINS (reference_py/, numpy; the twin is the specification)
+ *   include/nte.h       the API (this file)       config.py, bank.py, robust.py (public parts)
+ *   src/nte.c           init, step: validation    bank.py FilterBank.step, robust.py
+ *                       and dispatch              RobustEstimator.step
+ *   src/nte_bank.c/.h   the bank of three EKFs:   bank.py FilterBank (_advance; _predict,
+ *                       predict, measure,         _measure, _update_and_guard, _guard)
+ *                       update_and_guard, guard
+ *   src/nte_robust.c/.h the robust estimator      robust.py RobustEstimator, ldlt_solve
+ *   src/nte_model.c/.h  the model, its partials   model.py, rk3.py
+ *                       and the RK3 step
+ *   src/nte_ekf.c/.h    covariance prediction,    ekf.py
+ *                       Joseph update
+ *   src/nte_config.c    profiles and validation   config.py (ranges: INT_RANGES, ...)
+ *   src/nte_real.h      precision, exp, tanh      fmath.py
+ *   src/nte_constants.h generated constants and   firmware/tools/gen_constants.py
+ *                       configuration ranges
+ *   Layers: nte.c uses nte_bank.h and nte_robust.h; nte_robust.c uses nte_bank.h; the bank
+ *   uses nte_model.h and nte_ekf.h; everything uses nte_real.h.  No circle.
+ *
  * MEMORY MODEL
  *   The caller owns every instance (static, stack or pool).  sizeof(nte_t) on x86-64:
  *   504 bytes (float) / 936 (double) with NTE_ROBUST_BUFFER_LEN = 0 (the bank alone); with
@@ -222,60 +241,64 @@ typedef enum nte_estimator_t {
  *  cfg.estimator is nte_estimator_robust. */
 typedef struct nte_robust_config_t {
     int32_t buffer_len;     /**< [96] decimated samples kept per insertion, even,
-                                 2..NTE_ROBUST_BUFFER_LEN */
+                                 4..min(4096, NTE_ROBUST_BUFFER_LEN) */
     int32_t fit_substeps;   /**< [4] RK3 sub-steps between buffer entries, 1..16 */
-    int32_t fit_iterations; /**< [20] LM iterations per start, 0..1000 */
-    int32_t min_entries;    /**< [24] a shorter insertion is not refined, 1..buffer_len */
+    int32_t fit_iterations; /**< [20] LM iterations per start, 1..200 */
+    int32_t min_entries;    /**< [24] a shorter insertion is not refined, 2..buffer_len */
     nte_real_t restart_p0_u;         /**< [0.01] var(u) of the bank after a restart, log^2, > 0 */
     nte_real_t lm_lambda0;           /**< [0.01] initial LM damping, > 0 */
-    nte_real_t converged_confidence; /**< [0.75] CONVERGED needs confidence >= this, finite */
-    nte_real_t converged_change;     /**< [0.05] and a relative change <= this, finite, >= 0 */
+    nte_real_t converged_confidence; /**< [0.75] CONVERGED needs confidence >= this, > 0 */
+    nte_real_t converged_change;     /**< [0.05] and a relative change <= this, > 0 */
 } nte_robust_config_t;
 
 /** q_u entry meaning "use q_u_default" (any negative value means the same). */
 #define NTE_Q_U_USE_DEFAULT (-1)
 
 /**
- * Every tuning field, with its unit and valid range (checked by nte_init).  Fill it with
+ * Every tuning field, with its default in brackets ("default" profile; the "paper" profile
+ * differs in r_n2 [0.01], p0_u [1] and q_u [Table I]), its unit and valid range (checked by
+ * nte_init; ranges generated from reference_py/config.py).  Fill it with
  * nte_config_default or nte_config_paper, then change what you need.  The fields mirror
  * reference_py/config.py EstimatorConfig; a value equals the reference's when it is the
  * reference's float64 value rounded to nte_real_t.
  */
 typedef struct nte_config_t {
-    int32_t model;              /**< 1 (Model I) or 2 (Model II) */
-    nte_schedule_t schedule;    /**< nte_schedule_all or nte_schedule_rotate */
-    int32_t substeps;           /**< RK3 sub-steps per sample, 1..16 (cost grows linearly) */
-    int32_t gate_reopen_after;  /**< after this many gated updates in a row accept one, 1..1000 */
-    bool sign_inflation;        /**< inflate R where the smooth sign may be wrong (|s| < 1) */
-    nte_real_t eps_mm_s;        /**< smooth-sign width, s(v) = tanh(v/eps), mm/s, > 0 */
-    nte_real_t beta0;           /**< Model I's fixed beta, > 0 (Model II ignores it) */
-    nte_real_t r_n2;            /**< measurement noise variance, N^2, > 0 */
-    nte_real_t q_z;             /**< process noise of z per sample, >= 0 */
-    nte_real_t q_u[NTE_PARAM_COUNT]; /**< per-sample variance of each u, log^2, >= 0, or
-                                          negative (NTE_Q_U_USE_DEFAULT): use q_u_default */
-    nte_real_t q_u_default;     /**< per-sample variance of u for defaulted entries, >= 0 */
-    nte_real_t p0_z;            /**< initial variance of z, > 0 */
-    nte_real_t p0_u;            /**< initial variance of every u, log^2, > 0 */
-    nte_real_t gate_sigma;      /**< innovation gate in standard deviations, > 0; the gate
+    int32_t model;              /**< [argument] 1 (Model I) or 2 (Model II) */
+    nte_schedule_t schedule;    /**< [argument] nte_schedule_all or _rotate */
+    int32_t substeps;           /**< [1] RK3 sub-steps per sample, 1..16 (cost linear) */
+    int32_t gate_reopen_after;  /**< [10] after this many gated updates accept one, 1..1000 */
+    bool sign_inflation;        /**< [true] inflate R where the smooth sign may be wrong */
+    nte_real_t eps_mm_s;        /**< [0.5] smooth-sign width, s(v) = tanh(v/eps), mm/s, > 0 */
+    nte_real_t beta0;           /**< [0.0255] Model I's fixed beta, > 0 (Model II ignores it) */
+    nte_real_t r_n2;            /**< [4e-6] measurement noise variance, N^2, > 0 */
+    nte_real_t q_z;             /**< [1e-8] process noise of z per sample, >= 0 */
+    nte_real_t q_u[NTE_PARAM_COUNT]; /**< [NTE_Q_U_USE_DEFAULT] per-sample variance of
+                                          each u, log^2, >= 0, or negative: q_u_default */
+    nte_real_t q_u_default;     /**< [2e-7] variance of u for defaulted entries, >= 0 */
+    nte_real_t p0_z;            /**< [1e-6] initial variance of z, > 0 */
+    nte_real_t p0_u;            /**< [0.03] initial variance of every u, log^2, > 0 */
+    nte_real_t gate_sigma;      /**< [12] innovation gate in standard deviations, > 0; the gate
                                      compares NIS with gate_sigma^2 computed in nte_real_t */
-    nte_real_t u_max;           /**< |u| clip, log units (3.9 = factor 50), > 0 */
-    nte_real_t var_floor_z;     /**< lower bound of var(z), > 0 */
-    nte_real_t var_floor_u;     /**< lower bound of var(u), log^2, > 0 */
-    nte_real_t v_still_mm_s;    /**< |v| below this is a dwell (no sign inflation), mm/s, >= 0 */
-    nte_real_t dt_max_s;        /**< a longer gap restarts z at its steady state, s, > 0 */
-    nte_real_t depth_min_mm;    /**< accepted depth range, mm, finite, min <= max */
-    nte_real_t depth_max_mm;    /**< > 0 */
-    nte_real_t speed_max_mm_s;  /**< accepted |velocity|, mm/s, > 0 */
-    nte_real_t force_max_n;     /**< accepted |force|, N, > 0 */
-    /** Nominal (starting) physical values, nte_param_id_t order, finite.  Model II
-     *  keeps f2 and alpha fixed at theirs; Model I ignores nominal beta and uses beta0. */
+    nte_real_t u_max;           /**< [3.9] |u| clip, log units (3.9 = factor 50), > 0 */
+    nte_real_t var_floor_z;     /**< [1e-12] lower bound of var(z), > 0 */
+    nte_real_t var_floor_u;     /**< [1e-10] lower bound of var(u), log^2, > 0 */
+    nte_real_t v_still_mm_s;    /**< [1e-3] |v| below: a dwell (no sign inflation), mm/s, >= 0 */
+    nte_real_t dt_max_s;        /**< [0.5] a longer gap restarts z at steady state, s, > 0 */
+    nte_real_t depth_min_mm;    /**< [-1] accepted depth range, mm, finite, min <= max */
+    nte_real_t depth_max_mm;    /**< [500] > 0 */
+    nte_real_t speed_max_mm_s;  /**< [500] accepted |velocity|, mm/s, > 0 */
+    nte_real_t force_max_n;     /**< [50] accepted |force|, N, > 0 */
+    /** [preset paper-10mms] Nominal (starting) physical values, nte_param_id_t order,
+     *  finite.  Model II keeps f2 and alpha fixed at theirs; Model I ignores nominal beta and
+     *  uses beta0. */
     nte_real_t nominal[NTE_PARAM_COUNT];
-    /** The identified part of nominal f1: f1 - kappa (-f2), kappa = 1 if f2 < 0 else 0; > 0.
-     *  0 means "compute it in nte_real_t from nominal f1 and f2".  Give it explicitly (computed
-     *  in double, then rounded) to match a reference that starts from double values. */
+    /** [the preset's, computed in double] The identified part of nominal f1:
+     *  f1 - kappa (-f2), kappa = 1 if f2 < 0 else 0; > 0.  0 means "compute it in nte_real_t
+     *  from nominal f1 and f2".  Give it explicitly (computed in double, then rounded) to
+     *  match a reference that starts from double values. */
     nte_real_t f1_excess;
-    nte_estimator_t estimator;  /**< nte_estimator_bank (default) or nte_estimator_robust */
-    nte_robust_config_t robust; /**< the robust estimator's tuning (ignored by the bank) */
+    nte_estimator_t estimator;  /**< [nte_estimator_bank] or nte_estimator_robust */
+    nte_robust_config_t robust; /**< [see above] the robust estimator's tuning */
 } nte_config_t;
 
 /** The project's tuning (reference "default" profile); nominal = preset paper-10mms.

@@ -1,11 +1,14 @@
 /*
  * The bank of three joint state-parameter EKFs in switching mode (paper §IV, Fig. 1, Table I):
  * reference_py/bank.py in C for one run.  Every branch below is one of the reference's
- * np.where selections; the order of the floating-point operations is the reference's.
+ * np.where selections; the order of the floating-point operations is the reference's.  Each
+ * filter of a sample runs predict -> measure -> update_and_guard, the functions of the same
+ * names in bank.py (FilterBank._predict, _measure, _update_and_guard).
  */
+#include "nte_bank.h"
+
 #include "nte_ekf.h"
 #include "nte_model.h"
-#include "nte_robust.h"
 
 /* Table I: the parameters each filter identifies together with z, per model. */
 static const uint8_t subset_len[2][NTE_FILTER_COUNT] = {{2U, 2U, 2U}, {1U, 2U, 2U}};
@@ -19,15 +22,6 @@ static const uint8_t identified[2][NTE_IDENTIFIED_MAX] = {
     {nte_param_sigma0, nte_param_sigma1, nte_param_sigma2, nte_param_f1, nte_param_f2,
      nte_param_alpha},
     {nte_param_sigma0, nte_param_sigma1, nte_param_sigma2, nte_param_f1, nte_param_beta, 0U}};
-
-static const char* const param_names[NTE_PARAM_COUNT] = {"sigma0", "sigma1", "sigma2", "f1",
-                                                         "f2",     "alpha",  "beta"};
-
-const char* nte_param_name(const nte_param_id_t id)
-{
-    const int i = (int)id;
-    return ((i >= 0) && (i < NTE_PARAM_COUNT)) ? param_names[i] : "?";
-}
 
 static size_t model_index(const nte_t* self)
 {
@@ -96,7 +90,7 @@ void nte_bank_restart_from(nte_t* self, const nte_real_t theta[NTE_PARAM_COUNT],
     }
 }
 
-static void start(nte_t* self)
+void nte_bank_start(nte_t* self)
 {
     const size_t mi = model_index(self);
     set_nominal(self);
@@ -125,36 +119,6 @@ static void start(nte_t* self)
     self->counters.gated = 0U;
     self->counters.filter_resets = 0U;
     self->counters.gaps = 0U;
-#if NTE_ROBUST_BUFFER_LEN > 0
-    nte_robust_start(self);
-#endif
-}
-
-nte_err_t nte_init(nte_t* self, const nte_config_t* cfg)
-{
-    if (self == NULL) {
-        return nte_err_null_argument;
-    }
-    const nte_err_t err = nte_config_check(cfg);
-    if (err != nte_err_ok) {
-        return err;
-    }
-    self->cfg = *cfg;
-    self->gate2 = cfg->gate_sigma * cfg->gate_sigma;
-    for (size_t j = 0U; j < NTE_PARAM_COUNT; j++) {
-        self->q_u[j] = (cfg->q_u[j] < NTE_C(0.0)) ? cfg->q_u_default : cfg->q_u[j];
-    }
-    start(self);
-    return nte_err_ok;
-}
-
-nte_err_t nte_reset(nte_t* self)
-{
-    if (self == NULL) {
-        return nte_err_null_argument;
-    }
-    start(self);
-    return nte_err_ok;
 }
 
 /* Clip |u|, floor variances, reset the filter when its prior, P or x went bad (bank._guard):
@@ -215,84 +179,94 @@ typedef struct filter_out_t {
     nte_real_t nis;
 } filter_out_t;
 
-static uint32_t run_filter(nte_t* self, const step_ctx_t* c, const size_t i,
-                           const nte_rk3_result_t* shared, filter_out_t* fo)
+/* One filter's working set at a running sample: its state (z, its u) and covariance. */
+typedef struct filter_work_t {
+    size_t n;                   /* 1 + the number of parameters of the filter */
+    const uint8_t* names;       /* its parameters (Table I) */
+    nte_real_t x[NTE_EKF_N_MAX]; /* prior state */
+    nte_mat3_t P;               /* predicted covariance */
+    nte_real_t h[NTE_EKF_N_MAX]; /* measurement Jacobian at the prior */
+    nte_real_t innovation;
+    nte_real_t r_eff;
+} filter_work_t;
+
+/* bank._predict: the prior state (z restarted at the surface or after a gap) and the predicted
+ * covariance F P F^T + Q of filter i. */
+static void predict(nte_t* self, const step_ctx_t* c, const size_t i,
+                    const nte_rk3_result_t* pred, const nte_depth_terms_t* d, filter_work_t* w)
 {
-    const size_t mi = model_index(self);
-    const uint8_t* names = subsets[mi][i];
-    const size_t na = subset_len[mi][i];
-    const size_t n = na + 1U;
-    uint32_t status = 0U;
-    nte_rk3_result_t own;
-    fo->innovation = NTE_C(0.0);
-    fo->nis = NTE_C(0.0);
-    const nte_rk3_result_t* pred = shared;
-    if (c->rotate) {
-        fo->active = (self->k_mod3 == (uint8_t)i);
-    } else {
-        nte_model_rk3(&own, &self->th, c->z_prev, c->l_prev, c->l, c->dt, self->cfg.substeps,
-                      names, na);
-        pred = &own;
-        fo->active = true;
-    }
-    nte_depth_terms_t d;
-    nte_model_depth_terms(&d, &self->th, c->l);
+    const size_t na = w->n - 1U;
     /* out of tissue z is 0; after a gap it has relaxed to its steady state: either way the
      * prior z carries no memory of z(k-1) */
     const bool restart = c->gap || c->surface;
     nte_real_t zp = pred->z;
     if (restart) {
-        zp = c->surface ? NTE_C(0.0) : nte_model_steady_state_z(&self->th, &d);
+        zp = c->surface ? NTE_C(0.0) : nte_model_steady_state_z(&self->th, d);
     }
     nte_mat3_t F;
     nte_real_t q[NTE_EKF_N_MAX];
-    nte_real_t x[NTE_EKF_N_MAX];
-    nte_real_t h[NTE_EKF_N_MAX];
     F[0][0] = restart ? NTE_C(0.0) : pred->dz_dz0;
     q[0] = self->cfg.q_z;
-    x[0] = zp;
+    w->x[0] = zp;
     for (size_t a = 0U; a < na; a++) {
-        F[0][a + 1U] = restart ? NTE_C(0.0) : pred->dz_du[names[a]];
+        F[0][a + 1U] = restart ? NTE_C(0.0) : pred->dz_du[w->names[a]];
         F[a + 1U][0] = NTE_C(0.0);
         for (size_t b = 0U; b < na; b++) {
             F[a + 1U][b + 1U] = (a == b) ? NTE_C(1.0) : NTE_C(0.0);
         }
-        q[a + 1U] = self->q_u[names[a]];
-        x[a + 1U] = self->u[names[a]];
+        q[a + 1U] = self->q_u[w->names[a]];
+        w->x[a + 1U] = self->u[w->names[a]];
     }
-    nte_mat3_t P;
-    nte_ekf_predict(n, self->P[i], F, q, P);
+    nte_ekf_predict(w->n, self->P[i], F, q, w->P);
+}
 
+/* bank._measure: the predicted force, its Jacobian, the innovation and the effective R. */
+static uint32_t measure(const nte_t* self, const step_ctx_t* c, const nte_depth_terms_t* d,
+                        const bool active, filter_work_t* w)
+{
+    const size_t na = w->n - 1U;
+    uint32_t status = 0U;
     nte_output_terms_t o;
-    nte_model_output(&o, &self->th, &d, zp, c->s);
-    h[0] = nte_model_output_dz(&self->th, &d, &o);
+    nte_model_output(&o, &self->th, d, w->x[0], c->s);
+    w->h[0] = nte_model_output_dz(&self->th, d, &o);
     for (size_t a = 0U; a < na; a++) {
-        h[a + 1U] = nte_model_output_du(&self->th, &d, zp, &o, names[a]);
+        w->h[a + 1U] = nte_model_output_du(&self->th, d, w->x[0], &o, w->names[a]);
     }
-    nte_real_t r_eff = self->cfg.r_n2;
+    w->r_eff = self->cfg.r_n2;
     if (self->cfg.sign_inflation) {
         /* the data follow sign(v), the model tanh(v/eps): their difference is at most
          * (1 - |s|) l fr, treated as extra measurement noise */
-        const nte_real_t w = (NTE_C(1.0) - nte_abs(c->s)) * (d.l * o.fr);
+        const nte_real_t dw = (NTE_C(1.0) - nte_abs(c->s)) * (d->l * o.fr);
         const bool moving = nte_abs(c->v) >= self->cfg.v_still_mm_s;
-        const nte_real_t ww = w * w;
-        r_eff = self->cfg.r_n2 + (moving ? ww : NTE_C(0.0));
-        if (fo->active && moving && (ww > self->cfg.r_n2)) {
+        const nte_real_t ww = dw * dw;
+        w->r_eff = self->cfg.r_n2 + (moving ? ww : NTE_C(0.0));
+        if (active && moving && (ww > self->cfg.r_n2)) {
             status |= NTE_STATUS_SIGN_UNCERTAIN;
         }
     }
-    const nte_real_t innovation = c->y - o.h;
+    w->innovation = c->y - o.h;
+    return status;
+}
+
+/* bank._update_and_guard: the gated Joseph update (active filters only), the guard, and the
+ * commit of the filter's covariance and parameters to the shared model. */
+static uint32_t update_and_guard(nte_t* self, const size_t i, filter_work_t* w,
+                                 filter_out_t* fo)
+{
+    const size_t n = w->n;
+    const size_t na = n - 1U;
+    uint32_t status = 0U;
     nte_real_t xn[NTE_EKF_N_MAX];
     nte_mat3_t Pn;
     for (size_t a = 0U; a < n; a++) {
-        xn[a] = x[a];
+        xn[a] = w->x[a];
         for (size_t b = 0U; b < n; b++) {
-            Pn[a][b] = P[a][b];
+            Pn[a][b] = w->P[a][b];
         }
     }
     /* a gate that refused too many samples in a row would lock the filter out: open it */
     const bool open_gate = self->gated_run[i] >= (uint32_t)self->cfg.gate_reopen_after;
-    const nte_ekf_update_t upd = nte_ekf_joseph_update(n, xn, Pn, h, innovation, r_eff,
+    const nte_ekf_update_t upd = nte_ekf_joseph_update(n, xn, Pn, w->h, w->innovation, w->r_eff,
                                                        self->gate2, open_gate, fo->active);
     if (fo->active) {
         if (upd.accepted) {
@@ -302,27 +276,57 @@ static uint32_t run_filter(nte_t* self, const step_ctx_t* c, const size_t i,
             self->gated_run[i]++;
             self->counters.gated++;
         }
-        fo->innovation = innovation;
+        fo->innovation = w->innovation;
         fo->nis = upd.nis;
     }
     /* a prior that is not positive definite (or a non-positive innovation variance) can still
      * yield a plausible-looking posterior: judge the filter on both */
-    const bool prior_ok = nte_ekf_positive_definite(n, P) && (upd.s > NTE_C(0.0));
-    status |= guard(self, n, xn, Pn, x, prior_ok);
+    const bool prior_ok = nte_ekf_positive_definite(n, w->P) && (upd.s > NTE_C(0.0));
+    status |= guard(self, n, xn, Pn, w->x, prior_ok);
     for (size_t a = 0U; a < n; a++) {
         for (size_t b = 0U; b < n; b++) {
             self->P[i][a][b] = Pn[a][b];
         }
     }
     for (size_t a = 0U; a < na; a++) {
-        self->u[names[a]] = xn[a + 1U];
+        self->u[w->names[a]] = xn[a + 1U];
     }
-    nte_model_refresh(&self->th, self->nominal, self->ex_nominal, self->kappa, self->u, names, na);
+    nte_model_refresh(&self->th, self->nominal, self->ex_nominal, self->kappa, self->u, w->names,
+                      na);
     fo->z_post = xn[0];
     return status;
 }
 
-static void advance(nte_t* self, const bool first, const nte_real_t dt, const nte_real_t l_in,
+/* One filter of the bank at a running sample (one pass of bank._advance's loop). */
+static uint32_t run_filter(nte_t* self, const step_ctx_t* c, const size_t i,
+                           const nte_rk3_result_t* shared, filter_out_t* fo)
+{
+    const size_t mi = model_index(self);
+    filter_work_t w;
+    (void)memset(&w, 0, sizeof w);
+    w.names = subsets[mi][i];
+    w.n = (size_t)subset_len[mi][i] + 1U;
+    nte_rk3_result_t own;
+    fo->innovation = NTE_C(0.0);
+    fo->nis = NTE_C(0.0);
+    const nte_rk3_result_t* pred = shared;
+    if (c->rotate) {
+        fo->active = (self->k_mod3 == (uint8_t)i);
+    } else {
+        nte_model_rk3(&own, &self->th, c->z_prev, c->l_prev, c->l, c->dt, self->cfg.substeps,
+                      w.names, w.n - 1U);
+        pred = &own;
+        fo->active = true;
+    }
+    nte_depth_terms_t d;
+    nte_model_depth_terms(&d, &self->th, c->l);
+    predict(self, c, i, pred, &d, &w);
+    uint32_t status = measure(self, c, &d, fo->active, &w);
+    status |= update_and_guard(self, i, &w, fo);
+    return status;
+}
+
+void nte_bank_advance(nte_t* self, const bool first, const nte_real_t dt, const nte_real_t l_in,
                     const nte_real_t v, const nte_real_t y, nte_output_t* out)
 {
     step_ctx_t c;
@@ -380,61 +384,8 @@ static void advance(nte_t* self, const bool first, const nte_real_t dt, const nt
     out->status = status;
 }
 
-nte_err_t nte_step(nte_t* self, const nte_sample_t* sample, nte_output_t* out)
+size_t nte_bank_params(const nte_t* self, nte_param_estimate_t* out, const size_t capacity)
 {
-    if ((self == NULL) || (sample == NULL)) {
-        return nte_err_null_argument;
-    }
-    const nte_config_t* cfg = &self->cfg;
-    const nte_real_t l_in = sample->depth_mm;
-    const nte_real_t v = sample->velocity_mm_s;
-    const nte_real_t y = sample->force_n;
-    const bool finite = nte_isfinite(l_in) && nte_isfinite(v) && nte_isfinite(y);
-    const bool in_range = (l_in >= cfg->depth_min_mm) && (l_in <= cfg->depth_max_mm) &&
-                          (nte_abs(v) <= cfg->speed_max_mm_s) && (nte_abs(y) <= cfg->force_max_n);
-    const bool later = (!self->initialised) || (sample->t_us > self->t_prev_us);
-    const bool valid = finite && in_range && later;
-    if (!finite) {
-        self->counters.rejected[NTE_REJECT_NONFINITE]++;
-    } else if (!in_range) {
-        self->counters.rejected[NTE_REJECT_RANGE]++;
-    } else if (!later) {
-        self->counters.rejected[NTE_REJECT_TIME]++;
-    } else {
-        const bool first = !self->initialised;
-        const int64_t dt_us = first ? 1 : (sample->t_us - self->t_prev_us);
-        const nte_real_t dt = (nte_real_t)dt_us / NTE_C(1.0e6);
-        advance(self, first, dt, l_in, v, y, &self->last);
-        if (first) {
-            self->last.status |= NTE_STATUS_INIT;
-        } else {
-            self->k_mod3 = (uint8_t)((self->k_mod3 + 1U) % 3U);
-        }
-        self->t_prev_us = sample->t_us;
-        self->l_prev = l_in;
-        self->initialised = true;
-    }
-    if (!valid) {
-        self->last.status = NTE_STATUS_REJECTED;
-    }
-#if NTE_ROBUST_BUFFER_LEN > 0
-    if (cfg->estimator == nte_estimator_robust) {
-        /* RobustEstimator.step: after the bank's step of the same sample */
-        self->last.status |= nte_robust_step(self, sample, valid);
-        self->last.confidence = self->robust.confidence;
-    }
-#endif
-    if (out != NULL) {
-        *out = self->last;
-    }
-    return nte_err_ok;
-}
-
-size_t nte_get_params(const nte_t* self, nte_param_estimate_t* out, const size_t capacity)
-{
-    if (self == NULL) {
-        return 0U;
-    }
     const size_t mi = model_index(self);
     const size_t count = identified_len[mi];
     for (size_t j = 0U; (j < count) && (j < capacity) && (out != NULL); j++) {

@@ -101,25 +101,30 @@ static nte_err_t check_nonnegative(const nte_real_t v)
 }
 
 #if NTE_ROBUST_BUFFER_LEN > 0
-/* The robust estimator's fields (checked only when it is selected). */
+/* The robust estimator's fields (checked only when it is selected): RobustConfig.validate,
+ * ranges generated from reference_py/config.py into nte_constants.h. */
 static nte_err_t check_robust(const nte_robust_config_t* rc)
 {
     /* an odd buffer_len cannot be compacted to every other entry (robust.py's _record needs
      * buffer_len // 2 == len(buf[0::2])) */
-    if ((rc->buffer_len < 2) || (rc->buffer_len > NTE_ROBUST_BUFFER_LEN) ||
-        ((rc->buffer_len % 2) != 0)) {
+    if ((rc->buffer_len < NTE_RANGE_ROB_BUFFER_LEN_MIN) ||
+        (rc->buffer_len > NTE_RANGE_ROB_BUFFER_LEN_MAX) ||
+        (rc->buffer_len > NTE_ROBUST_BUFFER_LEN) || ((rc->buffer_len % 2) != 0)) {
         return nte_err_bad_robust;
     }
-    if ((rc->fit_substeps < 1) || (rc->fit_substeps > 16) || (rc->fit_iterations < 0) ||
-        (rc->fit_iterations > 1000) || (rc->min_entries < 1) ||
-        (rc->min_entries > rc->buffer_len)) {
+    if ((rc->fit_substeps < NTE_RANGE_ROB_FIT_SUBSTEPS_MIN) ||
+        (rc->fit_substeps > NTE_RANGE_ROB_FIT_SUBSTEPS_MAX) ||
+        (rc->fit_iterations < NTE_RANGE_ROB_FIT_ITERATIONS_MIN) ||
+        (rc->fit_iterations > NTE_RANGE_ROB_FIT_ITERATIONS_MAX) ||
+        (rc->min_entries < NTE_RANGE_ROB_MIN_ENTRIES_MIN) ||
+        (rc->min_entries > NTE_RANGE_ROB_MIN_ENTRIES_MAX) || (rc->min_entries > rc->buffer_len)) {
         return nte_err_bad_robust;
     }
-    if ((check_positive(rc->restart_p0_u) != nte_err_ok) ||
-        (check_positive(rc->lm_lambda0) != nte_err_ok) ||
-        !nte_isfinite(rc->converged_confidence) ||
-        (check_nonnegative(rc->converged_change) != nte_err_ok)) {
-        return nte_err_bad_robust;
+    const nte_real_t positive[] = {NTE_ROBUST_POSITIVE_FIELDS(rc)};
+    for (size_t i = 0U; i < (sizeof positive / sizeof positive[0]); i++) {
+        if (check_positive(positive[i]) != nte_err_ok) {
+            return nte_err_bad_robust;
+        }
     }
     return nte_err_ok;
 }
@@ -136,24 +141,22 @@ nte_err_t nte_config_check(const nte_config_t* cfg)
     if ((cfg->schedule != nte_schedule_all) && (cfg->schedule != nte_schedule_rotate)) {
         return nte_err_bad_schedule;
     }
-    if ((cfg->gate_reopen_after < 1) || (cfg->gate_reopen_after > 1000)) {
+    if ((cfg->gate_reopen_after < NTE_RANGE_GATE_REOPEN_AFTER_MIN) ||
+        (cfg->gate_reopen_after > NTE_RANGE_GATE_REOPEN_AFTER_MAX)) {
         return nte_err_bad_gate_reopen;
     }
-    if ((cfg->substeps < 1) || (cfg->substeps > 16)) {
+    if ((cfg->substeps < NTE_RANGE_SUBSTEPS_MIN) || (cfg->substeps > NTE_RANGE_SUBSTEPS_MAX)) {
         return nte_err_bad_substeps;
     }
-    const nte_real_t positive[] = {cfg->eps_mm_s,   cfg->beta0,          cfg->r_n2,
-                                   cfg->p0_z,       cfg->p0_u,           cfg->gate_sigma,
-                                   cfg->u_max,      cfg->var_floor_z,    cfg->var_floor_u,
-                                   cfg->dt_max_s,   cfg->depth_max_mm,   cfg->speed_max_mm_s,
-                                   cfg->force_max_n};
+    /* the validation of EstimatorConfig.validate, field lists generated from config.py */
+    const nte_real_t positive[] = {NTE_CONFIG_POSITIVE_FIELDS(cfg)};
     for (size_t i = 0U; i < (sizeof positive / sizeof positive[0]); i++) {
         const nte_err_t e = check_positive(positive[i]);
         if (e != nte_err_ok) {
             return e;
         }
     }
-    const nte_real_t nonnegative[] = {cfg->q_z, cfg->q_u_default, cfg->v_still_mm_s};
+    const nte_real_t nonnegative[] = {NTE_CONFIG_NONNEGATIVE_FIELDS(cfg)};
     for (size_t i = 0U; i < (sizeof nonnegative / sizeof nonnegative[0]); i++) {
         const nte_err_t e = check_nonnegative(nonnegative[i]);
         if (e != nte_err_ok) {

@@ -114,4 +114,22 @@
 #define NTE_K_NOMINAL_F1_EXCESS (0x1.1d14e40000000p-5f)
 #endif
 
+/* Valid configuration ranges (reference_py/config.py INT_RANGES, POSITIVE_FIELDS, */
+/* NONNEGATIVE_FIELDS, ROBUST_INT_RANGES, ROBUST_POSITIVE_FIELDS). */
+#define NTE_RANGE_SUBSTEPS_MIN 1
+#define NTE_RANGE_SUBSTEPS_MAX 16
+#define NTE_RANGE_GATE_REOPEN_AFTER_MIN 1
+#define NTE_RANGE_GATE_REOPEN_AFTER_MAX 1000
+#define NTE_RANGE_ROB_BUFFER_LEN_MIN 4
+#define NTE_RANGE_ROB_BUFFER_LEN_MAX 4096
+#define NTE_RANGE_ROB_FIT_SUBSTEPS_MIN 1
+#define NTE_RANGE_ROB_FIT_SUBSTEPS_MAX 16
+#define NTE_RANGE_ROB_FIT_ITERATIONS_MIN 1
+#define NTE_RANGE_ROB_FIT_ITERATIONS_MAX 200
+#define NTE_RANGE_ROB_MIN_ENTRIES_MIN 2
+#define NTE_RANGE_ROB_MIN_ENTRIES_MAX 4096
+#define NTE_CONFIG_POSITIVE_FIELDS(c) (c)->eps_mm_s, (c)->beta0, (c)->r_n2, (c)->p0_z, (c)->p0_u, (c)->gate_sigma, (c)->u_max, (c)->var_floor_z, (c)->var_floor_u, (c)->dt_max_s, (c)->depth_max_mm, (c)->speed_max_mm_s, (c)->force_max_n
+#define NTE_CONFIG_NONNEGATIVE_FIELDS(c) (c)->q_z, (c)->q_u_default, (c)->v_still_mm_s
+#define NTE_ROBUST_POSITIVE_FIELDS(r) (r)->restart_p0_u, (r)->lm_lambda0, (r)->converged_confidence, (r)->converged_change
+
 #endif /* NTE_CONSTANTS_H */

@@ -165,14 +165,14 @@ void nte_model_rk3(nte_rk3_result_t* res, const nte_theta_t* th, nte_real_t z,
     const nte_real_t dl = l_b - l_a;
     nte_real_t s_z = NTE_C(1.0);
     nte_real_t s_u[NTE_PARAM_COUNT] = {NTE_C(0.0)};
+    /* the end of one sub-step is the start of the next: its depth terms are computed once */
+    nte_depth_terms_t d1;
+    nte_model_depth_terms(&d1, th, nte_model_clamp_depth(l_a + (dl * (NTE_C(0.0) / n))));
     for (int32_t j = 0; j < substeps; j++) {
-        const nte_real_t tau0 = (nte_real_t)j / n;
         const nte_real_t taum = (nte_real_t)((2 * j) + 1) / (n * NTE_C(2.0));
         const nte_real_t tau1 = (nte_real_t)(j + 1) / n;
-        nte_depth_terms_t d0;
+        const nte_depth_terms_t d0 = d1;
         nte_depth_terms_t dm;
-        nte_depth_terms_t d1;
-        nte_model_depth_terms(&d0, th, nte_model_clamp_depth(l_a + (dl * tau0)));
         nte_model_depth_terms(&dm, th, nte_model_clamp_depth(l_a + (dl * taum)));
         nte_model_depth_terms(&d1, th, nte_model_clamp_depth(l_a + (dl * tau1)));
         const nte_real_t fz0 = nte_model_rate_dz(&d0);

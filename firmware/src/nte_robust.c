@@ -7,6 +7,7 @@
  */
 #include "nte_robust.h"
 
+#include "nte_bank.h"
 #include "nte_model.h"
 
 #if NTE_ROBUST_BUFFER_LEN > 0

@@ -1,23 +1,11 @@
 /*
- * The robust estimator (reference_py/robust.py) and the two bank entry points it needs
- * (reference_py/bank.py FilterBank.restart_from, the identified parameter list).  Internal
- * header.
+ * The robust estimator (reference_py/robust.py RobustEstimator): the bank (nte_bank.h) plus a
+ * batch refinement once per insertion.  Internal header; nte.c dispatches to it.
  */
 #ifndef NTE_ROBUST_H
 #define NTE_ROBUST_H
 
 #include "nte_real.h"
-
-/** The identified parameters of the instance's model in reference MODEL_PARAMS order;
- *  returns their count (Model I: 6, Model II: 5). */
-size_t nte_bank_identified(const nte_t* self, const uint8_t** ids);
-
-/** FilterBank.restart_from for one run: re-centre the scaled parameters on theta (seven
- *  physical values): nominal = theta, ex_nominal = f1 - kappa (-f2) in nte_real_t, u = 0,
- *  every filter's P = P0 with var(u) = p0_u, gated runs cleared; z and the time line carry
- *  on.  Cost: 7 exp. */
-void nte_bank_restart_from(nte_t* self, const nte_real_t theta[NTE_PARAM_COUNT],
-                           nte_real_t p0_u);
 
 #if NTE_ROBUST_BUFFER_LEN > 0
 

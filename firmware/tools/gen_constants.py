@@ -105,8 +105,29 @@ def lib_header() -> str:
     out += ["#else", f"#define NTE_K_EXP_DEGREE {deg32}",
             f"#define NTE_K_EXP_COEFFS {{ {coeff_lines[0][1]} }}"]
     out += [f"#define {n} ({v32})" for n, v32, _ in uniq]
-    out += ["#endif", "", "#endif /* NTE_CONSTANTS_H */", ""]
+    out += ["#endif", ""]
+    out += range_lines()
+    out += ["", "#endif /* NTE_CONSTANTS_H */", ""]
     return "\n".join(out)
+
+
+def range_lines() -> list[str]:
+    """The valid ranges of the configuration (reference_py/config.py's tables), which
+    nte_config_check applies exactly as EstimatorConfig.validate and RobustConfig.validate do."""
+    out = ["/* Valid configuration ranges (reference_py/config.py INT_RANGES, POSITIVE_FIELDS, */",
+           "/* NONNEGATIVE_FIELDS, ROBUST_INT_RANGES, ROBUST_POSITIVE_FIELDS). */"]
+    for prefix, table in (("NTE_RANGE_", config.INT_RANGES),
+                          ("NTE_RANGE_ROB_", config.ROBUST_INT_RANGES)):
+        for name, (lo, hi) in table.items():
+            out.append(f"#define {prefix}{name.upper()}_MIN {lo}")
+            out.append(f"#define {prefix}{name.upper()}_MAX {hi}")
+    for macro, arg, fields in (("NTE_CONFIG_POSITIVE_FIELDS", "c", config.POSITIVE_FIELDS),
+                               ("NTE_CONFIG_NONNEGATIVE_FIELDS", "c", config.NONNEGATIVE_FIELDS),
+                               ("NTE_ROBUST_POSITIVE_FIELDS", "r",
+                                config.ROBUST_POSITIVE_FIELDS)):
+        body = ", ".join(f"({arg})->{f}" for f in fields)
+        out.append(f"#define {macro}({arg}) {body}")
+    return out
 
 
 def preset_header() -> str:

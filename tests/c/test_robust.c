@@ -335,6 +335,67 @@ static void test_robust_config_errors(void** state)
     }
 }
 
+/* The integer ranges nte_config_check applies are the generated ones (NTE_RANGE_*, from
+ * reference_py/config.py): each bound accepted, one past it refused. */
+typedef struct range_case_t {
+    int32_t* field;
+    int32_t lo;
+    int32_t hi;
+    nte_err_t err;
+} range_case_t;
+
+static void check_bounds(nte_config_t* cfg, const range_case_t* rc)
+{
+    const int32_t keep = *rc->field;
+    *rc->field = rc->lo;
+    assert_int_equal(nte_config_check(cfg), nte_err_ok);
+    *rc->field = rc->lo - 1;
+    assert_int_equal(nte_config_check(cfg), rc->err);
+    *rc->field = rc->hi;
+    assert_int_equal(nte_config_check(cfg), nte_err_ok);
+    *rc->field = rc->hi + 1;
+    assert_int_equal(nte_config_check(cfg), rc->err);
+    *rc->field = keep;
+}
+
+static void test_generated_ranges(void** state)
+{
+    (void)state;
+    nte_config_t cfg;
+    nte_config_default(&cfg, 2, nte_schedule_all);
+    cfg.estimator = nte_estimator_robust;
+    cfg.robust.min_entries = NTE_RANGE_ROB_MIN_ENTRIES_MIN;
+    const int32_t len_max = (NTE_ROBUST_BUFFER_LEN < NTE_RANGE_ROB_BUFFER_LEN_MAX)
+                                ? NTE_ROBUST_BUFFER_LEN
+                                : NTE_RANGE_ROB_BUFFER_LEN_MAX;
+    const range_case_t cases[] = {
+        {&cfg.substeps, NTE_RANGE_SUBSTEPS_MIN, NTE_RANGE_SUBSTEPS_MAX, nte_err_bad_substeps},
+        {&cfg.gate_reopen_after, NTE_RANGE_GATE_REOPEN_AFTER_MIN, NTE_RANGE_GATE_REOPEN_AFTER_MAX,
+         nte_err_bad_gate_reopen},
+        {&cfg.robust.fit_substeps, NTE_RANGE_ROB_FIT_SUBSTEPS_MIN, NTE_RANGE_ROB_FIT_SUBSTEPS_MAX,
+         nte_err_bad_robust},
+        {&cfg.robust.fit_iterations, NTE_RANGE_ROB_FIT_ITERATIONS_MIN,
+         NTE_RANGE_ROB_FIT_ITERATIONS_MAX, nte_err_bad_robust},
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        check_bounds(&cfg, &cases[i]);
+    }
+    /* buffer_len: even, so one past a bound is two past it (odd values are refused anyway) */
+    cfg.robust.buffer_len = NTE_RANGE_ROB_BUFFER_LEN_MIN;
+    assert_int_equal(nte_config_check(&cfg), nte_err_ok);
+    cfg.robust.buffer_len = NTE_RANGE_ROB_BUFFER_LEN_MIN - 2;
+    assert_int_equal(nte_config_check(&cfg), nte_err_bad_robust);
+    cfg.robust.buffer_len = len_max;
+    assert_int_equal(nte_config_check(&cfg), nte_err_ok);
+    /* min_entries up to buffer_len */
+    cfg.robust.min_entries = len_max;
+    assert_int_equal(nte_config_check(&cfg), nte_err_ok);
+    cfg.robust.min_entries = NTE_RANGE_ROB_MIN_ENTRIES_MIN - 1;
+    assert_int_equal(nte_config_check(&cfg), nte_err_bad_robust);
+    cfg.robust.buffer_len = len_max + 2;
+    assert_int_equal(nte_config_check(&cfg), nte_err_bad_robust);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -344,6 +405,7 @@ int main(void)
         cmocka_unit_test(test_refinement_trigger),
         cmocka_unit_test(test_bank_has_no_robust_bits),
         cmocka_unit_test(test_robust_config_errors),
+        cmocka_unit_test(test_generated_ranges),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -1,0 +1,112 @@
+/*
+ * The public API of nte.h: nte_init, nte_reset, nte_step (sample validation and dispatch to
+ * the estimator), nte_get_params, nte_param_name.  The reference composes the same way:
+ * FilterBank.step validates and advances the bank (nte_bank.c); RobustEstimator.step runs
+ * the bank's step, then its own (nte_robust.c).  This file uses both components; the bank
+ * knows nothing of the robust estimator.
+ */
+#include "nte_bank.h"
+#include "nte_robust.h"
+
+static const char* const param_names[NTE_PARAM_COUNT] = {"sigma0", "sigma1", "sigma2", "f1",
+                                                         "f2",     "alpha",  "beta"};
+
+const char* nte_param_name(const nte_param_id_t id)
+{
+    const int i = (int)id;
+    return ((i >= 0) && (i < NTE_PARAM_COUNT)) ? param_names[i] : "?";
+}
+
+static void start(nte_t* self)
+{
+    nte_bank_start(self);
+#if NTE_ROBUST_BUFFER_LEN > 0
+    nte_robust_start(self);
+#endif
+}
+
+nte_err_t nte_init(nte_t* self, const nte_config_t* cfg)
+{
+    if (self == NULL) {
+        return nte_err_null_argument;
+    }
+    const nte_err_t err = nte_config_check(cfg);
+    if (err != nte_err_ok) {
+        return err;
+    }
+    self->cfg = *cfg;
+    self->gate2 = cfg->gate_sigma * cfg->gate_sigma;
+    for (size_t j = 0U; j < NTE_PARAM_COUNT; j++) {
+        self->q_u[j] = (cfg->q_u[j] < NTE_C(0.0)) ? cfg->q_u_default : cfg->q_u[j];
+    }
+    start(self);
+    return nte_err_ok;
+}
+
+nte_err_t nte_reset(nte_t* self)
+{
+    if (self == NULL) {
+        return nte_err_null_argument;
+    }
+    start(self);
+    return nte_err_ok;
+}
+
+nte_err_t nte_step(nte_t* self, const nte_sample_t* sample, nte_output_t* out)
+{
+    if ((self == NULL) || (sample == NULL)) {
+        return nte_err_null_argument;
+    }
+    /* FilterBank.step: validation at the door */
+    const nte_config_t* cfg = &self->cfg;
+    const nte_real_t l_in = sample->depth_mm;
+    const nte_real_t v = sample->velocity_mm_s;
+    const nte_real_t y = sample->force_n;
+    const bool finite = nte_isfinite(l_in) && nte_isfinite(v) && nte_isfinite(y);
+    const bool in_range = (l_in >= cfg->depth_min_mm) && (l_in <= cfg->depth_max_mm) &&
+                          (nte_abs(v) <= cfg->speed_max_mm_s) && (nte_abs(y) <= cfg->force_max_n);
+    const bool later = (!self->initialised) || (sample->t_us > self->t_prev_us);
+    const bool valid = finite && in_range && later;
+    if (!finite) {
+        self->counters.rejected[NTE_REJECT_NONFINITE]++;
+    } else if (!in_range) {
+        self->counters.rejected[NTE_REJECT_RANGE]++;
+    } else if (!later) {
+        self->counters.rejected[NTE_REJECT_TIME]++;
+    } else {
+        const bool first = !self->initialised;
+        const int64_t dt_us = first ? 1 : (sample->t_us - self->t_prev_us);
+        const nte_real_t dt = (nte_real_t)dt_us / NTE_C(1.0e6);
+        nte_bank_advance(self, first, dt, l_in, v, y, &self->last);
+        if (first) {
+            self->last.status |= NTE_STATUS_INIT;
+        } else {
+            self->k_mod3 = (uint8_t)((self->k_mod3 + 1U) % 3U);
+        }
+        self->t_prev_us = sample->t_us;
+        self->l_prev = l_in;
+        self->initialised = true;
+    }
+    if (!valid) {
+        self->last.status = NTE_STATUS_REJECTED;
+    }
+#if NTE_ROBUST_BUFFER_LEN > 0
+    if (cfg->estimator == nte_estimator_robust) {
+        /* RobustEstimator.step: after the bank's step of the same sample */
+        self->last.status |= nte_robust_step(self, sample, valid);
+        self->last.confidence = self->robust.confidence;
+    }
+#endif
+    if (out != NULL) {
+        *out = self->last;
+    }
+    return nte_err_ok;
+}
+
+size_t nte_get_params(const nte_t* self, nte_param_estimate_t* out, const size_t capacity)
+{
+    if (self == NULL) {
+        return 0U;
+    }
+    return nte_bank_params(self, out, capacity);
+}
