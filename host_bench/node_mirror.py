@@ -19,7 +19,7 @@ from typing import Iterable
 import numpy as np
 
 from reference_py.bank import FilterBank
-from reference_py.estimate import make_config
+from reference_py.tools.estimate import make_config
 from reference_py.fmath import real_for
 from reference_py.params import MODEL_PARAMS, PARAM_NAMES, PRESETS
 

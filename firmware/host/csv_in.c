@@ -1,4 +1,4 @@
-/* Strict CSV reader of the host programs; mirrors reference_py/csvio.py read_trial. */
+/* Strict CSV reader of the host programs; mirrors reference_py/tools/csvio.py read_trial. */
 #include "csv_in.h"
 
 #include <errno.h>

@@ -1,6 +1,6 @@
 /*
  * Strict reader of insertion CSV files for the host programs (the C twin of
- * reference_py/csvio.py read_trial).  Host only: uses malloc and double.
+ * reference_py/tools/csvio.py read_trial).  Host only: uses malloc and double.
  */
 #ifndef NTE_CSV_IN_H
 #define NTE_CSV_IN_H

@@ -1,5 +1,5 @@
 /*
- * nte-run: the C twin of `nte-ref estimate` (reference_py/cli.py).  Runs the library over a
+ * nte-run: the C twin of `nte-ref estimate` (reference_py/tools/cli.py).  Runs the library over a
  * CSV of t_s, depth_mm, force_n (velocity_mm_s optional) and writes one estimate row per
  * sample (the robust estimator adds a last column, confidence).  Built twice: nte-run (float) and nte-run-double (NTE_DOUBLE=1).
  *

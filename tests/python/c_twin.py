@@ -30,8 +30,8 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from reference_py.bank import FilterBank  # noqa: E402
-from reference_py.csvio import read_trial, time_us  # noqa: E402
-from reference_py.estimate import EstimateRun, estimate_csv_lines, make_config  # noqa: E402
+from reference_py.tools.csvio import read_trial, time_us  # noqa: E402
+from reference_py.tools.estimate import EstimateRun, estimate_csv_lines, make_config  # noqa: E402
 from reference_py.fmath import real_for  # noqa: E402
 from reference_py.params import MODEL_PARAMS, get_preset  # noqa: E402
 from reference_py.starts import start_values  # noqa: E402
@@ -190,8 +190,8 @@ def make_reversal() -> None:
     """tests/data/c_faults/reversal.csv: 10 mm/s in to 30 mm, then at once -10 mm/s back out
     (no blend: the velocity jumps by 20 mm/s between two samples), preset paper-10mms truth,
     exact sign, 2 mN noise (seed 1).  For the C fault-injection test."""
-    from reference_py.csvio import write_atomic
-    from reference_py.simulate import simulate_force
+    from reference_py.tools.csvio import write_atomic
+    from reference_py.tools.simulate import simulate_force
     rate, speed, depth = 200.0, 10.0, 30.0
     n_in = int(round(depth / speed * rate))
     t = np.arange(2 * n_in + 41) / rate

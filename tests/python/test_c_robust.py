@@ -68,8 +68,8 @@ RUNS = [RobustRun("p10_c2", 2, 0), RobustRun("p10_c2", 2, 3), RobustRun("p6_c2",
 
 def reference_robust(precision: str, runs: list[RobustRun]) -> dict[str, list[str]]:
     """Estimate files (as lines) of the reference robust estimator for runs sharing a config."""
-    from reference_py.csvio import read_trial, time_us
-    from reference_py.estimate import EstimateRun, estimate_csv_lines, make_config
+    from reference_py.tools.csvio import read_trial, time_us
+    from reference_py.tools.estimate import EstimateRun, estimate_csv_lines, make_config
     from reference_py.fmath import real_for
     from reference_py.params import MODEL_PARAMS, get_preset
     from reference_py.robust import RobustEstimator

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from reference_py.cli import main
+from reference_py.tools.cli import main
 
 GOOD_HEADER = "t_s,depth_mm,force_n"
 
@@ -53,7 +53,7 @@ def test_model1_columns(sim_csv, tmp_path):
 
 
 def test_velocity_is_derived_when_absent(sim_csv, tmp_path):
-    from reference_py.csvio import read_trial
+    from reference_py.tools.csvio import read_trial
     src = list(csv.DictReader(open(sim_csv)))
     p = tmp_path / "novel.csv"
     p.write_text(GOOD_HEADER + "\n" + "\n".join(

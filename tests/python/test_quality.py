@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from reference_py.quality import STANDARD_MATRIX, QualityCase, format_summary, run_quality
+from reference_py.tools.quality import STANDARD_MATRIX, QualityCase, format_summary, run_quality
 
 ROOT = Path(__file__).resolve().parents[2]
 RESULTS: dict[QualityCase, object] = {}

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from reference_py.fmath import F64
-from reference_py.quality import QualityCase, format_summary, run_quality
+from reference_py.tools.quality import QualityCase, format_summary, run_quality
 from reference_py.robust import ldlt_solve
 
 

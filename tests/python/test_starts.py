@@ -52,7 +52,7 @@ def test_bad_factor_refused():
 
 
 def test_bench_runs(capsys):
-    from reference_py.bench import run_bench
+    from reference_py.tools.bench import run_bench
     res = run_bench(60)
     assert all(r > 0 for r in res.values())
     assert "filterpy" in capsys.readouterr().out

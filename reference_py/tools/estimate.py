@@ -5,12 +5,12 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .bank import FilterBank
-from .config import EstimatorConfig, profile_config
+from ..bank import FilterBank
+from ..config import EstimatorConfig, profile_config
 from .csvio import Trial, format_real, time_us
-from .fmath import Array, real_for
-from .params import MODEL_PARAMS, Preset
-from .starts import start_values
+from ..fmath import Array, real_for
+from ..params import MODEL_PARAMS, Preset
+from ..starts import start_values
 
 ESTIMATORS = ("bank", "robust")
 
@@ -48,7 +48,7 @@ def run_estimate(trial: Trial, preset: Preset, model: int, estimator: str = "ban
     cfg = make_config(preset, model, profile, schedule)
     nominal = start_values(preset.params.as_list(), init_seed, init_factor, model)
     if estimator == "robust":
-        from .robust import RobustEstimator
+        from ..robust import RobustEstimator
         est = RobustEstimator(R, cfg, [nominal])
     else:
         est = FilterBank(R, cfg, [nominal])

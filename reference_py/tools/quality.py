@@ -6,10 +6,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .config import profile_config
+from ..config import profile_config
 from .evaluation import BOUNDS, make_scenario, metrics, passes, run_bank, start_values
-from .fmath import real_for
-from .params import get_preset
+from ..fmath import real_for
+from ..params import get_preset
 from .trajectory import TrajectorySpec
 
 METRIC_COLUMNS = (("rmse_ins_n", 1e3, "RMSE ins mN"), ("rmse_ret_n", 1e3, "RMSE ret mN"),

@@ -17,11 +17,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .bank import FilterBank
-from .config import EstimatorConfig
-from .fmath import Array, Real
-from . import starts
-from .params import MODEL_PARAMS, PARAM_NAMES, ParamSet, Preset
+from ..bank import FilterBank
+from ..config import EstimatorConfig
+from ..fmath import Array, Real
+from .. import starts
+from ..params import MODEL_PARAMS, PARAM_NAMES, ParamSet, Preset
 from .simulate import simulate_force
 from .trajectory import TrajectorySpec, lspb_profile
 
@@ -91,7 +91,7 @@ def run_bank(R: Real, cfg: EstimatorConfig, sc: Scenario, start_list: list[list[
              progress: bool = False, estimator: str = "bank") -> RunResult:
     """Run an estimator over the scenario, one batch element per seed."""
     if estimator == "robust":
-        from .robust import RobustEstimator
+        from ..robust import RobustEstimator
         est = RobustEstimator(R, cfg, start_list)
         bank = est.bank
     else:

@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .fmath import F64, Array, Real
-from .model import Theta, clamp_depth, depth_terms, exact_sign, output, smooth_sign
-from .params import PARAM_NAMES, ParamSet
+from ..fmath import F64, Array, Real
+from ..model import Theta, clamp_depth, depth_terms, exact_sign, output, smooth_sign
+from ..params import PARAM_NAMES, ParamSet
 
 SIM_SUBSTEPS = 10
 

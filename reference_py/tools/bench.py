@@ -12,12 +12,12 @@ import time
 
 import numpy as np
 
-from .bank import FilterBank
-from .config import default_config
-from .fmath import F32, F64, Real
-from .model import ScaledParams, clamp_depth, depth_terms, output, output_du, output_dz, smooth_sign
-from .params import FILTER_SUBSETS, IDX, PARAM_NAMES, get_preset
-from .rk3 import rk3_step
+from ..bank import FilterBank
+from ..config import default_config
+from ..fmath import F32, F64, Real
+from ..model import ScaledParams, clamp_depth, depth_terms, output, output_du, output_dz, smooth_sign
+from ..params import FILTER_SUBSETS, IDX, PARAM_NAMES, get_preset
+from ..rk3 import rk3_step
 from .simulate import simulate_force
 from .trajectory import TrajectorySpec, lspb_profile
 
@@ -132,7 +132,7 @@ def run_bench(samples: int = 10_000) -> dict[str, float]:
     results["reference float64, batch of 100"] = (
         100 * m / time_reference(F64, preset, t_us[:m], l[:m], v[:m], f[:m], batch=100))
     from pathlib import Path
-    bindir = Path(__file__).resolve().parents[1] / "build" / "host" / "bin"
+    bindir = Path(__file__).resolve().parents[2] / "build" / "host" / "bin"
     for label, exe in (("C nte-run float (whole process)", "nte-run"),
                        ("C nte-run-double (whole process)", "nte-run-double")):
         secs = time_c_program(str(bindir / exe), preset, t_us, l, v, f)

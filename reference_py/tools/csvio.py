@@ -20,7 +20,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from .fmath import Array
+from ..fmath import Array
 
 REQUIRED = ("t_s", "depth_mm", "force_n")
 OPTIONAL = ("velocity_mm_s",)

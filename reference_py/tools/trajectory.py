@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .fmath import Array
+from ..fmath import Array
 
 
 @dataclass(frozen=True)

@@ -21,7 +21,7 @@ from typing import Sequence
 import numpy as np
 
 from .csvio import CsvError, read_trial, write_atomic
-from .params import PRESETS, get_preset
+from ..params import PRESETS, get_preset
 
 EXIT_BAD_INPUT = 2
 
@@ -128,7 +128,7 @@ def _simulate(a: argparse.Namespace) -> int:
 
 def _estimate(a: argparse.Namespace) -> int:
     from .estimate import estimate_csv_lines, run_estimate
-    from .params import MODEL_PARAMS
+    from ..params import MODEL_PARAMS
 
     preset = get_preset(a.preset)
     trial = read_trial(a.csv)
