@@ -9,6 +9,8 @@
                      [--profile P] [--schedule S] [--estimator E] [--cycles C]
                      [--matrix | --robust-matrix]
     nte-ref bench [--samples N]
+    nte-ref phantom [NAME|lab] --out FILE.csv [--seed K] [--rate HZ] [--speed MM_S,...] [...]
+    nte-ref phantom --stats [--trials N]
 
 Exit status: 0 on success, 2 on bad input (the message on stderr names the file, line and column).
 """
@@ -20,6 +22,7 @@ from typing import Sequence
 
 import numpy as np
 
+from . import phantom
 from .csvio import CsvError, read_trial, write_atomic
 from ..params import PRESETS, get_preset
 
@@ -104,6 +107,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     b = sub.add_parser("bench", help="samples per second of the reference (and of filterpy)")
     b.add_argument("--samples", type=int, default=10000)
+
+    ph = sub.add_parser("phantom", help="a measured-like insertion (layers, relaxation, "
+                        "pre-sliding, sensor) to CSV and its truth to JSON",
+                        description="Simulate the realistic phantom (reference_py/tools/"
+                                    "PHANTOM.md); write t_s,depth_mm,velocity_mm_s,force_n,"
+                                    "force_true_n and FILE.truth.json.")
+    phantom.add_arguments(ph)
     return p
 
 
@@ -171,7 +181,7 @@ def _bench(a: argparse.Namespace) -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     handlers = {"simulate": _simulate, "estimate": _estimate, "evaluate": _evaluate,
-                "bench": _bench}
+                "bench": _bench, "phantom": phantom.run}
     try:
         return handlers[args.command](args)
     except (CsvError, ValueError) as exc:
