@@ -11,6 +11,7 @@
     nte-ref bench [--samples N]
     nte-ref phantom [NAME|lab] --out FILE.csv [--seed K] [--rate HZ] [--speed MM_S,...] [...]
     nte-ref phantom --stats [--trials N]
+    nte-ref fixedpoint [--model 1|2] [--seeds N] [--random N] [--sig-bits B]
 
 Exit status: 0 on success, 2 on bad input (the message on stderr names the file, line and column).
 """
@@ -22,7 +23,7 @@ from typing import Sequence
 
 import numpy as np
 
-from . import phantom
+from . import fixedpoint, phantom
 from .csvio import CsvError, read_trial, write_atomic
 from ..params import PRESETS, get_preset
 
@@ -114,6 +115,12 @@ def build_parser() -> argparse.ArgumentParser:
                                     "PHANTOM.md); write t_s,depth_mm,velocity_mm_s,force_n,"
                                     "force_true_n and FILE.truth.json.")
     phantom.add_arguments(ph)
+
+    fx = sub.add_parser("fixedpoint", help="range and Q-format of every variable of the bank",
+                        description=fixedpoint.__doc__.split("\n\n")[0],
+                        epilog=fixedpoint.__doc__.split("\n\n", 1)[1],
+                        formatter_class=argparse.RawDescriptionHelpFormatter)
+    fixedpoint.add_arguments(fx)
     return p
 
 
@@ -181,7 +188,8 @@ def _bench(a: argparse.Namespace) -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     handlers = {"simulate": _simulate, "estimate": _estimate, "evaluate": _evaluate,
-                "bench": _bench, "phantom": phantom.run}
+                "bench": _bench, "phantom": phantom.run,
+                "fixedpoint": fixedpoint.run}
     try:
         return handlers[args.command](args)
     except (CsvError, ValueError) as exc:

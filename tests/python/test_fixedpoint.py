@@ -1,0 +1,131 @@
+"""The fixed-point range report (nte-ref fixedpoint): Q-format rule, recording, a small fixed set."""
+import subprocess
+import sys
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from reference_py.bank import FilterBank
+from reference_py.config import profile_config
+from reference_py.fmath import F64
+from reference_py.params import PRESETS
+from reference_py.tools import fixedpoint as fp
+from reference_py.tools.trajectory import TrajectorySpec
+
+SHORT = TrajectorySpec(depth_mm=10.0, dwell_s=0.2)
+
+
+def _range(values):
+    r = fp.Range()
+    r.add(np.asarray(values, dtype=float))
+    return r
+
+
+@pytest.mark.parametrize("values,I", [
+    ([0.75, -0.5], 0),          # |x| < 1: Q0.31
+    ([1.0], 1),                 # 1 needs an integer bit
+    ([-50.0, 3.0], 6),          # |x| < 64
+    ([0.03, 0.01], -5),         # |x| < 1/32: Q-5.36
+    ([3e-5], -15),
+])
+def test_q_format_integer_bits(values, I):
+    got_I, F, fits = fp.q_format(_range(values), 12)
+    assert (got_I, F) == (I, 31 - I)
+    assert max(abs(v) for v in values) < 2.0 ** got_I
+    assert max(abs(v) for v in values) >= 2.0 ** (got_I - 1)
+    assert fits
+
+
+def test_q_format_fits_by_significant_bits():
+    # max 1 needs I = 1 (F = 30); p1 = 2^-18 keeps 30 - 18 = 12 significant bits: fits at 12,
+    # not at 13
+    r = _range([1.0] + [2.0 ** -18] * 10 + [0.5] * 89)
+    assert r.small() == 2.0 ** -18
+    assert fp.q_format(r, 12)[2]
+    assert not fp.q_format(r, 13)[2]
+    # exact zeros do not count, and a value below the 1st percentile does not either
+    r = _range([1.0] + [0.0] * 1000 + [1e-30] + [0.5] * 200)
+    assert r.small() == 0.5 and r.zeros == 1000
+    assert fp.q_format(r, 12)[2]
+
+
+def test_range_rejects_non_finite():
+    with pytest.raises(ValueError, match="non-finite"):
+        fp.Range().add(np.array([1.0, np.nan]))
+
+
+def test_recording_does_not_change_the_bank():
+    p = PRESETS["paper-10mms"]
+    sc = fp.paper_scenarios(2, 2, SHORT)[0]
+    cfg = replace(profile_config("default", 2), beta0=p.params.beta)
+    plain = FilterBank(F64, cfg, sc.starts)
+    rec = fp.RecordingBank(F64, cfg, sc.starts, ranges={})
+    from reference_py.tools.trajectory import lspb_profile
+    t, l, v, _ = lspb_profile(sc.spec)
+    rng = np.random.default_rng(3)
+    for k in range(0, len(t)):
+        y = np.full(3, 0.01 * l[k]) + rng.normal(0.0, 2e-3, 3)
+        a = plain.step(np.full(3, int(t[k] * 1e6)), np.full(3, l[k]), np.full(3, v[k]), y)
+        b = rec.step(np.full(3, int(t[k] * 1e6)), np.full(3, l[k]), np.full(3, v[k]), y)
+        assert np.array_equal(a.force_hat, b.force_hat) and np.array_equal(a.params, b.params)
+    assert rec.ranges["z"].count > 0
+
+
+@pytest.fixture(scope="module")
+def small_set():
+    """Model II over a fixed small set: one paper preset and one random tissue, short moves."""
+    paper = fp.paper_scenarios(2, 2, SHORT)[:1]
+    rand = [replace(s, spec=replace(SHORT, speed_mm_s=3.0))
+            for s in fp.random_scenarios(2, 1, 2, seed=4)]
+    return fp.collect(2, paper + rand)
+
+
+def test_small_set_covers_every_variable(small_set):
+    names = set(small_set)
+    for want in ("z", "u.sigma0", "u.beta", "theta.sigma1", "g", "1/g", "h (force)",
+                 "rk3 dz/dz0", "rk3 dz/du.beta", "H[z]", "H[u.f1]", "P1 predicted [z,z]",
+                 "P2 updated [f1,sigma1]", "P3 updated [sigma2,sigma2]", "K1[sigma0]", "K3[z]",
+                 "innovation2", "S3 = H P H' + R", "NIS1", "input force_n"):
+        assert want in names, want
+    assert all(r.count > 0 for r in small_set.values())
+
+
+def test_small_set_ranges_are_physical(small_set):
+    r = small_set
+    cfg = profile_config("default", 2)
+    assert 0.0 < r["e = exp(-alpha l)"].lo and r["e = exp(-alpha l)"].hi <= 1.0
+    assert r["g"].lo > 0.0 and r["1/g"].lo > 0.0
+    for name, rg in r.items():
+        if name.startswith("u."):
+            assert rg.max_abs() <= cfg.u_max, name
+        if name.startswith("P") and "[z,z]" in name:
+            assert rg.lo >= cfg.var_floor_z * (1 - 1e-12), name
+        if name.startswith("S"):
+            assert rg.lo >= cfg.r_n2 * (1 - 1e-12), name
+        if name.startswith("NIS"):
+            assert rg.lo >= 0.0, name
+
+
+def test_small_set_table(small_set):
+    lines, misfits = fp.format_table(small_set, 12)
+    rows = {ln.split(" | ")[0][2:]: ln for ln in lines[2:]}
+    assert set(rows) == set(small_set)
+    # the log-parameters are O(1) by construction (|u| <= u_max = 3.9): at most Q2.29
+    for name in ("u.sigma0", "u.sigma1", "u.sigma2", "u.f1", "u.beta"):
+        I, F = (int(x) for x in rows[name].split(" | ")[4][1:].split("."))
+        assert I <= 2 and I + F == 31, rows[name]
+        assert name not in misfits
+    # misfits are exactly the rows marked no
+    assert misfits == [n for n, ln in rows.items() if ln.endswith("**no** |")]
+    # asking for more significant bits can only add misfits
+    more = fp.format_table(small_set, 24)[1]
+    assert set(misfits) <= set(more) and len(more) > len(misfits)
+
+
+def test_cli_rejects_bad_flags():
+    res = subprocess.run([sys.executable, "-m", "reference_py", "fixedpoint", "--seeds", "0"],
+                         capture_output=True, text=True)
+    assert res.returncode == 2
+    assert res.stderr.strip() == "nte-ref: error: --seeds must be >= 1 (got 0)"
+    assert "Traceback" not in res.stderr
