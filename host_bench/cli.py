@@ -2,8 +2,10 @@
 
     nte-bench replay FILE.csv|FILE.log --channel vcan0 [--interface socketcan|slcan]
                      [--speed X] [--depth-rate HZ] [--player python|canplayer] --out DIR
+    nte-bench send FILE.csv [--channel vcan0] [--speed X] [--force-every N]
+                   [--record-csv FILE] [--record-log FILE]
 
-replay sends a scenario (CSV: t_s, depth_mm, velocity_mm_s, force_n -- depth frames at
+replay sends a scenario (CSV: t_s, depth_mm, force_n, optional velocity_mm_s -- depth frames at
 --depth-rate, linearly interpolated from the CSV, force frames at the CSV's own rate; or a
 candump log, whose input frames are sent as they are) onto the bus at t / speed, records every
 frame the node publishes (DIR/node.csv with can.CSVWriter, DIR/node.log in candump -L format),
@@ -11,6 +13,14 @@ runs the reference (reference_py FilterBank, float32, the node's configuration) 
 quantised frames through host_bench.node_mirror, compares the node's Estimate and Params
 frames with it raw value for raw value, writes DIR/summary.json, DIR/force.png and
 DIR/params.png (parameters with +-3 sigma bands), and prints the final parameters.
+send sends a scenario CSV row by row (one Depth frame per row, a Force frame where force_n is
+given) at its own timestamps and records the whole bus (host_bench.replay).
+
+The CSV is read by the tools' one reader (reference_py.tools.csvio). Values outside a signal's DBC range (read from
+firmware/can/nte.dbc) are clipped to the range by replay, with a warning that counts them; send
+refuses them. Every output is written by the tools' safe writer (all of DIR or nothing).
+The socketcan interface needs a kernel with CAN (AF_CAN); elsewhere run the command under
+host_bench/with-vcan, which provides vcan0.
 
 Exit status: 0 done and no mismatch, 1 mismatches or frames missing, 2 bad arguments/input.
 """
@@ -18,11 +28,9 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import shutil
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 from typing import Sequence
@@ -30,21 +38,39 @@ from typing import Sequence
 import can
 import numpy as np
 
-from .dbc import TICK_S, NteDatabase, seconds_to_ticks, log10_to_std
+from reference_py.params import PRESETS
+from reference_py.tools.cli import EXIT_BAD_INPUT, OneLineParser, bounded
+from reference_py.tools.safe_write import Outputs
+
+from .dbc import TICK_S, NteDatabase, log10_to_std
 from .node_mirror import NodeMirror, compare, node_outputs
 from .replay import read_scenario
 
 PARAM_LABELS = ("sigma0", "sigma1", "sigma2", "f1", "f2", "alpha", "beta")
 
 
-def scenario_frames(csv_path: str, db: NteDatabase, depth_rate_hz: float) -> list[tuple[float, can.Message]]:
+def scenario_frames(csv_path: str, db: NteDatabase, depth_rate_hz: float,
+                    clipped: dict[str, int] | None = None) -> list[tuple[float, can.Message]]:
     """(t_s, message) for a scenario CSV: depth at depth_rate_hz (interpolated), force at the
-    CSV rows that have one; at equal times depth first.  Times are on the 100 us tick grid."""
+    CSV rows that have one; at equal times depth first.  Times are on the 100 us tick grid.
+    A value outside its signal's DBC range is clipped to the range and counted in ``clipped``
+    (by signal name) when a dict is given."""
     rows = read_scenario(csv_path)
     t = np.array([r.t_s for r in rows])
     d = np.array([r.depth_mm for r in rows])
     v = np.array([r.velocity_mm_s for r in rows])
     tx = db.sender()
+    ranges = {sig: db.signal_range(msg, sig)
+              for msg, sig in (("Depth", "Depth"), ("Depth", "Velocity"), ("Force", "Force"))}
+    counts = clipped if clipped is not None else {}
+
+    def clip(sig: str, x: float) -> float:
+        lo, hi = ranges[sig]
+        if lo <= x <= hi:
+            return x
+        counts[sig] = counts.get(sig, 0) + 1
+        return min(max(x, lo), hi)
+
     step_ticks = max(1, int(round(1.0 / depth_rate_hz / TICK_S)))
     t0 = int(round(t[0] / TICK_S))
     t1 = int(round(t[-1] / TICK_S))
@@ -60,17 +86,21 @@ def scenario_frames(csv_path: str, db: NteDatabase, depth_rate_hz: float) -> lis
     for k, kind, a, b in events:
         st = (k % 65536) * TICK_S
         if kind == 0:
-            a = min(max(a, 0.0), 500.0)
-            msg = tx.message("Depth", {"Depth": a, "Velocity": min(max(b, -500.0), 500.0),
+            msg = tx.message("Depth", {"Depth": clip("Depth", a), "Velocity": clip("Velocity", b),
                                        "SensorTime": st})
         else:
-            msg = tx.message("Force", {"Force": min(max(a, -50.0), 50.0), "SensorTime": st})
+            msg = tx.message("Force", {"Force": clip("Force", a), "SensorTime": st})
         out.append((k * TICK_S, msg))
     return out
 
 
 def log_frames(path: str) -> list[tuple[float, can.Message]]:
-    msgs = list(can.LogReader(path))
+    try:
+        msgs = list(can.LogReader(path))
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    except (ValueError, IndexError) as exc:
+        raise ValueError(f"{path}: not a CAN log python-can can read: {exc}") from None
     if not msgs:
         raise ValueError(f"{path}: no frames")
     t0 = msgs[0].timestamp
@@ -163,8 +193,9 @@ def final_parameters(db: NteDatabase, messages: list[can.Message]) -> dict[str, 
     return last
 
 
-def plot(out: Path, db: NteDatabase, mirror: NodeMirror, messages: list[can.Message],
-         params_per_step: int) -> list[str]:
+def plot(files: Sequence[Path], db: NteDatabase, mirror: NodeMirror,
+         messages: list[can.Message], params_per_step: int) -> None:
+    """The force figure to files[0] and the parameter figure to files[1] (PNG)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -192,8 +223,7 @@ def plot(out: Path, db: NteDatabase, mirror: NodeMirror, messages: list[can.Mess
     ax.legend()
     ax.set_title("Force loop over CAN")
     fig.tight_layout()
-    files = [str(out / "force.png")]
-    fig.savefig(files[0], dpi=110)
+    fig.savefig(str(files[0]), dpi=110, format="png")
     plt.close(fig)
     fig, axs = plt.subplots(4, 2, figsize=(10, 9), sharex=True)
     for j, ax in enumerate(axs.flat[:7]):
@@ -208,66 +238,91 @@ def plot(out: Path, db: NteDatabase, mirror: NodeMirror, messages: list[can.Mess
         ax.set_xlabel("sensor time, s")
     fig.suptitle("Node parameters (Params frames) with ±3σ")
     fig.tight_layout()
-    files.append(str(out / "params.png"))
-    fig.savefig(files[1], dpi=110)
+    fig.savefig(str(files[1]), dpi=110, format="png")
     plt.close(fig)
-    return files
+
+
+def open_bus(interface: str, channel: str, bitrate: int,
+             filters: list[dict] | None = None, command: str = "nte-bench") -> can.BusABC:
+    """The python-can bus, or ValueError with one line saying why it cannot be opened."""
+    try:
+        if interface == "socketcan":
+            return can.Bus(interface="socketcan", channel=channel, can_filters=filters,
+                           receive_own_messages=False)
+        return can.Bus(interface="slcan", channel=channel, bitrate=bitrate, sleep_after_open=0)
+    except (OSError, can.CanError, ValueError) as exc:
+        errno = getattr(exc, "errno", None) or getattr(exc.__cause__, "errno", None)
+        if errno == 97 or "Address family not supported" in str(exc):
+            raise ValueError(f"--interface socketcan: this host's kernel has no SocketCAN "
+                             f"(AF_CAN); run it under host_bench/with-vcan, which provides vcan0: "
+                             f"host_bench/with-vcan {command} ...") from None
+        if errno == 19 or "No such device" in str(exc):
+            raise ValueError(f"--channel {channel}: no such CAN interface (create vcan0 with "
+                             f"'ip link add dev vcan0 type vcan', or run under "
+                             f"host_bench/with-vcan)") from None
+        raise ValueError(f"--channel {channel}: cannot open the {interface} bus: "
+                         f"{exc}".splitlines()[0]) from None
 
 
 def cmd_replay(a: argparse.Namespace) -> int:
-    out = Path(a.out)
-    out.mkdir(parents=True, exist_ok=True)
-    db = NteDatabase(base_id=a.base_id)
-    try:
-        if a.file.endswith((".log", ".asc", ".blf", ".trc")):
-            frames = log_frames(a.file)
-        else:
-            frames = scenario_frames(a.file, db, a.depth_rate)
-    except (OSError, ValueError) as exc:
-        print(f"nte-bench: {exc}", file=sys.stderr)
-        return 2
     if a.speed <= 0 and a.player == "canplayer":
-        print("nte-bench: --player canplayer needs --speed > 0", file=sys.stderr)
-        return 2
-    write_candump(out / "input.log", frames, a.channel, a.speed if a.speed > 0 else 1.0)
-    writers: list[can.Listener] = [can.CSVWriter(str(out / "node.csv")),
-                                   can.CanutilsLogWriter(str(out / "node.log"), channel=a.channel)]
-    collector = _Collect(db, writers)
-    if a.interface == "socketcan":
-        filters = [{"can_id": i, "can_mask": 0x7FF, "extended": False} for i in collector.ids]
-        bus = can.Bus(interface="socketcan", channel=a.channel, can_filters=filters,
-                      receive_own_messages=False)
+        raise ValueError("--player canplayer needs --speed > 0")
+    db = NteDatabase(base_id=a.base_id)
+    clipped: dict[str, int] = {}
+    if a.file.endswith((".log", ".asc", ".blf", ".trc")):
+        frames = log_frames(a.file)
     else:
-        bus = can.Bus(interface="slcan", channel=a.channel, bitrate=a.bitrate, sleep_after_open=0)
-    notifier = can.Notifier(bus, [collector])
-    t_start = time.monotonic()
-    try:
-        if a.player == "canplayer":
-            _send_canplayer(out / "input.log", (frames[-1][0] - frames[0][0]) / a.speed,
-                            not a.no_progress)
-        else:
-            _send_python(bus, frames, a.speed, not a.no_progress)
-        time.sleep(a.tail)
-    finally:
-        notifier.stop()
-        bus.shutdown()
-        for w in writers:
-            w.stop()
-    wall = time.monotonic() - t_start
-    mirror = NodeMirror(preset=a.preset, model=a.model, base_id=a.base_id,
-                        depth_timeout_us=int(a.depth_timeout_ms * 1000),
-                        params_per_step=a.params_per_step)
-    mirror.feed_all(m for _, m in frames)
-    est, par, bad = node_outputs(db, collector.messages)
-    res = compare(mirror, est, par)
-    res.update({"frames_sent": len(frames), "output_frames_received": len(collector.messages),
-                "output_e2e_errors": bad, "wall_s": round(wall, 3),
-                "mirror_events": mirror.events})
-    res["final_parameters"] = {k: {"value": v, "sd": s}
-                               for k, (v, s) in final_parameters(db, collector.messages).items()}
-    if not a.no_plot:
-        res["figures"] = plot(out, db, mirror, collector.messages, a.params_per_step)
-    (out / "summary.json").write_text(json.dumps(res, indent=2) + "\n")
+        frames = scenario_frames(a.file, db, a.depth_rate, clipped)
+    for sig, n in sorted(clipped.items()):
+        lo, hi = db.signal_range("Force" if sig == "Force" else "Depth", sig)
+        print(f"nte-bench: warning: {n} {sig} value(s) outside the DBC range "
+              f"[{lo:g}, {hi:g}] clipped to it", file=sys.stderr)
+    with Outputs() as outs:
+        out = outs.directory(a.out, "--out")
+        names = ["input.log", "node.csv", "node.log", "summary.json"]
+        if not a.no_plot:
+            names += ["force.png", "params.png"]
+        tmp = {n: outs.add(out / n, "--out") for n in names}
+        write_candump(tmp["input.log"], frames, a.channel, a.speed if a.speed > 0 else 1.0)
+        collector = _Collect(db, [])
+        filters = [{"can_id": i, "can_mask": 0x7FF, "extended": False} for i in collector.ids]
+        bus = open_bus(a.interface, a.channel, a.bitrate, filters, "nte-bench replay")
+        writers: list[can.Listener] = [
+            can.CSVWriter(str(tmp["node.csv"])),
+            can.CanutilsLogWriter(str(tmp["node.log"]), channel=a.channel)]
+        collector.writers = writers
+        notifier = can.Notifier(bus, [collector])
+        t_start = time.monotonic()
+        try:
+            if a.player == "canplayer":
+                _send_canplayer(tmp["input.log"], (frames[-1][0] - frames[0][0]) / a.speed,
+                                not a.no_progress)
+            else:
+                _send_python(bus, frames, a.speed, not a.no_progress)
+            time.sleep(a.tail)
+        finally:
+            notifier.stop()
+            bus.shutdown()
+            for w in writers:
+                w.stop()
+        wall = time.monotonic() - t_start
+        mirror = NodeMirror(preset=a.preset, model=a.model, base_id=a.base_id,
+                            depth_timeout_us=int(a.depth_timeout_ms * 1000),
+                            params_per_step=a.params_per_step)
+        mirror.feed_all(m for _, m in frames)
+        est, par, bad = node_outputs(db, collector.messages)
+        res = compare(mirror, est, par)
+        res.update({"frames_sent": len(frames), "output_frames_received": len(collector.messages),
+                    "output_e2e_errors": bad, "wall_s": round(wall, 3),
+                    "mirror_events": mirror.events, "input_values_clipped": clipped})
+        res["final_parameters"] = {k: {"value": v, "sd": s}
+                                   for k, (v, s) in final_parameters(db, collector.messages).items()}
+        if not a.no_plot:
+            plot([tmp["force.png"], tmp["params.png"]], db, mirror, collector.messages,
+                 a.params_per_step)
+            res["figures"] = [str(out / "force.png"), str(out / "params.png")]
+        outs.write_lines(tmp["summary.json"], [json.dumps(res, indent=2)])
+        outs.commit()
     print(f"nte-bench: sent {len(frames)} frames in {wall:.1f} s; node published "
           f"{res['estimates_node']} estimates (reference {res['estimates_reference']}), "
           f"{res['params_node']} params frames")
@@ -279,39 +334,115 @@ def cmd_replay(a: argparse.Namespace) -> int:
     print("final parameters (value ± sd):")
     for k, v in res["final_parameters"].items():
         print(f"  {k:7s} {v['value']:.6g} ± {v['sd']:.3g}")
+    n_clip = sum(clipped.values())
+    print(f"input samples: {n_clip} clipped to the DBC ranges; node: "
+          f"{res.get('mirror_events', {})}")
     ok = (res["estimate_mismatches"] == 0 and res["param_value_mismatches"] == 0
           and res["estimates_node"] == res["estimates_reference"] and bad == 0)
     return 0 if ok else 1
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="nte-bench", description=__doc__.split("\n\n")[0],
-                                formatter_class=argparse.RawDescriptionHelpFormatter,
-                                epilog=__doc__.split("\n\n", 1)[1])
-    sub = p.add_subparsers(dest="cmd", required=True)
-    r = sub.add_parser("replay", help="replay a scenario CSV or candump log to the node and "
-                                      "compare its outputs with the reference")
-    r.add_argument("file", help="scenario CSV (t_s, depth_mm, velocity_mm_s, force_n) or a "
-                                "candump log (.log)")
-    r.add_argument("--channel", default="vcan0", help="CAN interface or slcan port (vcan0)")
-    r.add_argument("--interface", default="socketcan", choices=("socketcan", "slcan"))
-    r.add_argument("--bitrate", type=int, default=500000, help="slcan bit rate")
-    r.add_argument("--speed", type=float, default=1.0,
+def cmd_send(a: argparse.Namespace) -> int:
+    from .replay import replay, schedule
+    db = NteDatabase(base_id=a.base_id)
+    frames = schedule(read_scenario(a.file), db, force_every=a.force_every)
+    with Outputs() as outs:
+        rec_csv = outs.add(a.record_csv, "--record-csv") if a.record_csv else None
+        rec_log = outs.add(a.record_log, "--record-log") if a.record_log else None
+        bus = open_bus(a.interface, a.channel, a.bitrate, None, "nte-bench send")
+        writers: list[can.Listener] = []
+        if rec_csv is not None:
+            writers.append(can.CSVWriter(str(rec_csv)))
+        if rec_log is not None:
+            writers.append(can.CanutilsLogWriter(str(rec_log), channel=a.channel))
+        try:
+            res = replay(bus, frames, speed=a.speed, writers=writers, tail_s=a.tail, db=db)
+        finally:
+            bus.shutdown()
+            for w in writers:
+                w.stop()
+        outs.commit()
+    sent = ", ".join(f"{k} {v}" for k, v in sorted(res.sent_by_name.items()))
+    print(f"replay: sent {res.sent} frames ({sent}) in {res.duration_s:.3f} s, received "
+          f"{res.received}, worst lateness {res.max_late_s * 1e3:.2f} ms")
+    return 0
+
+
+def _bus_flags(r: argparse.ArgumentParser, tail_s: float) -> None:
+    r.add_argument("--channel", default="vcan0",
+                   help="socketcan interface name, or slcan serial port / pyserial URL such as "
+                        "socket://127.0.0.1:PORT")
+    r.add_argument("--interface", default="socketcan", choices=("socketcan", "slcan"),
+                   help="python-can interface")
+    r.add_argument("--bitrate", type=bounded(10_000, 1_000_000, " bit/s", integer=True),
+                   default=500000, help="slcan bit rate")
+    r.add_argument("--base-id", type=_base_id, default=None,
+                   help="base CAN id, 0x000-0x7F0 (default: the DBC's NteBaseId, 0x200)")
+    r.add_argument("--speed", type=bounded(0.0, 100.0), default=1.0,
                    help="time scale: 1 real time, 0.5 half speed, 0 as fast as possible")
-    r.add_argument("--depth-rate", type=float, default=1000.0, help="depth frame rate, Hz")
+    r.add_argument("--tail", type=bounded(0.0, 60.0, " s"), default=tail_s, metavar="S",
+                   help="keep recording S seconds after the last frame")
+
+
+def _base_id(text: str) -> int:
+    try:
+        value = int(text, 0)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    if not 0 <= value <= 0x7F0:
+        raise argparse.ArgumentTypeError(f"must be within 0x000..0x7F0 (got {text})")
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = OneLineParser(prog="nte-bench", description=__doc__.split("\n\n")[0],
+                      epilog=__doc__.split("\n\n", 1)[1])
+    sub = p.add_subparsers(dest="cmd", required=True, parser_class=OneLineParser)
+    r = sub.add_parser("replay", help="replay a scenario CSV or candump log to the node and "
+                                      "compare its outputs with the reference",
+                       description="Replay a scenario CSV or candump log to the node and compare "
+                                   "its Estimate and Params frames with the reference.")
+    r.add_argument("file", help="scenario CSV (t_s, depth_mm, force_n, optional velocity_mm_s) "
+                                "or a candump log (.log)")
+    _bus_flags(r, 0.5)
+    r.add_argument("--depth-rate", type=bounded(0.0, 10_000.0, " Hz", lo_open=True),
+                   default=1000.0, help="depth frame rate, Hz")
     r.add_argument("--player", choices=("python", "canplayer"), default="python",
                    help="who sends: python-can, or can-utils canplayer (full rate)")
-    r.add_argument("--base-id", type=lambda s: int(s, 0), default=None)
     r.add_argument("--model", type=int, choices=(1, 2), default=2, help="the node's model")
-    r.add_argument("--preset", default="paper-10mms", help="the node's preset")
-    r.add_argument("--depth-timeout-ms", type=float, default=50.0, help="the node's timeout")
-    r.add_argument("--params-per-step", type=int, default=1, help="the node's setting")
-    r.add_argument("--tail", type=float, default=0.5, help="record S s after the last frame")
-    r.add_argument("--no-plot", action="store_true")
-    r.add_argument("--no-progress", action="store_true")
-    r.add_argument("--out", required=True, help="output directory")
-    a = p.parse_args(argv)
-    return cmd_replay(a)
+    r.add_argument("--preset", default="paper-10mms", choices=sorted(PRESETS), metavar="NAME",
+                   help=f"the node's preset, one of {', '.join(sorted(PRESETS))}")
+    r.add_argument("--depth-timeout-ms", type=bounded(0.0, 60_000.0, " ms", lo_open=True),
+                   default=50.0, help="the node's depth timeout, ms")
+    r.add_argument("--params-per-step", type=bounded(1, 7, integer=True), default=1,
+                   help="the node's setting: Params frames per estimator step")
+    r.add_argument("--no-plot", action="store_true", help="do not draw force.png, params.png")
+    r.add_argument("--no-progress", action="store_true", help="no progress bar")
+    r.add_argument("--out", required=True, help="output directory (created if absent; its "
+                                                "parent must exist)")
+    r.set_defaults(run=cmd_replay)
+    s = sub.add_parser("send", help="send a scenario CSV row by row and record the bus",
+                       description="Send a scenario CSV as Depth and Force frames of "
+                                   "firmware/can/nte.dbc (E2E protected) at their timestamps, "
+                                   "recording everything received.")
+    s.add_argument("file", help="scenario CSV (t_s, depth_mm, force_n, optional velocity_mm_s)")
+    _bus_flags(s, 0.2)
+    s.add_argument("--force-every", type=bounded(1, 1000, integer=True), default=1, metavar="N",
+                   help="send every N-th force sample only")
+    s.add_argument("--record-csv", metavar="FILE", help="write all frames with can.CSVWriter")
+    s.add_argument("--record-log", metavar="FILE",
+                   help="write all frames in candump -L format (can.CanutilsLogWriter)")
+    s.set_defaults(run=cmd_send)
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    a = build_parser().parse_args(argv)
+    try:
+        return int(a.run(a))
+    except ValueError as exc:       # CsvError, OutputError, a bad scenario, an unopenable bus
+        print(f"nte-bench: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
 
 
 if __name__ == "__main__":

@@ -108,6 +108,13 @@ class NteDatabase:
     def frame_id(self, name: str) -> int:
         return self.base_id + self.offsets[name]
 
+    def signal_range(self, message: str, signal: str) -> tuple[float, float]:
+        """(minimum, maximum) physical value of a signal, as the DBC declares it."""
+        sig = self.db.get_message_by_name(message).get_signal_by_name(signal)
+        if sig.minimum is None or sig.maximum is None:
+            raise ValueError(f"{self.path}: {message}.{signal} declares no range")
+        return float(sig.minimum), float(sig.maximum)
+
     def name_of(self, can_id: int) -> str | None:
         return self._by_id.get(can_id)
 

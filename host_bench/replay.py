@@ -1,22 +1,22 @@
 """Bench replay: send a scenario's depth and force samples to the node over CAN, record the bus.
 
-Scenario CSV, one row per depth sample, header required:
-    t_s, depth_mm, velocity_mm_s, force_n
-``force_n`` may be empty (or nan) on rows without a force sample (e.g. 1 kHz depth, 200 Hz
-force); ``--force-every N`` keeps only every N-th force sample. Each row becomes a Depth frame
-and, if it has a force, a Force frame, both stamped with SensorTime = round(t_s / 100 us) mod 2^16,
+Scenario CSV (read by reference_py.tools.csvio, the tools' one reader), one row per depth
+sample, header required: t_s, depth_mm, force_n, and optionally velocity_mm_s (else central
+differences of depth).  ``force_n`` may be empty on rows without a force sample (e.g. 1 kHz
+depth, 200 Hz force); ``--force-every N`` keeps only every N-th force sample. Each row becomes
+a Depth frame and, if it has a force, a Force frame, both stamped with SensorTime = round(t_s / 100 us) mod 2^16,
 sent at start + t_s / speed (speed 0 = as fast as possible: the node must use the frames' own
 timestamps, never arrival times). Everything the bus delivers to this process is written with
 python-can's writers (CSV and candump -L log); the frames sent are written too, marked "T".
 
-    python -m host_bench.replay scenario.csv --interface socketcan --channel vcan0 \\
+    nte-bench send scenario.csv --interface socketcan --channel vcan0 \\
         --record-csv run.csv --record-log run.log
+
+(``python -m host_bench.replay ARGS`` runs ``nte-bench send ARGS``.)
 """
 
 from __future__ import annotations
 
-import argparse
-import csv
 import math
 import sys
 import threading
@@ -26,6 +26,8 @@ from pathlib import Path
 from typing import Iterable, Sequence
 
 import can
+
+from reference_py.tools.csvio import read_trial
 
 from .dbc import TICK_S, NteDatabase, seconds_to_ticks
 
@@ -42,35 +44,18 @@ class ScenarioRow:
 
 
 def read_scenario(path: str | Path) -> list[ScenarioRow]:
-    """Read and validate a scenario CSV (strictly increasing t_s, finite values)."""
+    """Read a scenario CSV with the tools' one reader (reference_py.tools.csvio: strictly
+    increasing t_s, finite values, velocity_mm_s optional, force_n empty where no force sample
+    was taken)."""
+    trial = read_trial(path, sparse=("force_n",))
     rows: list[ScenarioRow] = []
-    with open(path, newline="") as f:
-        reader = csv.DictReader(f)
-        need = {"t_s", "depth_mm", "velocity_mm_s", "force_n"}
-        if reader.fieldnames is None or not need <= set(reader.fieldnames):
-            raise ValueError(f"{path}: header must contain {sorted(need)}")
-        for line, rec in enumerate(reader, start=2):
-            try:
-                t = float(rec["t_s"])
-                d = float(rec["depth_mm"])
-                v = float(rec["velocity_mm_s"])
-                fs = (rec["force_n"] or "").strip()
-                fo = float(fs) if fs else None
-            except ValueError as exc:
-                raise ValueError(f"{path}:{line}: {exc}") from None
-            if fo is not None and math.isnan(fo):
-                fo = None
-            if not all(math.isfinite(x) for x in (t, d, v)) or (fo is not None and not math.isfinite(fo)):
-                raise ValueError(f"{path}:{line}: non-finite value")
-            if rows and t <= rows[-1].t_s:
-                raise ValueError(f"{path}:{line}: t_s must increase")
-            if -DEPTH_SLACK_MM <= d < 0.0:
-                d = 0.0
-            if DEPTH_MAX_MM < d <= DEPTH_MAX_MM + DEPTH_SLACK_MM:
-                d = DEPTH_MAX_MM
-            rows.append(ScenarioRow(t, d, v, fo))
-    if not rows:
-        raise ValueError(f"{path}: no rows")
+    for t, d, v, fo in zip(trial.t_s, trial.depth_mm, trial.velocity_mm_s, trial.force_n):
+        d = float(d)
+        if -DEPTH_SLACK_MM <= d < 0.0:
+            d = 0.0
+        if DEPTH_MAX_MM < d <= DEPTH_MAX_MM + DEPTH_SLACK_MM:
+            d = DEPTH_MAX_MM
+        rows.append(ScenarioRow(float(t), d, float(v), None if math.isnan(fo) else float(fo)))
     return rows
 
 
@@ -173,64 +158,10 @@ def replay(bus: can.BusABC, frames: Iterable[ScheduledFrame], *, speed: float = 
     return res
 
 
-def open_bus(interface: str, channel: str, bitrate: int = 500000) -> can.BusABC:
-    if interface == "socketcan":
-        return can.Bus(interface="socketcan", channel=channel)
-    if interface == "slcan":
-        return can.Bus(interface="slcan", channel=channel, bitrate=bitrate, sleep_after_open=0)
-    raise ValueError(f"unsupported interface {interface!r} (socketcan or slcan)")
-
-
 def main(argv: Sequence[str] | None = None) -> int:
-    p = argparse.ArgumentParser(
-        prog="python -m host_bench.replay",
-        description="Replay a scenario CSV (t_s, depth_mm, velocity_mm_s, force_n) as Depth and "
-                    "Force frames of firmware/can/nte.dbc (E2E protected) at their timestamps, "
-                    "recording everything received.",
-        epilog="Exit status: 0 on success, 2 on a bad scenario or argument.")
-    p.add_argument("scenario", help="scenario CSV file")
-    p.add_argument("--interface", default="socketcan", choices=("socketcan", "slcan"),
-                   help="python-can interface (default socketcan)")
-    p.add_argument("--channel", default="vcan0",
-                   help="socketcan interface name, or slcan serial port / pyserial URL "
-                        "such as socket://127.0.0.1:PORT (default vcan0)")
-    p.add_argument("--bitrate", type=int, default=500000, help="slcan bit rate (default 500000)")
-    p.add_argument("--base-id", type=lambda s: int(s, 0), default=None,
-                   help="base CAN id (default: the DBC's NteBaseId, 0x200)")
-    p.add_argument("--speed", type=float, default=1.0,
-                   help="time scale: 1 real time, 0.5 half speed, 0 as fast as possible")
-    p.add_argument("--force-every", type=int, default=1, metavar="N",
-                   help="send every N-th force sample only (default 1)")
-    p.add_argument("--tail", type=float, default=0.2, metavar="S",
-                   help="keep recording S seconds after the last frame (default 0.2)")
-    p.add_argument("--record-csv", metavar="FILE", help="write all frames with can.CSVWriter")
-    p.add_argument("--record-log", metavar="FILE",
-                   help="write all frames in candump -L format (can.CanutilsLogWriter)")
-    a = p.parse_args(argv)
-    if a.force_every < 1:
-        p.error("--force-every must be >= 1")
-    try:
-        db = NteDatabase(base_id=a.base_id)
-        frames = schedule(read_scenario(a.scenario), db, force_every=a.force_every)
-    except (OSError, ValueError) as exc:
-        print(f"replay: {exc}", file=sys.stderr)
-        return 2
-    writers: list[can.Listener] = []
-    if a.record_csv:
-        writers.append(can.CSVWriter(a.record_csv))
-    if a.record_log:
-        writers.append(can.CanutilsLogWriter(a.record_log, channel=a.channel))
-    bus = open_bus(a.interface, a.channel, a.bitrate)
-    try:
-        res = replay(bus, frames, speed=a.speed, writers=writers, tail_s=a.tail, db=db)
-    finally:
-        bus.shutdown()
-        for w in writers:
-            w.stop()
-    print(f"replay: sent {res.sent} frames ({', '.join(f'{k} {v}' for k, v in sorted(res.sent_by_name.items()))}) "
-          f"in {res.duration_s:.3f} s, received {res.received}, worst lateness "
-          f"{res.max_late_s * 1e3:.2f} ms")
-    return 0
+    """``python -m host_bench.replay ARGS`` is ``nte-bench send ARGS``."""
+    from .cli import main as bench_main
+    return bench_main(["send", *(sys.argv[1:] if argv is None else argv)])
 
 
 if __name__ == "__main__":

@@ -18,23 +18,66 @@ Exit status: 0 on success, 2 on bad input (the message on stderr names the file,
 from __future__ import annotations
 
 import argparse
+import math
 import sys
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 
 from . import fixedpoint, phantom
 from .csvio import CsvError, read_trial, write_atomic
+from .safe_write import Outputs
 from ..params import PRESETS, get_preset
 
 EXIT_BAD_INPUT = 2
 
 
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> None:  # argparse exits with 2 too; keep the prefix short
-        self.print_usage(sys.stderr)
-        print(f"nte-ref: error: {message}", file=sys.stderr)
+class HelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """Keeps the description's layout and shows every flag's default in --help (a flag
+    without a default says so in its own help text)."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        if (action.default not in (None, False, argparse.SUPPRESS) and action.option_strings
+                and "default" not in text):
+            text += " (default: %(default)s)"
+        return text
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """An argument parser whose refusals are one line on stderr and exit status 2:
+    ``PROG: error: argument --flag: why (see PROG --help)``."""
+
+    def __init__(self, *args: object, **kwargs: object) -> None:
+        kwargs.setdefault("formatter_class", HelpFormatter)
+        super().__init__(*args, **kwargs)  # type: ignore[arg-type]
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        print(f"{self.prog}: error: {message} (see {self.prog} --help)", file=sys.stderr)
         raise SystemExit(EXIT_BAD_INPUT)
+
+
+def bounded(lo: float, hi: float, unit: str = "", *, integer: bool = False,
+            lo_open: bool = False) -> Callable[[str], float]:
+    """An argparse type: a finite number (an integer if ``integer``) in [lo, hi], or in
+    (lo, hi] if ``lo_open``; otherwise a message with the range, the unit and the value."""
+    kind = "an integer" if integer else "a number"
+    low = f"> {lo:g}" if lo_open else f">= {lo:g}"
+
+    def parse(text: str) -> float:
+        try:
+            value: float = int(text, 10) if integer else float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not {kind}: {text!r}") from None
+        if not math.isfinite(value) or value < lo or (lo_open and value <= lo) or value > hi:
+            raise argparse.ArgumentTypeError(f"must be {low} and <= {hi:g}{unit} (got {text})")
+        return value
+
+    parse.__name__ = kind  # argparse names the type in its own messages
+    return parse
+
+
+_Parser = OneLineParser
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -133,12 +176,15 @@ def _simulate(a: argparse.Namespace) -> int:
                           accel_mm_s2=a.accel, dwell_s=a.dwell, rate_hz=a.rate, cycles=a.cycles)
     if not (np.isfinite(a.noise) and a.noise >= 0):
         raise ValueError(f"--noise must be >= 0 (got {a.noise})")
-    t, l, vel, _ = lspb_profile(spec)
-    truth = simulate_force(preset.params, t, l, vel)[0][0]
-    noisy = truth + np.random.default_rng(a.seed).normal(0.0, a.noise, len(t))
-    lines = ["t_s,depth_mm,velocity_mm_s,force_n,force_true_n"]
-    lines += ["%.17g,%.17g,%.17g,%.17g,%.17g" % row for row in zip(t, l, vel, noisy, truth)]
-    write_atomic(a.out, lines)
+    with Outputs() as outs:
+        out = outs.add(a.out, "--out")
+        t, l, vel, _ = lspb_profile(spec)
+        truth = simulate_force(preset.params, t, l, vel)[0][0]
+        noisy = truth + np.random.default_rng(a.seed).normal(0.0, a.noise, len(t))
+        lines = ["t_s,depth_mm,velocity_mm_s,force_n,force_true_n"]
+        lines += ["%.17g,%.17g,%.17g,%.17g,%.17g" % row for row in zip(t, l, vel, noisy, truth)]
+        outs.write_lines(out, lines)
+        outs.commit()
     print(f"wrote {len(t)} samples ({t[-1]:.2f} s) to {a.out}")
     return 0
 
@@ -148,13 +194,17 @@ def _estimate(a: argparse.Namespace) -> int:
     from ..params import MODEL_PARAMS
 
     preset = get_preset(a.preset)
-    trial = read_trial(a.csv)
-    run = run_estimate(trial, preset, a.model, a.estimator, a.precision, a.profile, a.schedule,
-                       a.init_seed, a.init_factor, progress=True)
-    write_atomic(a.out, estimate_csv_lines(run))
-    if a.plot:
-        from .plotting import plot_estimate
-        plot_estimate(run, a.plot)
+    with Outputs() as outs:
+        out = outs.add(a.out, "--out")
+        png = outs.add(a.plot, "--plot") if a.plot else None
+        trial = read_trial(a.csv)
+        run = run_estimate(trial, preset, a.model, a.estimator, a.precision, a.profile,
+                           a.schedule, a.init_seed, a.init_factor, progress=True)
+        outs.write_lines(out, estimate_csv_lines(run))
+        if png is not None:
+            from .plotting import plot_estimate
+            plot_estimate(run, png)
+        outs.commit()
     print(f"{len(run.t_s)} samples, Model {'I' if a.model == 1 else 'II'}, {a.precision}; "
           f"final estimates (± 1 sd):")
     for j, name in enumerate(MODEL_PARAMS[a.model]):

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -11,7 +10,9 @@ from .estimate import EstimateRun
 
 
 def plot_estimate(run: EstimateRun, path: str | os.PathLike[str], title: str = "") -> None:
-    """Force vs depth (measured and estimated) and every parameter with a +-3 sigma band."""
+    """Force vs depth (measured and estimated) and every parameter with a +-3 sigma band.
+
+    Writes ``path`` directly: the caller makes it atomic (``safe_write.Outputs``)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -48,15 +49,7 @@ def plot_estimate(run: EstimateRun, path: str | os.PathLike[str], title: str = "
     for j in range(n, 2 * ((n + 1) // 2)):
         axes[1 + j // 2][j % 2].remove()
     fig.tight_layout()
-    target = Path(path)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix="." + target.name + ".", suffix=target.suffix,
-                               dir=str(target.parent))
-    os.close(fd)
     try:
-        fig.savefig(tmp, dpi=110)
-        os.replace(tmp, target)
+        fig.savefig(str(path), dpi=110, format=Path(path).suffix.lstrip(".") or "png")
     finally:
         plt.close(fig)
-        if os.path.exists(tmp):
-            os.unlink(tmp)

@@ -52,9 +52,12 @@ def test_scenario_reader_rejects_bad_input(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="increase"):
         read_scenario(p)
     p.write_text("t_s,depth_mm,velocity_mm_s\n0,0,0\n")
-    with pytest.raises(ValueError, match="header"):
+    with pytest.raises(ValueError, match=r"s.csv:1: column 'force_n': missing from the header"):
         read_scenario(p)
-    p.write_text("t_s,depth_mm,velocity_mm_s,force_n\n0,-1e-9,0,nan\n0.001,600,0,\n")
+    p.write_text("t_s,depth_mm,velocity_mm_s,force_n\n0,0,0,\n0.001,0,0,nan\n")
+    with pytest.raises(ValueError, match=r"s.csv:3: column 'force_n': not finite: 'nan'"):
+        read_scenario(p)
+    p.write_text("t_s,depth_mm,velocity_mm_s,force_n\n0,-1e-9,0,\n0.001,600,0,\n")
     rows = read_scenario(p)
     assert rows[0].depth_mm == 0.0 and rows[0].force_n is None   # tiny negative clamped
     with pytest.raises(ValueError, match="row 1"):
@@ -134,3 +137,135 @@ def test_replay_on_vcan(tmp_path: Path) -> None:
     csv_lines = (tmp_path / "record.csv").read_text().splitlines()
     assert csv_lines[0].startswith("timestamp,arbitration_id")
     assert len(csv_lines) - 1 == len(log)
+
+
+# -- nte-bench: every bad input is one line and exit status 2, nothing written ----------------
+
+def _bench(argv, capsys) -> tuple[int, str]:
+    from host_bench.cli import main
+    try:
+        rc = main([str(a) for a in argv])
+    except SystemExit as exc:            # argparse's refusals (the console script's status)
+        rc = int(exc.code or 0)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    return rc, err[0]
+
+
+def _small(tmp_path: Path) -> Path:
+    p = tmp_path / "s.csv"
+    p.write_text("t_s,depth_mm,force_n\n0,0,0\n0.01,0.1,0.01\n")
+    return p
+
+
+BENCH_CASES = [
+    (["--depth-rate", "0"], "nte-bench replay: error: argument --depth-rate: must be > 0 and "
+                            "<= 10000 Hz (got 0) (see nte-bench replay --help)"),
+    (["--depth-rate", "nan"], "argument --depth-rate: must be > 0 and <= 10000 Hz (got nan)"),
+    (["--speed", "-1"], "argument --speed: must be >= 0 and <= 100 (got -1)"),
+    (["--tail", "1e9"], "argument --tail: must be >= 0 and <= 60 s (got 1e9)"),
+    (["--bitrate", "fast"], "argument --bitrate: not an integer: 'fast'"),
+    (["--base-id", "0x7ff"], "argument --base-id: must be within 0x000..0x7F0 (got 0x7ff)"),
+    (["--params-per-step", "0"], "argument --params-per-step: must be >= 1 and <= 7 (got 0)"),
+    (["--depth-timeout-ms", "0"], "argument --depth-timeout-ms: must be > 0 and <= 60000 ms"),
+    (["--preset", "nope"], "argument --preset: invalid choice: 'nope'"),
+    (["--player", "canplayer", "--speed", "0"],
+     "nte-bench: error: --player canplayer needs --speed > 0"),
+    (["--interface", "slcan", "--channel", "/nonexistent/tty"],
+     "nte-bench: error: --channel /nonexistent/tty: cannot open the slcan bus: "),
+]
+
+
+@pytest.mark.parametrize("flags,message", BENCH_CASES, ids=[c[0][0] + " " + c[0][1]
+                                                             for c in BENCH_CASES])
+def test_bench_replay_bad_flags(tmp_path, capsys, flags, message):
+    out = tmp_path / "out"
+    rc, line = _bench(["replay", _small(tmp_path), "--out", out, *flags], capsys)
+    assert rc == 2 and message in line, line
+    assert not out.exists()
+
+
+def test_bench_bad_files(tmp_path, capsys):
+    out = tmp_path / "out"
+    rc, line = _bench(["replay", tmp_path / "absent.log", "--out", out], capsys)
+    assert rc == 2 and line == f"nte-bench: error: {tmp_path}/absent.log: cannot read: " \
+                               f"No such file or directory"
+    bad = tmp_path / "bad.csv"
+    bad.write_text("t_s,depth_mm,force_n\n0,0,0\n0,0,0\n")
+    rc, line = _bench(["replay", bad, "--out", out], capsys)
+    assert rc == 2 and line.endswith("bad.csv:3: column 't_s': time 0.0 does not increase "
+                                     "(previous 0.0)")
+    rc, line = _bench(["replay", _small(tmp_path), "--out", tmp_path / "no" / "dir"], capsys)
+    assert rc == 2 and line == (f"nte-bench: error: --out {tmp_path}/no/dir: directory "
+                                f"{tmp_path}/no does not exist (it is not created)")
+    rc, line = _bench(["send", _small(tmp_path), "--record-log", "/dev/null"], capsys)
+    assert rc == 2 and line == ("nte-bench: error: --record-log /dev/null: is a character "
+                                "device, not a regular file; refusing to replace it")
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("errno,message", [
+    (97, "--interface socketcan: this host's kernel has no SocketCAN (AF_CAN); run it under "
+         "host_bench/with-vcan, which provides vcan0: host_bench/with-vcan nte-bench replay"),
+    (19, "--channel vcan9: no such CAN interface (create vcan0 with 'ip link add dev vcan0 "
+         "type vcan', or run under host_bench/with-vcan)")])
+def test_bench_without_can_points_to_with_vcan(tmp_path, capsys, monkeypatch, errno, message):
+    """The kernel's refusals (errno 97 EAFNOSUPPORT: no AF_CAN; 19 ENODEV: no such interface)
+    become one line with the hint; the output directory is not left behind."""
+    import host_bench.cli as bench
+
+    def refuse(**kwargs):
+        raise OSError(errno, os.strerror(errno))
+
+    monkeypatch.setattr(bench.can, "Bus", refuse)
+    out = tmp_path / "out"
+    rc, line = _bench(["replay", _small(tmp_path), "--channel", "vcan9", "--out", out], capsys)
+    assert rc == 2 and line.startswith("nte-bench: error: " + message), line
+    assert not out.exists()
+
+
+def test_bench_on_this_host_without_af_can(tmp_path):
+    """The console script itself, where the kernel really has no AF_CAN (the build machines)."""
+    import socket
+    try:
+        socket.socket(socket.AF_CAN, socket.SOCK_RAW, socket.CAN_RAW).close()
+        pytest.skip("this kernel has SocketCAN")
+    except OSError:
+        pass
+    exe = ROOT / ".venv" / "bin" / "nte-bench"
+    r = subprocess.run([str(exe), "replay", str(_small(tmp_path)), "--out",
+                        str(tmp_path / "out")], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert r.stderr.strip() == ("nte-bench: error: --interface socketcan: this host's kernel "
+                                "has no SocketCAN (AF_CAN); run it under host_bench/with-vcan, "
+                                "which provides vcan0: host_bench/with-vcan nte-bench replay ...")
+
+
+def test_out_of_range_values_are_clipped_and_counted(tmp_path):
+    from host_bench.cli import scenario_frames
+    p = tmp_path / "s.csv"
+    p.write_text("t_s,depth_mm,velocity_mm_s,force_n\n0,0,0,0\n0.001,10,700,60\n"
+                 "0.002,20,0,-75\n0.003,30,0,1\n")
+    clipped: dict[str, int] = {}
+    db = NteDatabase()
+    frames = scenario_frames(str(p), db, 1000.0, clipped)
+    assert clipped == {"Velocity": 1, "Force": 2}
+    rx = db.receiver()
+    forces = [rx.decode(m.arbitration_id, m.data)[1]["Force"] for _, m in frames
+              if m.arbitration_id == db.frame_id("Force")]
+    assert forces == pytest.approx([0.0, 50.0, -50.0, 1.0], abs=1e-4)
+
+
+def test_help_lists_every_flag_with_its_default(capsys):
+    from host_bench.cli import build_parser
+    for cmd in ("replay", "send"):
+        with pytest.raises(SystemExit) as e:
+            build_parser().parse_args([cmd, "--help"])
+        assert e.value.code == 0
+        text = capsys.readouterr().out
+        sub = build_parser()._subparsers._group_actions[0].choices[cmd]   # type: ignore[union-attr]
+        for act in sub._actions:
+            for flag in act.option_strings:
+                assert flag in text, (cmd, flag)
+            if act.option_strings and act.default not in (None, False, "==SUPPRESS=="):
+                assert f"(default: {act.default})" in " ".join(text.split()), (cmd, act.dest)
