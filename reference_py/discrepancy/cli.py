@@ -20,6 +20,7 @@ import argparse  # noqa: E402
 import sys  # noqa: E402
 from pathlib import Path  # noqa: E402
 
+from ..tools.safe_write import check_directory  # noqa: E402
 from .io import InputError, read_trial  # noqa: E402
 from .prep import TooShort  # noqa: E402
 
@@ -32,8 +33,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     args = ap.parse_args(argv)
     try:
+        check_directory(args.out, "--out")
         trials = [read_trial(f) for f in args.files]
-    except InputError as exc:
+    except (InputError, ValueError) as exc:
         print(f"nte-discrepancy: {exc}", file=sys.stderr)
         return 2
     from .report import write
@@ -45,7 +47,11 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     for name, why in res.skipped:
         print(f"nte-discrepancy: skipped {name}: {why}", file=sys.stderr)
-    rep = write(res, [str(f) for f in args.files], Path(args.out), not args.no_figures)
+    try:
+        rep = write(res, [str(f) for f in args.files], Path(args.out), not args.no_figures)
+    except ValueError as exc:       # an output the safe writer refuses
+        print(f"nte-discrepancy: {exc}", file=sys.stderr)
+        return 2
     print(f"named: {', '.join(rep['named'])}; report in {args.out}")
     return 0
 

@@ -3,6 +3,7 @@ depth, and the residual before and after the added effects."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Callable
 
 import matplotlib
 
@@ -30,7 +31,7 @@ def _shade(ax, t: np.ndarray, phase: np.ndarray) -> None:  # type: ignore[no-unt
         seen.add(name)
 
 
-def draw(res: Result, out: Path) -> list[str]:
+def draw(res: Result, out: Path, place: Callable[[Path], Path] = lambda p: p) -> list[str]:
     """Write the figures; returns their file names (relative to ``out``)."""
     names = []
     last = "+".join(s.effect for s in res.steps) or "base"
@@ -59,7 +60,7 @@ def draw(res: Result, out: Path) -> list[str]:
         ax.legend(fontsize=6)
         fig.tight_layout()
         name = f"trial{i}_{p.name}.png"
-        fig.savefig(out / name, dpi=80)
+        fig.savefig(place(out / name), dpi=80, format="png")  # place: the writer's file
         plt.close(fig)
         names.append(name)
     return names

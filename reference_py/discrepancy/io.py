@@ -8,8 +8,6 @@ plugs in by adding a reader for ``.log`` that returns the same :class:`Trial` (s
 """
 from __future__ import annotations
 
-import csv
-import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -17,15 +15,22 @@ from typing import Callable
 import numpy as np
 
 from ..fmath import Array
+from ..tools.csvio import CsvError
+from ..tools.csvio import read_trial as read_csv_trial
 
 REQUIRED = ("t_s", "depth_mm", "force_n")
 OPTIONAL = ("velocity_mm_s",)
 
 
 class InputError(Exception):
-    """Unreadable or malformed input; the message names the file, line and column."""
+    """Unreadable or malformed input; the message names the file, line and column (or is the
+    reader's own message, a ``csvio.CsvError``, passed alone)."""
 
-    def __init__(self, path: str | Path, line: int | None, column: str | None, msg: str) -> None:
+    def __init__(self, path: str | Path | Exception, line: int | None = None,
+                 column: str | None = None, msg: str = "") -> None:
+        if isinstance(path, Exception):
+            super().__init__(str(path))
+            return
         where = str(path)
         if line is not None:
             where += f":{line}"
@@ -46,45 +51,20 @@ class Trial:
 
 
 def read_csv(path: Path) -> Trial:
-    """CSV with a header naming t_s, depth_mm, force_n (any order) and optionally velocity_mm_s.
+    """CSV with a header naming t_s, depth_mm, force_n (any order) and optionally velocity_mm_s,
+    read by the tools' one reader (reference_py.tools.csvio: its rules and its messages).
 
     Lines starting with '#' are comments.  Times must increase strictly (irregular spacing and
     gaps are fine); every value must be a finite number.
     """
     try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(path, None, None, f"cannot read: {exc}") from None
-    rows = [(no, row) for no, row in enumerate(csv.reader(text.splitlines()), start=1)
-            if row and not row[0].lstrip().startswith("#") and any(c.strip() for c in row)]
-    if not rows:
-        raise InputError(path, None, None, "empty file (expected a header t_s,depth_mm,force_n)")
-    head_no, head = rows[0]
-    names = [h.strip() for h in head]
-    for req in REQUIRED:
-        if req not in names:
-            raise InputError(path, head_no, req, f"missing column {req!r} in header {names}")
-    cols = {n: names.index(n) for n in REQUIRED + OPTIONAL if n in names}
-    data: dict[str, list[float]] = {n: [] for n in cols}
-    for no, row in rows[1:]:
-        if len(row) != len(names):
-            raise InputError(path, no, None, f"expected {len(names)} fields, found {len(row)}")
-        for n, j in cols.items():
-            cell = row[j].strip()
-            try:
-                val = float(cell)
-            except ValueError:
-                raise InputError(path, no, n, f"not a number: {cell!r}") from None
-            if not math.isfinite(val):
-                raise InputError(path, no, n, f"not finite: {cell!r}")
-            data[n].append(val)
-        if len(data["t_s"]) > 1 and data["t_s"][-1] <= data["t_s"][-2]:
-            raise InputError(path, no, "t_s", "time does not increase")
-    if len(data["t_s"]) < 2:
+        tr = read_csv_trial(path)
+    except CsvError as exc:
+        raise InputError(exc) from None
+    if len(tr.t_s) < 2:
         raise InputError(path, None, None, "fewer than 2 data rows")
-    vel = np.asarray(data["velocity_mm_s"]) if "velocity_mm_s" in data else None
-    return Trial(path.stem, np.asarray(data["t_s"]), np.asarray(data["depth_mm"]),
-                 np.asarray(data["force_n"]), vel)
+    return Trial(path.stem, tr.t_s, tr.depth_mm, tr.force_n,
+                 tr.velocity_mm_s if tr.velocity_given else None)
 
 
 def read_candump(path: Path) -> Trial:

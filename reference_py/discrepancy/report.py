@@ -144,13 +144,17 @@ def render_md(rep: dict[str, Any], figures: list[str]) -> str:
 
 
 def write(res: Result, inputs: list[str], out: Path, with_figures: bool = True) -> dict[str, Any]:
-    out.mkdir(parents=True, exist_ok=True)
-    rep = build(res, inputs)
-    figs: list[str] = []
-    if with_figures:
-        from .figures import draw
-        figs = draw(res, out)
-    rep["figures"] = figs
-    (out / "report.json").write_text(json.dumps(rep, indent=1), encoding="utf-8")
-    (out / "report.md").write_text(render_md(rep, figs), encoding="utf-8")
+    """The report in ``out`` through the tools' safe writer: every file or none."""
+    from ..tools.safe_write import Outputs
+    with Outputs() as outs:
+        outs.directory(out, "--out")
+        rep = build(res, inputs)
+        figs: list[str] = []
+        if with_figures:
+            from .figures import draw
+            figs = draw(res, out, lambda p: outs.add(p, "--out"))
+        rep["figures"] = figs
+        outs.write_text(outs.add(out / "report.json", "--out"), json.dumps(rep, indent=1))
+        outs.write_text(outs.add(out / "report.md", "--out"), render_md(rep, figs))
+        outs.commit()
     return rep

@@ -74,6 +74,33 @@ def resolve_output(path: str | os.PathLike[str], flag: str = "--out") -> Path:
     return target
 
 
+def check_directory(path: str | os.PathLike[str], flag: str = "--out") -> None:
+    """Refuse (OutputError) an output directory :meth:`Outputs.directory` would refuse, without
+    creating anything: a command checks it before long work and declares it at the end."""
+    d = Path(path)
+    where = f"{flag} {d}"
+    if d.exists() or d.is_symlink():
+        if not d.is_dir():
+            raise OutputError(f"{where}: exists and is not a directory")
+        _probe(d, f"{where}: cannot write in it")
+        return
+    parent = d.parent
+    if not parent.exists():
+        raise OutputError(f"{where}: directory {parent} does not exist (it is not created)")
+    if not parent.is_dir():
+        raise OutputError(f"{where}: {parent} is not a directory")
+    _probe(parent, f"{where}: cannot create the directory")
+
+
+def _probe(directory: Path, what: str) -> None:
+    """Create and remove a temporary directory in ``directory`` (the permission bits do not
+    tell, e.g. for root or on a read-only file system), or OutputError ``what: reason``."""
+    try:
+        os.rmdir(tempfile.mkdtemp(prefix=".probe.", dir=str(directory)))
+    except OSError as exc:
+        raise OutputError(f"{what}: {exc.strerror or exc}") from None
+
+
 @dataclass
 class _Pending:
     target: Path
@@ -116,11 +143,7 @@ class Outputs:
             if not d.is_dir():
                 raise OutputError(f"{where}: exists and is not a directory")
             return d
-        parent = d.parent
-        if not parent.exists():
-            raise OutputError(f"{where}: directory {parent} does not exist (it is not created)")
-        if not parent.is_dir():
-            raise OutputError(f"{where}: {parent} is not a directory")
+        check_directory(d, flag)
         try:
             d.mkdir()
         except OSError as exc:
@@ -152,6 +175,11 @@ class Outputs:
             for line in lines:
                 fh.write(line)
                 fh.write("\n")
+
+    def write_text(self, tmp: Path, text: str) -> None:
+        """Text, exactly as given, to a temporary path returned by :meth:`add`."""
+        with open(tmp, "w", encoding="utf-8", newline="") as fh:
+            fh.write(text)
 
     def commit(self) -> None:
         """Give every output its mode and rename them all into place (or restore all)."""

@@ -42,10 +42,10 @@ def test_end_to_end_report_and_figures(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize("text,where", [
-    ("t_s,depth_mm\n0,0\n", ":1: column force_n"),
-    ("t_s,depth_mm,force_n\n0,0,0\n0.01,abc,0\n", ":3: column depth_mm"),
-    ("t_s,depth_mm,force_n\n0,0,0\n0.01,0,nan\n", ":3: column force_n"),
-    ("t_s,depth_mm,force_n\n0,0,0\n0,0,0\n", ":3: column t_s"),
+    ("t_s,depth_mm\n0,0\n", ":1: column 'force_n'"),
+    ("t_s,depth_mm,force_n\n0,0,0\n0.01,abc,0\n", ":3: column 'depth_mm'"),
+    ("t_s,depth_mm,force_n\n0,0,0\n0.01,0,nan\n", ":3: column 'force_n'"),
+    ("t_s,depth_mm,force_n\n0,0,0\n0,0,0\n", ":3: column 't_s'"),
     ("t_s,depth_mm,force_n\n0,0,0\n0.01,0\n", ":3"),
 ])
 def test_bad_input_names_file_line_column(tmp_path: Path, capsys: pytest.CaptureFixture[str],

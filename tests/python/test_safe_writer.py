@@ -229,3 +229,34 @@ def test_sparse_column_empty_cells_are_absent_samples(tmp_path):
     assert np.isnan(t.columns["force_n"][0]) and t.columns["force_n"][1] == 0.5
     with pytest.raises(CsvError, match="column 'force_n': not a number: ''"):
         read_table(p)
+
+
+# -- nte-discrepancy writes its report through the same writer --------------------------------
+
+@pytest.mark.parametrize("out,message", [
+    ("/dev/null", "--out /dev/null: exists and is not a directory"),
+    ("/nonexistent/rep", "--out /nonexistent/rep: directory /nonexistent does not exist "
+                         "(it is not created)"),
+    ("/sys/rep", "--out /sys/rep: cannot create the directory: ")])   # + the kernel's reason
+def test_discrepancy_out_refused_before_any_work(tmp_path, capsys, out, message):
+    from reference_py.discrepancy.cli import main as discrepancy
+    f = tmp_path / "t.csv"
+    f.write_text("t_s,depth_mm,force_n\n0,0,0\n")
+    assert discrepancy([str(f), "--out", out]) == 2
+    line = only_line(capsys)
+    assert line == "nte-discrepancy: " + message or (
+        message.endswith(": ") and line.startswith("nte-discrepancy: " + message)), line
+
+
+def test_discrepancy_report_all_or_nothing(tmp_path, monkeypatch):
+    """A figure that fails leaves no report directory and no file behind."""
+    from reference_py.discrepancy import report
+
+    def failing_render(rep, figs):
+        raise RuntimeError("render failed")
+
+    monkeypatch.setattr(report, "render_md", failing_render)
+    monkeypatch.setattr(report, "build", lambda res, inputs: {"named": []})
+    with pytest.raises(RuntimeError, match="render failed"):
+        report.write(None, [], tmp_path / "rep", with_figures=False)   # type: ignore[arg-type]
+    assert list(tmp_path.iterdir()) == []
