@@ -1,39 +1,64 @@
-"""Blind tests (issue 8): data with a hidden effect, generated in tests only, graded on what the
-workflow names first and on how much of the gap to the noise-free truth it closes.
+"""Blind tests: data with a hidden effect in a form the workflow may not have been written for,
+generated in tests only (discrepancy_generator.py), graded on what the workflow names first, on
+how much of the gap to the noise-free truth it closes, on the bounds of what it reports and on its
+"unexplained" verdict.
 
-All 180 cases (20 per effect, 20 with none, 20 with relaxation + pre-sliding) run once, in two
-processes, for the whole module.  Naming and gap shrink are separate tests so that a shortfall in
-one is visible (a strict xfail carrying the measured figure) without hiding the other.
+The CI subset is the first CI_CASES cases of every kind (each effect form, none, the relaxation +
+pre-sliding pair, stick-slip): 4 x 23 = 92 cases, run once for the module in two processes. The
+full run (20 cases per kind) is ``python -m reference_py.discrepancy.confusion --full``; it prints
+the confusion matrix per form and restricted to the held-out forms.  Targets are the issue's;
+a shortfall is a strict xfail carrying the figure measured on the CI subset, so the mark must go
+once it passes.
 
-DISCREPANCY_SUMMARY=FILE writes the closing-note figures of this run (confusion matrix, median
-shrink, run time per trial; the same as ``python -m reference_py.discrepancy.confusion``);
-DISCREPANCY_RESULTS=FILE writes the per-case results as JSON; DISCREPANCY_REGRADE=FILE grades such
-a file instead of running the cases (seconds instead of ~6 CPU-minutes; same figures, the cases
-and the workflow are deterministic).
+DISCREPANCY_BLIND_CASES=N runs N cases per kind instead (20 = the full run);
+DISCREPANCY_RESULTS=FILE writes the per-case rows as JSON; DISCREPANCY_REGRADE=FILE grades such a
+file instead of running the cases (the cases and the workflow are deterministic).
 """
 import json
 import os
 
 import pytest
 
-from discrepancy_generator import CASES_PER_KIND, EFFECTS, PAIR, run_all
+from discrepancy_generator import EFFECTS, FORMS, OOV, jobs_for, run_all
 
-#: measured shortfalls (full run, 20 cases per row); strict: the mark must go once it passes
+CI_CASES = 4
+
+#: measured shortfalls (CI subset); strict: the mark must go once the target is met
 NAMING_XFAIL: dict[str, str] = {
-    "direction_asymmetry": "named first 17/20 (3 'none': the base fit absorbs the asymmetry to "
-                           "2-3 mN RMS vs the truth under 6 mN noise, screen dBIC 7 / -1 / 2), "
-                           "target >= 18/20",
+    "dwell_relaxation": "named first 2/12 (maxwell_total 0/4, power_law 0/4: direction_asymmetry "
+                        "8x; prony_dwell 2/4), target >= 90 %",
+    "reversal_presliding": "named first 8/12 (dahl 2/4, lugre 2/4: direction_asymmetry 4x; "
+                           "elastoplastic 4/4), target >= 90 %",
+    "direction_asymmetry": "named first 6/8 (2 'none'), target >= 90 %",
+    "sensor_drift": "named first 6/12 (linear 3/4, random_walk 2/4, warmup 1/4; 'none' 4x), "
+                    "target >= 90 %",
+}
+HELD_OUT_XFAIL: dict[str, str] = {
+    "dwell_relaxation": "held-out forms named first 0/8 (direction_asymmetry 6, "
+                        "velocity_friction 1, layer_puncture 1), target >= 85 %",
+    "reversal_presliding": "held-out forms named first 8/12, target >= 85 %",
+    "direction_asymmetry": "held-out form (depth) named first 3/4, target >= 85 %",
+    "sensor_drift": "held-out forms named first 3/8 ('none' 4x), target >= 85 %",
 }
 _SHRINK = "cases named first with RMSE vs truth -50 % in its phases and -30 % overall: "
 SHRINK_XFAIL: dict[str, str] = {
-    "velocity_friction": _SHRINK + "18/20 (k=12: phase RMSE +35 %; k=17: overall only -20 %), "
-                                   "target 20/20",
-    "direction_asymmetry": _SHRINK + "16/17 (k=6: phase RMSE doubles after a 2nd effect), "
+    "reversal_presliding": _SHRINK + "3/8 (lugre and elastoplastic: phases -19..-47 %), "
                                      "target all",
-    "layer_puncture": _SHRINK + "15/20 (median 0.65 phases / 0.46 overall), target 20/20",
-    "sensor_drift": _SHRINK + "15/20 (median 0.73; k=5 0.01, k=17 0.12), target 20/20",
-    "tissue_motion": _SHRINK + "13/19 (median 0.59; partial fits 0.29-0.48), target all",
+    "velocity_friction": _SHRINK + "11/12 (stribeck k=0: phases -36 %), target all",
+    "layer_puncture": _SHRINK + "4/12 (phases -1..-50 %; cubic_membrane k=0 -1 %), target all",
+    "sensor_drift": _SHRINK + "4/6 (random_walk k=0 -11 %, linear k=3 -45 %), target all",
+    "tissue_motion": _SHRINK + "5/12 (-12..-48 %), target all",
 }
+NONE_XFAIL = "'none' on 3/4 cases without a hidden effect (k=1: layer_puncture, " \
+             "velocity_friction), target >= 90 %"
+PAIR_XFAIL = "relaxation + pre-sliding both named in 0/4 (relaxation never named; " \
+             "direction_asymmetry instead), target >= 85 %"
+BOUNDS_XFAIL = "the workflow's report documents no parameter bounds (report.json has no " \
+               "'bounds' table): 92/92 cases unchecked"
+UNEXPLAINED_FIRES_XFAIL = "the workflow's report carries no verdict (report.json has no " \
+                          "'verdict'): stick-slip 0/4 flagged 'unexplained'"
+UNEXPLAINED_SILENT_XFAIL = "the workflow's report carries no verdict (report.json has no " \
+                           "'verdict'), so silence cannot be shown: 0/88"
 
 
 def _params(xfails: dict[str, str]) -> list:
@@ -41,55 +66,108 @@ def _params(xfails: dict[str, str]) -> list:
             if e in xfails else e for e in EFFECTS]
 
 
+def _mark(reason: str):  # type: ignore[no-untyped-def]
+    return pytest.mark.xfail(strict=True, reason=reason) if reason else (lambda f: f)
+
+
 @pytest.fixture(scope="module")
 def results() -> list[dict]:
     cached = os.environ.get("DISCREPANCY_REGRADE")
-    if cached:   # re-grade a DISCREPANCY_RESULTS file of a full run (the workflow is deterministic)
+    if cached:
         with open(cached) as fh:
-            return [{**r, "kind": tuple(r["kind"])} for r in json.load(fh)]
-    res = run_all(workers=2, per_kind=CASES_PER_KIND)
-    out = os.environ.get("DISCREPANCY_SUMMARY")
-    if out:
-        from reference_py.discrepancy.confusion import summarise
-        with open(out, "w") as fh:
-            fh.write(summarise(res) + "\n")
+            return json.load(fh)
+    cases = int(os.environ.get("DISCREPANCY_BLIND_CASES", CI_CASES))
+    res = run_all(jobs_for(cases), workers=2)
     out = os.environ.get("DISCREPANCY_RESULTS")
     if out:
         with open(out, "w") as fh:
-            json.dump([{**r, "kind": list(r["kind"])} for r in res], fh)
+            json.dump(res, fh)
     return res
+
+
+def _rows(results: list[dict], effect: str, held_out_only: bool = False) -> list[dict]:
+    rows = [r for r in results if r["kind"].split("/")[0] == effect and "/" in r["kind"]
+            and (r["held_out"][effect] or not held_out_only)]
+    assert rows, effect
+    return rows
+
+
+def _summary(rows: list[dict]) -> list[str]:
+    return [f"{r['kind']}#{r['k']}: {','.join(r['named'])}" for r in rows]
+
+
+def test_every_form_is_drawn(results: list[dict]) -> None:
+    kinds = {r["kind"] for r in results}
+    for e in EFFECTS:
+        for f in FORMS[e]:
+            assert f"{e}/{f.name}" in kinds
+    assert {"none", "pair", OOV} <= kinds
+    pair_forms = {tuple(sorted(r["forms"].values())) for r in results if r["kind"] == "pair"}
+    assert len(pair_forms) >= 2
 
 
 @pytest.mark.parametrize("effect", _params(NAMING_XFAIL))
 def test_hidden_effect_named_first(results: list[dict], effect: str) -> None:
-    rows = [r for r in results if r["kind"] == (effect,)]
-    assert len(rows) >= 20
-    hits = [r for r in rows if r["named"][0] == effect]
-    assert len(hits) >= 0.9 * len(rows), [r["named"] for r in rows]
+    """>= 90 % of the cases of an effect, over all its forms, name it first."""
+    rows = _rows(results, effect)
+    hits = [r for r in rows if r["first"] == effect]
+    assert len(hits) >= 0.9 * len(rows), _summary(rows)
+
+
+@pytest.mark.parametrize("effect", _params(HELD_OUT_XFAIL))
+def test_held_out_forms_named_first(results: list[dict], effect: str) -> None:
+    """>= 85 % of the cases in forms the library does not contain name the effect first."""
+    rows = _rows(results, effect, held_out_only=True)
+    hits = [r for r in rows if r["first"] == effect]
+    assert len(hits) >= 0.85 * len(rows), _summary(rows)
 
 
 @pytest.mark.parametrize("effect", _params(SHRINK_XFAIL))
 def test_gap_shrinks_when_named_first(results: list[dict], effect: str) -> None:
     """Every case where the hidden effect is named first: RMSE vs the noise-free truth falls by
     >= 50 % where the effect acts and by >= 30 % overall."""
-    hits = [r for r in results if r["kind"] == (effect,) and r["named"][0] == effect]
+    hits = [r for r in _rows(results, effect) if r["first"] == effect]
     assert hits
     bad = [r for r in hits if not (r["support_after"] <= 0.5 * r["support_before"]
                                    and r["overall_after"] <= 0.7 * r["overall_before"])]
-    assert not bad, bad
+    assert not bad, [(r["kind"], r["k"], round(1 - r["support_after"] / r["support_before"], 2),
+                      round(1 - r["overall_after"] / r["overall_before"], 2)) for r in bad]
 
 
-@pytest.mark.xfail(strict=True, reason="'none' returned on 17/20 cases without a hidden effect "
-                                       "(full run of this module), target >= 18/20")
+@_mark(NONE_XFAIL)
 def test_no_hidden_effect_reports_none(results: list[dict]) -> None:
-    rows = [r for r in results if r["kind"] == ()]
-    assert len(rows) >= 20
+    rows = [r for r in results if r["kind"] == "none"]
     ok = sum(1 for r in rows if r["named"] == ["none"])
-    assert ok >= 0.9 * len(rows), [r["named"] for r in rows]
+    assert rows and ok >= 0.9 * len(rows), _summary(rows)
 
 
+@_mark(PAIR_XFAIL)
 def test_two_hidden_effects_both_named(results: list[dict]) -> None:
-    rows = [r for r in results if r["kind"] == PAIR]
-    assert len(rows) >= 20
-    ok = sum(1 for r in rows if set(PAIR) <= set(r["named"]))
-    assert ok >= 0.8 * len(rows), [r["named"] for r in rows]
+    rows = [r for r in results if r["kind"] == "pair"]
+    ok = sum(1 for r in rows if set(r["effects"]) <= set(r["named"]))
+    assert rows and ok >= 0.85 * len(rows), _summary(rows)
+
+
+@_mark(BOUNDS_XFAIL)
+def test_no_parameter_outside_its_bounds(results: list[dict]) -> None:
+    """Over the whole blind set: no named effect's and no base parameter outside the bounds the
+    report documents, no layer outside the inserted depth, no drop above the peak."""
+    bad = [(r["kind"], r["k"], r["violations"][:3]) for r in results if r["violations"]]
+    assert not bad, (len(bad), bad[:8])
+
+
+@_mark(UNEXPLAINED_FIRES_XFAIL)
+def test_unexplained_fires_on_stick_slip(results: list[dict]) -> None:
+    """A stick-slip oscillation is outside the vocabulary: the verdict says 'unexplained'."""
+    rows = [r for r in results if r["kind"] == OOV]
+    fired = [r for r in rows if r["unexplained"] is True]
+    assert rows and len(fired) >= 0.9 * len(rows), [(r["k"], r["unexplained"]) for r in rows]
+
+
+@_mark(UNEXPLAINED_SILENT_XFAIL)
+def test_unexplained_silent_on_the_vocabulary(results: list[dict]) -> None:
+    """On the vocabulary's own cases (one effect, none, the pair) the verdict stays silent in
+    >= 90 %."""
+    rows = [r for r in results if r["kind"] != OOV]
+    silent = [r for r in rows if r["unexplained"] is False]
+    assert len(silent) >= 0.9 * len(rows), (len(silent), len(rows))
