@@ -30,6 +30,7 @@ from .safe_write import Outputs
 from ..params import PRESETS, get_preset
 
 EXIT_BAD_INPUT = 2
+MAX_SIMULATED_SAMPLES = 10_000_000    #: simulate refuses longer records (≈ 0.4 GB of CSV)
 
 
 class HelpFormatter(argparse.RawDescriptionHelpFormatter):
@@ -38,8 +39,9 @@ class HelpFormatter(argparse.RawDescriptionHelpFormatter):
 
     def _get_help_string(self, action: argparse.Action) -> str:
         text = action.help or ""
-        if (action.default not in (None, False, argparse.SUPPRESS) and action.option_strings
-                and "default" not in text):
+        shown = action.default is not None and action.default is not False \
+            and action.default != argparse.SUPPRESS
+        if shown and action.option_strings and "default" not in text:
             text += " (default: %(default)s)"
         return text
 
@@ -62,7 +64,11 @@ def bounded(lo: float, hi: float, unit: str = "", *, integer: bool = False,
     """An argparse type: a finite number (an integer if ``integer``) in [lo, hi], or in
     (lo, hi] if ``lo_open``; otherwise a message with the range, the unit and the value."""
     kind = "an integer" if integer else "a number"
-    low = f"> {lo:g}" if lo_open else f">= {lo:g}"
+
+    def show(x: float) -> str:
+        return str(int(x)) if integer else f"{x:g}"
+
+    low = f"> {show(lo)}" if lo_open else f">= {show(lo)}"
 
     def parse(text: str) -> float:
         try:
@@ -70,7 +76,7 @@ def bounded(lo: float, hi: float, unit: str = "", *, integer: bool = False,
         except ValueError:
             raise argparse.ArgumentTypeError(f"not {kind}: {text!r}") from None
         if not math.isfinite(value) or value < lo or (lo_open and value <= lo) or value > hi:
-            raise argparse.ArgumentTypeError(f"must be {low} and <= {hi:g}{unit} (got {text})")
+            raise argparse.ArgumentTypeError(f"must be {low} and <= {show(hi)}{unit} (got {text})")
         return value
 
     parse.__name__ = kind  # argparse names the type in its own messages
@@ -83,7 +89,6 @@ _Parser = OneLineParser
 def build_parser() -> argparse.ArgumentParser:
     presets = ", ".join(PRESETS)
     p = _Parser(prog="nte-ref", description=__doc__.split("\n\n")[0],
-                formatter_class=argparse.RawDescriptionHelpFormatter,
                 epilog=f"presets: {presets}\nunits: depth mm, speed mm/s, time s, force N")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
@@ -91,19 +96,24 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Simulate the force of a preset tissue along an LSPB "
                                    "insertion, dwell and retraction; write "
                                    "t_s,depth_mm,velocity_mm_s,force_n,force_true_n.")
-    s.add_argument("--preset", required=True, help="parameter set (see the list below)")
-    s.add_argument("--depth", type=float, required=True, metavar="MM", help="insertion depth, mm")
-    s.add_argument("--dwell", type=float, required=True, metavar="S", help="dwell at depth, s")
-    s.add_argument("--speed", type=float, metavar="MM_S", help="cruise speed (default: preset's)")
-    s.add_argument("--accel", type=float, default=100.0, metavar="MM_S2",
-                   help="blend acceleration, mm/s^2 (default 100)")
-    s.add_argument("--rate", type=float, default=200.0, metavar="HZ",
-                   help="sample rate (default 200)")
-    s.add_argument("--noise", type=float, default=2e-3, metavar="N",
-                   help="white force noise standard deviation, N (default 0.002)")
-    s.add_argument("--seed", type=int, default=1, metavar="K", help="noise seed (default 1)")
-    s.add_argument("--cycles", type=int, default=1, help="identical insertion cycles (default 1)")
-    s.add_argument("--out", required=True, metavar="FILE.csv")
+    s.add_argument("--preset", required=True, help=f"parameter set, one of {presets}")
+    s.add_argument("--depth", type=bounded(0.0, 500.0, " mm", lo_open=True), required=True,
+                   metavar="MM", help="insertion depth, mm (no default)")
+    s.add_argument("--dwell", type=bounded(0.0, 3600.0, " s"), required=True, metavar="S",
+                   help="dwell at depth, s (no default)")
+    s.add_argument("--speed", type=bounded(0.0, 200.0, " mm/s", lo_open=True), metavar="MM_S",
+                   help="cruise speed, mm/s (default: the preset's)")
+    s.add_argument("--accel", type=bounded(0.0, 1e5, " mm/s^2", lo_open=True), default=100.0,
+                   metavar="MM_S2", help="blend acceleration, mm/s^2")
+    s.add_argument("--rate", type=bounded(1.0, 20_000.0, " Hz"), default=200.0, metavar="HZ",
+                   help="sample rate, Hz")
+    s.add_argument("--noise", type=bounded(0.0, 50.0, " N"), default=2e-3, metavar="N",
+                   help="white force noise standard deviation, N")
+    s.add_argument("--seed", type=bounded(0, 2**32 - 1, integer=True), default=1, metavar="K",
+                   help="noise seed")
+    s.add_argument("--cycles", type=bounded(1, 1000, integer=True), default=1,
+                   help="identical insertion cycles")
+    s.add_argument("--out", required=True, metavar="FILE.csv", help="the CSV to write")
 
     e = sub.add_parser("estimate", help="run the estimator on a CSV",
                        description="Run the estimator over a CSV of t_s, depth_mm, force_n "
@@ -111,46 +121,58 @@ def build_parser() -> argparse.ArgumentParser:
                                    "depth); write one row per sample: t_s, force_hat_n, z, "
                                    "innovation_n, status, then every identified parameter and "
                                    "its standard deviation.")
-    e.add_argument("csv", metavar="FILE.csv")
-    e.add_argument("--model", type=int, choices=(1, 2), required=True)
+    e.add_argument("csv", metavar="FILE.csv", help="the insertion to estimate from")
+    e.add_argument("--model", type=int, choices=(1, 2), required=True,
+                   help="force model I or II (no default)")
     e.add_argument("--estimator", default="bank", choices=("bank", "robust"),
                    help="bank: the paper's three filters in switching mode; robust: the bank "
                         "plus a batch refinement after every insertion (converges from "
                         "factor-5 starts; adds a 'confidence' column)")
     e.add_argument("--preset", default="paper-10mms",
                    help="starting (nominal) parameters; Model II also takes its fixed f2 and "
-                        "alpha from it, Model I its beta0 (default paper-10mms)")
-    e.add_argument("--init-seed", type=int, default=0, metavar="K",
+                        "alpha from it, Model I its beta0")
+    e.add_argument("--init-seed", type=bounded(0, 2**63 - 1, integer=True), default=0,
+                   metavar="K",
                    help="0: start at the preset; K > 0: multiply each identified parameter by "
                         "a factor drawn log-uniformly from [1/F, F] with seed K")
-    e.add_argument("--init-factor", type=float, default=5.0, metavar="F", help="default 5")
-    e.add_argument("--precision", default="float64", choices=("float64", "float32"))
+    e.add_argument("--init-factor", type=bounded(1.0, 100.0), default=5.0, metavar="F",
+                   help="spread of the starting factors")
+    e.add_argument("--precision", default="float64", choices=("float64", "float32"),
+                   help="arithmetic of the filters")
     e.add_argument("--schedule", default="all", choices=("all", "rotate"),
                    help="all: three filters every sample; rotate: one filter per sample")
     e.add_argument("--profile", default="default", choices=("default", "paper"),
                    help="tuning: ours, or the paper's Table I mapped to scaled parameters")
-    e.add_argument("--out", required=True, metavar="EST.csv")
-    e.add_argument("--plot", metavar="EST.png", help="also draw force and parameters")
+    e.add_argument("--out", required=True, metavar="EST.csv", help="the estimates to write")
+    e.add_argument("--plot", metavar="EST.png", help="also draw force and parameters (PNG; default: no plot)")
 
     v = sub.add_parser("evaluate", help="estimation quality over many seeds (printed table)",
                        description="Simulate the quality scenario (LSPB to 50 mm, 1 s dwell, "
                                    "200 Hz, 2 mN noise) for N seeds and print the metrics.")
-    v.add_argument("--preset", default="paper-10mms")
-    v.add_argument("--model", type=int, choices=(1, 2), default=2)
-    v.add_argument("--factor", type=float, default=1.25, help="start within this factor")
-    v.add_argument("--seeds", type=int, default=100)
-    v.add_argument("--precision", default="float64", choices=("float64", "float32"))
-    v.add_argument("--profile", default="default", choices=("default", "paper"))
-    v.add_argument("--schedule", default="all", choices=("all", "rotate"))
-    v.add_argument("--cycles", type=int, default=1)
-    v.add_argument("--estimator", default="bank", choices=("bank", "robust"))
+    v.add_argument("--preset", default="paper-10mms", help="the true and nominal parameters")
+    v.add_argument("--model", type=int, choices=(1, 2), default=2, help="force model")
+    v.add_argument("--factor", type=bounded(1.0, 100.0), default=1.25,
+                   help="start within this factor")
+    v.add_argument("--seeds", type=bounded(1, 100_000, integer=True), default=100,
+                   help="number of seeds (scenarios)")
+    v.add_argument("--precision", default="float64", choices=("float64", "float32"),
+                   help="arithmetic of the filters")
+    v.add_argument("--profile", default="default", choices=("default", "paper"),
+                   help="tuning profile")
+    v.add_argument("--schedule", default="all", choices=("all", "rotate"),
+                   help="filters per sample")
+    v.add_argument("--cycles", type=bounded(1, 100, integer=True), default=1,
+                   help="insertion cycles per scenario")
+    v.add_argument("--estimator", default="bank", choices=("bank", "robust"),
+                   help="the estimator")
     v.add_argument("--matrix", action="store_true",
                    help="run the README's standard set of bank cases instead (about 2 minutes)")
     v.add_argument("--robust-matrix", action="store_true",
                    help="run the README's robust-estimator cases (three cycles; about 10 minutes)")
 
     b = sub.add_parser("bench", help="samples per second of the reference (and of filterpy)")
-    b.add_argument("--samples", type=int, default=10000)
+    b.add_argument("--samples", type=bounded(1, 10_000_000, integer=True), default=10000,
+                   help="samples per timed run")
 
     ph = sub.add_parser("phantom", help="a measured-like insertion (layers, relaxation, "
                         "pre-sliding, sensor) to CSV and its truth to JSON",
@@ -172,10 +194,15 @@ def _simulate(a: argparse.Namespace) -> int:
     from .trajectory import TrajectorySpec, lspb_profile
 
     preset = get_preset(a.preset)
-    spec = TrajectorySpec(depth_mm=a.depth, speed_mm_s=a.speed or preset.speed_mm_s,
+    speed = preset.speed_mm_s if a.speed is None else a.speed
+    spec = TrajectorySpec(depth_mm=a.depth, speed_mm_s=speed,
                           accel_mm_s2=a.accel, dwell_s=a.dwell, rate_hz=a.rate, cycles=a.cycles)
-    if not (np.isfinite(a.noise) and a.noise >= 0):
-        raise ValueError(f"--noise must be >= 0 (got {a.noise})")
+    # each cycle: in and out (blends included: at most depth/speed + speed/accel each way), dwell
+    duration = a.cycles * (2.0 * (a.depth / speed + speed / a.accel) + a.dwell)
+    if duration * a.rate > MAX_SIMULATED_SAMPLES:
+        raise ValueError(f"--rate {a.rate:g} Hz over {duration:.4g} s is {duration * a.rate:.3g} "
+                         f"samples, more than the {MAX_SIMULATED_SAMPLES:,} allowed; lower "
+                         f"--rate, --dwell or --cycles")
     with Outputs() as outs:
         out = outs.add(a.out, "--out")
         t, l, vel, _ = lspb_profile(spec)

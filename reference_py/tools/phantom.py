@@ -869,10 +869,12 @@ def truth_json(res: PhantomResult) -> str:
 
 def write_phantom(csv_path: str | os.PathLike[str], res: PhantomResult) -> str:
     """Write the record (CSV) and its ground truth (JSON sidecar); returns the sidecar's path."""
-    from .csvio import write_atomic
+    from .safe_write import Outputs
     side = truth_path(csv_path)
-    write_atomic(side, [truth_json(res)])
-    write_atomic(csv_path, res.csv_lines())
+    with Outputs() as outs:                     # both files or neither
+        outs.write_lines(outs.add(side, "--out"), [truth_json(res)])
+        outs.write_lines(outs.add(csv_path, "--out"), res.csv_lines())
+        outs.commit()
     return side
 
 

@@ -267,5 +267,6 @@ def test_help_lists_every_flag_with_its_default(capsys):
         for act in sub._actions:
             for flag in act.option_strings:
                 assert flag in text, (cmd, flag)
-            if act.option_strings and act.default not in (None, False, "==SUPPRESS=="):
+            if act.option_strings and act.default is not None and act.default is not False \
+                    and act.default != "==SUPPRESS==":
                 assert f"(default: {act.default})" in " ".join(text.split()), (cmd, act.dest)

@@ -118,3 +118,69 @@ def test_console_script_and_module_entry_points(sim_csv, tmp_path):
                         "--model", "3", "--out", str(tmp_path / "o.csv")],
                        capture_output=True, text=True)
     assert r.returncode == 2 and "invalid choice" in r.stderr
+
+
+# -- every flag bounded: one line, exit status 2, nothing written ----------------------------
+
+SIMULATE = ["simulate", "--preset", "paper-10mms", "--depth", "5", "--dwell", "0"]
+FLAG_CASES = [
+    (SIMULATE + ["--rate", "1e7"], "nte-ref simulate: error: argument --rate: must be >= 1 and "
+                                   "<= 20000 Hz (got 1e7) (see nte-ref simulate --help)"),
+    (SIMULATE + ["--depth", "1e6"], "argument --depth: must be > 0 and <= 500 mm (got 1e6)"),
+    (SIMULATE + ["--speed", "0"], "argument --speed: must be > 0 and <= 200 mm/s (got 0)"),
+    (SIMULATE + ["--rate", "nan"], "argument --rate: must be >= 1 and <= 20000 Hz (got nan)"),
+    (SIMULATE + ["--noise", "-1"], "argument --noise: must be >= 0 and <= 50 N (got -1)"),
+    (SIMULATE + ["--seed", "1.5"], "argument --seed: not an integer: '1.5'"),
+    (SIMULATE + ["--cycles", "0"], "argument --cycles: must be >= 1 and <= 1000 (got 0)"),
+    (SIMULATE + ["--dwell", "3600", "--rate", "20000"],
+     "nte-ref: error: --rate 20000 Hz over 3601 s is 7.2e+07 samples, more than the "
+     "10,000,000 allowed; lower --rate, --dwell or --cycles"),
+    (["bench", "--samples", "0"], "nte-ref bench: error: argument --samples: must be >= 1 and "
+                                  "<= 10000000 (got 0)"),
+    (["evaluate", "--seeds", "0"], "argument --seeds: must be >= 1 and <= 100000 (got 0)"),
+    (["evaluate", "--factor", "0.5"], "argument --factor: must be >= 1 and <= 100 (got 0.5)"),
+    (["estimate", "x.csv", "--model", "2", "--init-factor", "inf"],
+     "argument --init-factor: must be >= 1 and <= 100 (got inf)"),
+    (["estimate", "x.csv", "--model", "2", "--init-seed", "-1"],
+     "argument --init-seed: must be >= 0 and <= 9223372036854775807 (got -1)"),
+]
+
+
+@pytest.mark.parametrize("argv,message", FLAG_CASES, ids=[" ".join(c[0][-2:]) for c in FLAG_CASES])
+def test_numeric_flags_are_bounded(tmp_path, capsys, argv, message):
+    out = tmp_path / "x.csv"
+    argv = list(argv) + (["--out", str(out)] if argv[0] in ("simulate", "estimate") else [])
+    try:
+        rc = main(argv)
+    except SystemExit as exc:           # argparse's refusal: the console script's status
+        rc = exc.code
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and message in err[0], err
+    assert "Traceback" not in err[0]
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_estimate_into_a_directory_is_refused(sim_csv, tmp_path, capsys):
+    assert main(["estimate", str(sim_csv), "--model", "2", "--out", str(tmp_path)]) == 2
+    assert capsys.readouterr().err.strip() == (f"nte-ref: error: --out {tmp_path}: is a "
+                                               f"directory, not a regular file; refusing to "
+                                               f"replace it")
+
+
+@pytest.mark.parametrize("cmd", ["simulate", "estimate", "evaluate", "bench"])
+def test_help_lists_every_flag_and_its_default(cmd, capsys):
+    from reference_py.tools.cli import build_parser
+    with pytest.raises(SystemExit) as e:
+        build_parser().parse_args([cmd, "--help"])
+    assert e.value.code == 0
+    text = " ".join(capsys.readouterr().out.split())
+    sub = build_parser()._subparsers._group_actions[0].choices[cmd]   # type: ignore[union-attr]
+    for act in sub._actions:
+        if not act.option_strings or act.dest == "help":
+            continue
+        assert act.option_strings[0] in text, act.dest
+        if act.default is not None and act.default is not False:
+            assert f"(default: {act.default})" in text, act.dest
+        else:
+            assert act.required or act.const is not None or "default" in (act.help or ""), \
+                act.dest
