@@ -39,7 +39,9 @@ import can
 import numpy as np
 
 from reference_py.params import PRESETS
-from reference_py.tools.cli import EXIT_BAD_INPUT, OneLineParser, bounded
+from reference_py.tools.cli import (EXIT_BAD_INPUT, OneLineParser, add_unit_arguments, bounded,
+                                    units_from)
+from reference_py.tools.csvio import Units
 from reference_py.tools.safe_write import Outputs
 
 from .dbc import TICK_S, NteDatabase, log10_to_std
@@ -50,12 +52,13 @@ PARAM_LABELS = ("sigma0", "sigma1", "sigma2", "f1", "f2", "alpha", "beta")
 
 
 def scenario_frames(csv_path: str, db: NteDatabase, depth_rate_hz: float,
-                    clipped: dict[str, int] | None = None) -> list[tuple[float, can.Message]]:
+                    clipped: dict[str, int] | None = None,
+                    units: Units | None = None) -> list[tuple[float, can.Message]]:
     """(t_s, message) for a scenario CSV: depth at depth_rate_hz (interpolated), force at the
     CSV rows that have one; at equal times depth first.  Times are on the 100 us tick grid.
     A value outside its signal's DBC range is clipped to the range and counted in ``clipped``
-    (by signal name) when a dict is given."""
-    rows = read_scenario(csv_path)
+    (by signal name) when a dict is given; ``units`` converts and checks the CSV (csvio)."""
+    rows = read_scenario(csv_path, units)
     t = np.array([r.t_s for r in rows])
     d = np.array([r.depth_mm for r in rows])
     v = np.array([r.velocity_mm_s for r in rows])
@@ -272,7 +275,7 @@ def cmd_replay(a: argparse.Namespace) -> int:
     if a.file.endswith((".log", ".asc", ".blf", ".trc")):
         frames = log_frames(a.file)
     else:
-        frames = scenario_frames(a.file, db, a.depth_rate, clipped)
+        frames = scenario_frames(a.file, db, a.depth_rate, clipped, units_from(a))
     for sig, n in sorted(clipped.items()):
         lo, hi = db.signal_range("Force" if sig == "Force" else "Depth", sig)
         print(f"nte-bench: warning: {n} {sig} value(s) outside the DBC range "
@@ -335,8 +338,9 @@ def cmd_replay(a: argparse.Namespace) -> int:
     for k, v in res["final_parameters"].items():
         print(f"  {k:7s} {v['value']:.6g} ± {v['sd']:.3g}")
     n_clip = sum(clipped.values())
-    print(f"input samples: {n_clip} clipped to the DBC ranges; node: "
-          f"{res.get('mirror_events', {})}")
+    events = ", ".join(f"{k} {v}" for k, v in sorted(res.get("mirror_events", {}).items()))
+    print(f"frames: {len(frames)} sent, {n_clip} input values clipped to the DBC ranges; "
+          f"reference node events: {events or 'none'}")
     ok = (res["estimate_mismatches"] == 0 and res["param_value_mismatches"] == 0
           and res["estimates_node"] == res["estimates_reference"] and bad == 0)
     return 0 if ok else 1
@@ -345,7 +349,7 @@ def cmd_replay(a: argparse.Namespace) -> int:
 def cmd_send(a: argparse.Namespace) -> int:
     from .replay import replay, schedule
     db = NteDatabase(base_id=a.base_id)
-    frames = schedule(read_scenario(a.file), db, force_every=a.force_every)
+    frames = schedule(read_scenario(a.file, units_from(a)), db, force_every=a.force_every)
     with Outputs() as outs:
         rec_csv = outs.add(a.record_csv, "--record-csv") if a.record_csv else None
         rec_log = outs.add(a.record_log, "--record-log") if a.record_log else None
@@ -416,6 +420,7 @@ def build_parser() -> argparse.ArgumentParser:
                    default=50.0, help="the node's depth timeout, ms")
     r.add_argument("--params-per-step", type=bounded(1, 7, integer=True), default=1,
                    help="the node's setting: Params frames per estimator step")
+    add_unit_arguments(r)
     r.add_argument("--no-plot", action="store_true", help="do not draw force.png, params.png")
     r.add_argument("--no-progress", action="store_true", help="no progress bar")
     r.add_argument("--out", required=True, help="output directory (created if absent; its "
@@ -429,6 +434,7 @@ def build_parser() -> argparse.ArgumentParser:
     _bus_flags(s, 0.2)
     s.add_argument("--force-every", type=bounded(1, 1000, integer=True), default=1, metavar="N",
                    help="send every N-th force sample only")
+    add_unit_arguments(s)
     s.add_argument("--record-csv", metavar="FILE", help="write all frames with can.CSVWriter")
     s.add_argument("--record-log", metavar="FILE",
                    help="write all frames in candump -L format (can.CanutilsLogWriter)")

@@ -27,7 +27,7 @@ from typing import Iterable, Sequence
 
 import can
 
-from reference_py.tools.csvio import read_trial
+from reference_py.tools.csvio import Units, read_trial
 
 from .dbc import TICK_S, NteDatabase, seconds_to_ticks
 
@@ -43,11 +43,11 @@ class ScenarioRow:
     force_n: float | None
 
 
-def read_scenario(path: str | Path) -> list[ScenarioRow]:
+def read_scenario(path: str | Path, units: Units | None = None) -> list[ScenarioRow]:
     """Read a scenario CSV with the tools' one reader (reference_py.tools.csvio: strictly
     increasing t_s, finite values, velocity_mm_s optional, force_n empty where no force sample
-    was taken)."""
-    trial = read_trial(path, sparse=("force_n",))
+    was taken), converted and checked by ``units`` when given (csvio.Units)."""
+    trial = read_trial(path, sparse=("force_n",), units=units)
     rows: list[ScenarioRow] = []
     for t, d, v, fo in zip(trial.t_s, trial.depth_mm, trial.velocity_mm_s, trial.force_n):
         d = float(d)

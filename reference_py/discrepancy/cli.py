@@ -20,6 +20,7 @@ import argparse  # noqa: E402
 import sys  # noqa: E402
 from pathlib import Path  # noqa: E402
 
+from ..tools.cli import add_unit_arguments, units_from  # noqa: E402
 from ..tools.safe_write import check_directory  # noqa: E402
 from .io import InputError, read_trial  # noqa: E402
 from .prep import TooShort  # noqa: E402
@@ -31,10 +32,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("files", nargs="+", metavar="FILE")
     ap.add_argument("--out", required=True, metavar="DIR")
     ap.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    add_unit_arguments(ap)
     args = ap.parse_args(argv)
     try:
         check_directory(args.out, "--out")
-        trials = [read_trial(f) for f in args.files]
+        trials = [read_trial(f, units_from(args)) for f in args.files]
     except (InputError, ValueError) as exc:
         print(f"nte-discrepancy: {exc}", file=sys.stderr)
         return 2

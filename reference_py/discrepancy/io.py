@@ -15,7 +15,7 @@ from typing import Callable
 import numpy as np
 
 from ..fmath import Array
-from ..tools.csvio import CsvError
+from ..tools.csvio import CsvError, Units
 from ..tools.csvio import read_trial as read_csv_trial
 
 REQUIRED = ("t_s", "depth_mm", "force_n")
@@ -50,7 +50,7 @@ class Trial:
     velocity_mm_s: Array | None = None
 
 
-def read_csv(path: Path) -> Trial:
+def read_csv(path: Path, units: Units | None = None) -> Trial:
     """CSV with a header naming t_s, depth_mm, force_n (any order) and optionally velocity_mm_s,
     read by the tools' one reader (reference_py.tools.csvio: its rules and its messages).
 
@@ -58,7 +58,7 @@ def read_csv(path: Path) -> Trial:
     gaps are fine); every value must be a finite number.
     """
     try:
-        tr = read_csv_trial(path)
+        tr = read_csv_trial(path, units=units)
     except CsvError as exc:
         raise InputError(exc) from None
     if len(tr.t_s) < 2:
@@ -80,13 +80,14 @@ def read_candump(path: Path) -> Trial:
 READERS: dict[str, Callable[[Path], Trial]] = {".csv": read_csv, ".log": read_candump}
 
 
-def read_trial(path: str | Path) -> Trial:
+def read_trial(path: str | Path, units: Units | None = None) -> Trial:
+    """A trial by its suffix; a CSV converted and checked by ``units`` (csvio.Units) if given."""
     p = Path(path)
     reader = READERS.get(p.suffix.lower())
     if reader is None:
         raise InputError(p, None, None, f"unknown file type {p.suffix!r} (known: "
                          f"{', '.join(READERS)})")
-    return reader(p)
+    return read_csv(p, units) if reader is read_csv else reader(p)
 
 
 def write_csv(path: str | Path, trial: Trial) -> None:

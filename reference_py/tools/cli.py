@@ -20,7 +20,7 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-from typing import Callable, Sequence
+from typing import TYPE_CHECKING, Callable, Sequence
 
 import numpy as np
 
@@ -28,6 +28,9 @@ from . import fixedpoint, phantom
 from .csvio import CsvError, read_trial, write_atomic
 from .safe_write import Outputs
 from ..params import PRESETS, get_preset
+
+if TYPE_CHECKING:
+    from .csvio import Units
 
 EXIT_BAD_INPUT = 2
 MAX_SIMULATED_SAMPLES = 10_000_000    #: simulate refuses longer records (≈ 0.4 GB of CSV)
@@ -81,6 +84,37 @@ def bounded(lo: float, hi: float, unit: str = "", *, integer: bool = False,
 
     parse.__name__ = kind  # argparse names the type in its own messages
     return parse
+
+
+def _sign(text: str) -> int:
+    if text not in ("1", "+1", "-1"):
+        raise argparse.ArgumentTypeError(f"must be +1 or -1 (got {text!r})")
+    return -1 if text == "-1" else 1
+
+
+def add_unit_arguments(p: argparse.ArgumentParser) -> None:
+    """The input conversion flags of every tool that reads an insertion CSV (csvio.Units)."""
+    from .csvio import DEPTH_UNITS, FORCE_UNITS, TIME_UNITS
+    g = p.add_argument_group("units and signs of the input CSV (converted by the reader; "
+                             "implausible values are refused naming the likely option)")
+    g.add_argument("--force-unit", choices=tuple(FORCE_UNITS), default="N",
+                   help="unit of the force_n column")
+    g.add_argument("--time-unit", choices=tuple(TIME_UNITS), default="s",
+                   help="unit of the t_s column")
+    g.add_argument("--depth-unit", choices=tuple(DEPTH_UNITS), default="mm",
+                   help="unit of the depth_mm (and velocity_mm_s, per time unit) column")
+    g.add_argument("--force-sign", type=_sign, default=1, metavar="+1|-1",
+                   help="-1: the sensor reads the insertion force as negative")
+    g.add_argument("--depth-sign", type=_sign, default=1, metavar="+1|-1",
+                   help="-1: the depth column grows out of the tissue")
+    g.add_argument("--no-units-check", action="store_true",
+                   help="do not refuse implausible units or signs (default: check)")
+
+
+def units_from(a: argparse.Namespace) -> "Units":
+    from .csvio import Units
+    return Units(a.force_unit, a.time_unit, a.depth_unit, a.force_sign, a.depth_sign,
+                 not a.no_units_check)
 
 
 _Parser = OneLineParser
@@ -143,6 +177,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="all: three filters every sample; rotate: one filter per sample")
     e.add_argument("--profile", default="default", choices=("default", "paper"),
                    help="tuning: ours, or the paper's Table I mapped to scaled parameters")
+    add_unit_arguments(e)
     e.add_argument("--out", required=True, metavar="EST.csv", help="the estimates to write")
     e.add_argument("--plot", metavar="EST.png", help="also draw force and parameters (PNG; default: no plot)")
 
@@ -217,14 +252,16 @@ def _simulate(a: argparse.Namespace) -> int:
 
 
 def _estimate(a: argparse.Namespace) -> int:
-    from .estimate import estimate_csv_lines, run_estimate
+    from .csvio import Limits
+    from .estimate import estimate_csv_lines, make_config, run_estimate
     from ..params import MODEL_PARAMS
 
     preset = get_preset(a.preset)
     with Outputs() as outs:
         out = outs.add(a.out, "--out")
         png = outs.add(a.plot, "--plot") if a.plot else None
-        trial = read_trial(a.csv)
+        cfg = make_config(preset, a.model, a.profile, a.schedule)
+        trial = read_trial(a.csv, units=units_from(a), limits=Limits.from_config(cfg))
         run = run_estimate(trial, preset, a.model, a.estimator, a.precision, a.profile,
                            a.schedule, a.init_seed, a.init_factor, progress=True)
         outs.write_lines(out, estimate_csv_lines(run))
@@ -237,7 +274,20 @@ def _estimate(a: argparse.Namespace) -> int:
     for j, name in enumerate(MODEL_PARAMS[a.model]):
         print(f"  {name:7s} = {float(run.params[-1, j]):.6g} ± {float(run.params_sd[-1, j]):.3g}")
     print(f"wrote {a.out}" + (f" and {a.plot}" if a.plot else ""))
+    print(status_counts(run.status))
     return 0
+
+
+def status_counts(status: np.ndarray) -> str:
+    """The closing line of every estimating tool: samples rejected (invalid input, ignored),
+    gated (an update skipped by the innovation gate) and clipped (a parameter at its bound)."""
+    from ..bank import STATUS_CLIPPED, STATUS_GATED, STATUS_REJECTED
+    st = np.asarray(status, dtype=np.uint32)
+    n = {k: int(np.count_nonzero(st & np.uint32(bit)))
+         for k, bit in (("rejected", STATUS_REJECTED), ("gated", STATUS_GATED),
+                        ("clipped", STATUS_CLIPPED))}
+    return (f"samples: {len(st)}; rejected {n['rejected']}, gated {n['gated']}, "
+            f"clipped {n['clipped']}")
 
 
 def _evaluate(a: argparse.Namespace) -> int:

@@ -158,15 +158,163 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
     return Table(name, header, {c: data[:, i] for i, c in enumerate(header)}, lines)
 
 
+# -- units and conventions ----------------------------------------------------------------
+
+#: Units the reader converts from (factor to the tools' unit: N, s, mm).
+FORCE_UNITS = {"N": 1.0, "mN": 1.0e-3}
+TIME_UNITS = {"s": 1.0, "ms": 1.0e-3}
+DEPTH_UNITS = {"mm": 1.0, "m": 1.0e3}
+
+
+class UnitsError(CsvError):
+    """The file's values are implausible in the tools' units: the message names the probable
+    unit or convention and the option that converts it."""
+
+
+@dataclass(frozen=True)
+class Units:
+    """How a file's columns are converted to N, s, mm (and the sign conventions: depth grows
+    into the tissue, force is positive while inserting), and whether to check plausibility."""
+    force: str = "N"
+    time: str = "s"
+    depth: str = "mm"
+    force_sign: int = 1
+    depth_sign: int = 1
+    check: bool = True
+
+
+@dataclass(frozen=True)
+class Limits:
+    """The estimator's accepted ranges (EstimatorConfig's defaults): beyond them a sample is
+    rejected; a time step above dt_max_s restarts the state."""
+    depth_min_mm: float = -1.0
+    depth_max_mm: float = 500.0
+    speed_max_mm_s: float = 500.0
+    force_max_n: float = 50.0
+    dt_max_s: float = 0.5
+
+    @classmethod
+    def from_config(cls, cfg: object) -> "Limits":
+        return cls(*(float(getattr(cfg, f)) for f in ("depth_min_mm", "depth_max_mm",
+                                                     "speed_max_mm_s", "force_max_n",
+                                                     "dt_max_s")))
+
+
+#: A stroke shorter than this is not an insertion in mm (probably metres).
+MIN_STROKE_MM = 1.0
+#: Above this share of out-of-range samples a file is refused ("most samples rejected").
+MAX_REJECTED_SHARE = 0.5
+#: Above this share of forces beyond the range, the force column's unit is questioned.
+MAX_FORCE_OUT_SHARE = 0.05
+
+
+def _pct(x: float) -> str:
+    return f"{100.0 * x:.0f} %"
+
+
+def check_units(tr: "Trial", units: Units = Units(), limits: Limits = Limits()) -> None:
+    """Refuse (UnitsError) a trial whose values, in N, s and mm, are implausible: time steps of
+    seconds (ms read as s), a depth stroke under a millimetre (m read as mm), depth mostly
+    negative or force mostly negative while inserting (the opposite sign), force mostly beyond
+    the configured range (mN read as N), a force beyond a thousand times the range, or most
+    samples outside the estimator's accepted ranges.  The message names the column, the probable
+    unit or convention and the option that converts it."""
+    n = len(tr.t_s)
+    name = tr.path
+    fmax = limits.force_max_n
+    if n >= 2:
+        dt = float(np.median(np.diff(tr.t_s)))
+        if dt > limits.dt_max_s:
+            hint = ("probably milliseconds: convert with --time-unit ms" if units.time == "s"
+                    else "too coarse for the estimator")
+            raise UnitsError(f"{name}: column 't_s': median time step {dt:.4g} s (longer than "
+                             f"the {limits.dt_max_s:g} s gap limit): {hint}")
+    d = tr.depth_mm
+    stroke = float(np.max(d) - np.min(d))
+    if 0.0 < stroke < MIN_STROKE_MM:          # (a depth that never moves is no unit question)
+        hint = ("probably metres: convert with --depth-unit m" if units.depth == "mm"
+                else "no insertion")
+        raise UnitsError(f"{name}: column 'depth_mm': the depth spans only {stroke:.4g} mm "
+                         f"(less than {MIN_STROKE_MM:g} mm): {hint}")
+    neg = float(np.mean(d < 0.0))
+    if neg > 0.5:
+        raise UnitsError(f"{name}: column 'depth_mm': {_pct(neg)} of the depths are negative "
+                         f"(down to {float(np.min(d)):.4g} mm): probably measured the other "
+                         f"way: convert with --depth-sign -1")
+    f = tr.force_n
+    present = np.isfinite(f)
+    fa = np.abs(f[present])
+    if len(fa):
+        out = float(np.mean(fa > fmax))
+        if out > MAX_FORCE_OUT_SHARE:
+            peak = float(np.max(fa))
+            if units.force == "N" and peak * FORCE_UNITS["mN"] <= fmax:
+                hint = "probably millinewtons: convert with --force-unit mN"
+            else:
+                hint = "not a force in N"
+            raise UnitsError(f"{name}: column 'force_n': {_pct(out)} of the forces exceed the "
+                             f"configured range ±{fmax:g} N (up to {peak:.4g}): {hint}")
+        k = int(np.argmax(np.where(present, np.abs(f), -1.0)))
+        if abs(float(f[k])) > 1000.0 * fmax:
+            line = f":{tr.lines[k]}" if tr.lines else ""
+            raise UnitsError(f"{name}{line}: column 'force_n': {float(f[k]):.4g} N is not a "
+                             f"plausible force (the configured range is ±{fmax:g} N)")
+        inserting = present & (tr.velocity_mm_s > 0.5) & (d > 0.0)
+        if np.count_nonzero(inserting) >= 10:
+            fi = f[inserting]
+            if float(np.median(fi)) < 0.0:
+                raise UnitsError(f"{name}: column 'force_n': the force is negative in "
+                                 f"{_pct(float(np.mean(fi < 0.0)))} of the samples taken while "
+                                 f"inserting: probably the sensor's opposite sign: convert "
+                                 f"with --force-sign -1")
+    bad = ((d < limits.depth_min_mm) | (d > limits.depth_max_mm)
+           | (np.abs(tr.velocity_mm_s) > limits.speed_max_mm_s)
+           | (present & (np.abs(np.where(present, f, 0.0)) > fmax)))
+    share = float(np.mean(bad))
+    if share > MAX_REJECTED_SHARE:
+        raise UnitsError(f"{name}: {int(np.count_nonzero(bad))} of {n} samples "
+                         f"({_pct(share)}) are outside the estimator's accepted ranges (depth "
+                         f"{limits.depth_min_mm:g}..{limits.depth_max_mm:g} mm, speed "
+                         f"±{limits.speed_max_mm_s:g} mm/s, force ±{fmax:g} N): check the "
+                         f"units (--time-unit, --depth-unit, --force-unit) and signs")
+
+
 def read_trial(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
-               sparse: Sequence[str] = ()) -> Trial:
-    """An insertion: t_s, depth_mm, force_n and velocity_mm_s (given or central differences)."""
+               sparse: Sequence[str] = (), units: Units | None = None,
+               limits: Limits = Limits()) -> Trial:
+    """An insertion: t_s, depth_mm, force_n and velocity_mm_s (given or central differences).
+
+    With ``units``, the columns are converted from the file's units and signs to N, s, mm (a
+    given velocity by depth unit / time unit and the depth sign) and, if ``units.check``, the
+    result is checked by :func:`check_units` against ``limits``.  Without, nothing is
+    converted or checked (the library's own files)."""
     table = read_table(path, required, sparse)
     cols = table.columns
-    t, depth = cols["t_s"], cols["depth_mm"]
+    t, depth, force = cols["t_s"], cols["depth_mm"], cols["force_n"]
     given = "velocity_mm_s" in cols
-    vel = cols["velocity_mm_s"] if given else central_difference(t, depth)
-    return Trial(table.path, t, depth, cols["force_n"], vel, given, cols, table.lines)
+    vel = cols["velocity_mm_s"] if given else None
+    if units is not None:
+        for kind, unit, known in (("force", units.force, FORCE_UNITS),
+                                  ("time", units.time, TIME_UNITS),
+                                  ("depth", units.depth, DEPTH_UNITS)):
+            if unit not in known:
+                raise CsvError(f"--{kind}-unit {unit}: not one of {', '.join(known)}")
+        kt, kd = TIME_UNITS[units.time], DEPTH_UNITS[units.depth] * units.depth_sign
+        kf = FORCE_UNITS[units.force] * units.force_sign
+        if kt != 1.0:
+            t = t * kt
+        if kd != 1.0:
+            depth = depth * kd
+        if kf != 1.0:
+            force = force * kf
+        if vel is not None and kd / kt != 1.0:
+            vel = vel * (kd / kt)
+    if vel is None:
+        vel = central_difference(t, depth)
+    tr = Trial(table.path, t, depth, force, vel, given, cols, table.lines)
+    if units is not None and units.check:
+        check_units(tr, units, limits)
+    return tr
 
 
 def central_difference(t: Array, x: Array) -> Array:

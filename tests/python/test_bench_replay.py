@@ -154,7 +154,8 @@ def _bench(argv, capsys) -> tuple[int, str]:
 
 def _small(tmp_path: Path) -> Path:
     p = tmp_path / "s.csv"
-    p.write_text("t_s,depth_mm,force_n\n0,0,0\n0.01,0.1,0.01\n")
+    p.write_text("t_s,depth_mm,force_n\n" + "".join(f"{k * 0.01!r},{k * 0.1!r},0.01\n"
+                                                     for k in range(50)))
     return p
 
 
@@ -270,3 +271,22 @@ def test_help_lists_every_flag_with_its_default(capsys):
             if act.option_strings and act.default is not None and act.default is not False \
                     and act.default != "==SUPPRESS==":
                 assert f"(default: {act.default})" in " ".join(text.split()), (cmd, act.dest)
+
+
+def test_bench_refuses_implausible_units_naming_the_option(tmp_path, capsys):
+    p = tmp_path / "mn.csv"
+    p.write_text("t_s,depth_mm,force_n\n" + "".join(f"{k * 0.01!r},{k * 0.1!r},400\n"
+                                                    for k in range(50)))
+    out = tmp_path / "out"
+    rc, line = _bench(["replay", p, "--out", out], capsys)
+    assert rc == 2 and line == (f"nte-bench: error: {p}: column 'force_n': 100 % of the forces "
+                                f"exceed the configured range ±50 N (up to 400): probably "
+                                f"millinewtons: convert with --force-unit mN")
+    assert not out.exists()
+    from host_bench.cli import scenario_frames
+    from reference_py.tools.csvio import Units
+    frames = scenario_frames(str(p), NteDatabase(), 100.0, {}, Units(force="mN"))
+    rx = NteDatabase().receiver()
+    forces = {round(rx.decode(m.arbitration_id, m.data)[1]["Force"], 4) for _, m in frames
+              if m.arbitration_id == NteDatabase().frame_id("Force")}
+    assert forces == {0.4}
