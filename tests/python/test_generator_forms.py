@@ -68,6 +68,23 @@ def test_power_law_prony_approximation_within_half_a_percent(a: float, t0: float
     assert np.max(np.abs(approx - exact)) < 5e-3
 
 
+@pytest.mark.parametrize("form", ["maxwell_total", "power_law"])
+def test_qlv_of_a_held_step_follows_the_relaxation_kernel(form: str) -> None:
+    """F = F_e + rho Q for an elastic force stepped to 1 N and held is G(t), the form's kernel
+    (the power law through its 14-branch Prony approximation, within 0.5 % of G)."""
+    rng = np.random.default_rng(5)
+    par = g._draw_effect(rng, "dwell_relaxation", form, {"noise_n": 0.01, "peak_n": 1.0})
+    par["rho"] = 0.6
+    h = 1e-3
+    t = np.arange(0.0, 8.0, h)
+    f_e = np.minimum(t / h, 1.0)                     # 0 -> 1 N over the first sample, then held
+    f = f_e + par["rho"] * g.qlv(f_e, t, par["taus"], par["weights"])
+    later = t >= 0.05
+    gk = g.relaxation_kernel(form, par, t[later] - 0.5 * h)
+    assert np.max(np.abs(f[later] - gk)) < (4e-3 if form == "power_law" else 1e-4)
+    assert f[-1] < 0.8                               # it does relax
+
+
 def _dwell_drop(case: g.Case) -> float:
     tr, f = case.trials[0], case.truth[0] - case.truth[0][0]
     p = case.info["effect_params"]["dwell_relaxation"]
@@ -120,6 +137,7 @@ def test_presliding_turns_over_within_the_drawn_distance(form: str) -> None:
         # lugre's damping and Stribeck rise shift it a little; the others are exact
         tol = 0.15 if form == "lugre" else 0.01
         assert abs(cross - par["crossing_mm"]) <= tol * par["crossing_mm"] + 0.006, (cross, par)
+        assert g.presliding_crossing_mm(form, par) == pytest.approx(par["crossing_mm"], rel=1e-12)
         jump.append(np.max(np.abs(np.diff(m))))
     # continuous through the reversal (the base model's sign jumps by 2 in one sample; LuGre's
     # damping term moves m by up to ~0.05 per 5 um step)
