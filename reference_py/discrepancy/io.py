@@ -2,9 +2,12 @@
 
 A trial is one insertion recording: times (s), stage/insertion depth (mm), axial force (N) and,
 when the recorder logged it, the stage velocity (mm/s).  Readers are chosen by file suffix from
-:data:`READERS`; the CSV reader is implemented.  A candump log decoded through the project's DBC
-plugs in by adding a reader for ``.log`` that returns the same :class:`Trial` (see
-:func:`read_candump`).
+:data:`READERS`: CSV (the tools' one reader: a spreadsheet export with a byte-order mark and
+quoted cells is fine) and candump logs (``.log``, ``candump -l``/``-L``) decoded with the
+project's DBC (firmware/can/nte.dbc through host_bench.dbc, end-to-end checks included).
+
+Values outside a physical range are refused (|force| > MAX_ABS_FORCE_N, |depth| > MAX_ABS_DEPTH_MM):
+a 1e300 N sample is a broken file, not a measurement.
 """
 from __future__ import annotations
 
@@ -19,6 +22,11 @@ from ..tools.csvio import CsvError, Units
 from ..tools.csvio import read_trial as read_csv_trial
 
 REQUIRED = ("t_s", "depth_mm", "force_n")
+#: the largest force (N) and depth (mm) a needle-insertion record can hold
+MAX_ABS_FORCE_N = 1000.0
+MAX_ABS_DEPTH_MM = 10000.0
+_LIMITS = {"force_n": MAX_ABS_FORCE_N, "depth_mm": MAX_ABS_DEPTH_MM,
+           "velocity_mm_s": 10000.0}
 OPTIONAL = ("velocity_mm_s",)
 
 
@@ -63,18 +71,70 @@ def read_csv(path: Path, units: Units | None = None) -> Trial:
         raise InputError(exc) from None
     if len(tr.t_s) < 2:
         raise InputError(path, None, None, "fewer than 2 data rows")
+    for name, lim in _LIMITS.items():
+        if name == "velocity_mm_s" and not tr.velocity_given:
+            continue
+        col = getattr(tr, name)
+        bad = np.flatnonzero(np.abs(col) > lim)
+        if len(bad):
+            k = int(bad[0])
+            line = tr.lines[k] if k < len(tr.lines) else None
+            raise InputError(path, line, name, f"{col[k]:g} is outside the physical range "
+                             f"(|{name}| <= {lim:g})")
     return Trial(path.stem, tr.t_s, tr.depth_mm, tr.force_n,
                  tr.velocity_mm_s if tr.velocity_given else None)
 
 
 def read_candump(path: Path) -> Trial:
-    """Placeholder for candump logs: decoding needs the project's DBC frame definitions.
+    """A candump log (``candump -l`` / ``-L`` format) of the bench's Depth and Force frames.
 
-    To plug it in: decode each frame with the DBC (depth, velocity, force signals in mm, mm/s,
-    N), collect (timestamp, signal) rows, and return a :class:`Trial` like :func:`read_csv`.
+    Frames are decoded with the project's DBC and their end-to-end protection is checked (frames
+    that fail are dropped); times are the log's own time stamps.  Depth and velocity are
+    interpolated at each Force frame's time.
     """
-    raise InputError(path, None, None, "candump logs are not supported yet (needs the DBC "
-                     "decoder); export the trial as CSV with t_s,depth_mm,force_n")
+    try:
+        import can
+        from host_bench.dbc import NteDatabase
+    except ImportError as exc:
+        raise InputError(path, None, None, f"candump logs need python-can and cantools ({exc})"
+                         ) from None
+    try:
+        msgs = list(can.LogReader(str(path)))
+    except (OSError, ValueError, UnicodeDecodeError) as exc:
+        raise InputError(path, None, None, f"not a candump log: {exc}") from None
+    db = NteDatabase()
+    rx = db.receiver()
+    dep: list[tuple[float, float, float]] = []
+    frc: list[tuple[float, float]] = []
+    dropped = 0
+    for m in msgs:
+        if m.is_error_frame or m.is_remote_frame:
+            continue
+        name, sig, status = rx.decode(m.arbitration_id, bytes(m.data))
+        if name is None:
+            continue
+        if status not in ("ok", "skipped") or sig is None:
+            dropped += 1
+            continue
+        if name == "Depth":
+            dep.append((m.timestamp, float(sig["Depth"]), float(sig["Velocity"])))
+        elif name == "Force":
+            frc.append((m.timestamp, float(sig["Force"])))
+    if len(dep) < 2 or len(frc) < 2:
+        raise InputError(path, None, None, f"needs Depth and Force frames (found {len(dep)} "
+                         f"Depth, {len(frc)} Force, {dropped} failed the end-to-end check)")
+    td, d, v = (np.asarray(c) for c in zip(*dep))
+    tf, f = (np.asarray(c) for c in zip(*frc))
+    keep = (tf >= td[0]) & (tf <= td[-1])
+    tf, f = tf[keep], f[keep]
+    order = np.argsort(tf, kind="stable")
+    tf, f = tf[order], f[order]
+    uniq = np.concatenate([[True], np.diff(tf) > 0])
+    tf, f = tf[uniq], f[uniq]
+    if len(tf) < 2:
+        raise InputError(path, None, None, "no Force frame inside the span of the Depth frames")
+    t0 = tf[0]
+    return Trial(path.stem, tf - t0, np.interp(tf, td, d), f, np.interp(tf, td, v))
 
 
 READERS: dict[str, Callable[[Path], Trial]] = {".csv": read_csv, ".log": read_candump}

@@ -74,3 +74,69 @@ def test_short_trial_is_skipped_not_fatal(tmp_path: Path, capsys: pytest.Capture
     rep = json.loads((out / "report.json").read_text())
     assert [s["name"] for s in rep["skipped"]] == ["short"]
     assert "skipped short" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("text,why", [
+    ("t_s,depth_mm,force_n\n0,0,0\n0.01,0,1e300\n", "outside the physical range"),
+    ("t_s,depth_mm,force_n\n0,0,0\n0.01,-2e4,0\n", "outside the physical range"),
+    ("", "no header line"),
+    ("# only a comment\n", "no header line"),
+])
+def test_bad_values_exit_2_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                    text: str, why: str) -> None:
+    f = tmp_path / "bad.csv"
+    f.write_text(text)
+    out = tmp_path / "o"
+    assert main([str(f), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert why in err and err.count("\n") == 1 and not out.exists()
+
+
+def test_spreadsheet_csv_with_bom_and_quoted_cells(tmp_path: Path) -> None:
+    """A spreadsheet export (UTF-8 byte-order mark, quoted header and cells, CRLF) reads exactly
+    as the plain file."""
+    from reference_py.discrepancy.io import read_trial
+    tr = make_case(("dwell_relaxation",), 5).trials[0]
+    plain, sheet = tmp_path / "plain.csv", tmp_path / "sheet.csv"
+    write_csv(plain, tr)
+    with open(sheet, "w", encoding="utf-8-sig", newline="") as fh:
+        fh.write('"t_s","depth_mm","force_n"\r\n')
+        for a, b, c in zip(tr.t_s, tr.depth_mm, tr.force_n):
+            fh.write(f'"{float(a)!r}","{float(b)!r}","{float(c)!r}"\r\n')
+    assert sheet.read_bytes()[:3] == b"\xef\xbb\xbf"
+    got, ref = read_trial(sheet), read_trial(plain)
+    for name in ("t_s", "depth_mm", "force_n"):
+        assert np.array_equal(getattr(got, name), getattr(ref, name))
+
+
+def test_candump_log_decoded_with_the_dbc(tmp_path: Path) -> None:
+    """A candump log of the bench's Depth and Force frames, written with python-can through the
+    project's DBC, reads back as the trial (to the frames' scaling)."""
+    can = pytest.importorskip("can")
+    from host_bench.dbc import NteDatabase
+    from reference_py.discrepancy.io import read_trial
+    tr = make_case(("dwell_relaxation",), 5).trials[0]
+    tx = NteDatabase().sender()
+    log = tmp_path / "run.log"
+    with can.CanutilsLogWriter(str(log)) as w:
+        for t, d, fval in zip(tr.t_s, tr.depth_mm, tr.force_n):
+            st = t % 6.5535
+            w.on_message_received(tx.message("Depth", {"Depth": d, "Velocity": 0.0,
+                                                       "SensorTime": st}, 1000.0 + t))
+            w.on_message_received(tx.message("Force", {"Force": fval, "SensorTime": st},
+                                             1000.0 + t + 1e-4))
+    got = read_trial(log)
+    n = len(got.t_s)
+    assert n == len(tr.t_s) - 1          # the last Force frame comes after the last Depth frame
+    assert np.max(np.abs(got.force_n - tr.force_n[:n])) <= 0.6e-4    # DBC scaling 1e-4 N
+    assert np.allclose(got.t_s, tr.t_s[:n] - tr.t_s[0], atol=1e-5)
+    assert np.max(np.abs(got.depth_mm - tr.depth_mm[:n])) <= 2e-3
+
+
+def test_candump_without_force_frames_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]
+                                             ) -> None:
+    log = tmp_path / "empty.log"
+    log.write_text("(1000.000000) vcan0 123#00\n")
+    assert main([str(log), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "needs Depth and Force frames" in err and err.count("\n") == 1
