@@ -10,7 +10,7 @@
                      [--matrix | --robust-matrix]
     nte-ref bench [--samples N]
     nte-ref phantom [NAME|lab] --out FILE.csv [--seed K] [--rate HZ] [--speed MM_S,...] [...]
-    nte-ref phantom --stats [--trials N]
+    nte-ref phantom --stats [--trials N] [--first-seed K]
     nte-ref fixedpoint [--model 1|2] [--seeds N] [--random N] [--sig-bits B]
 
 Exit status: 0 on success, 2 on bad input (the message on stderr names the file, line and column).

@@ -12,11 +12,14 @@ from reference_py.tools.phantom import (LAB, MEASURED, PRESETS, lab_statistics, 
                                         result_stats, simulate_phantom)
 
 N_LAB = 100
+# seeds 1-100 tuned the generator (its Dahl length ratio, its scales); the statistics are checked
+# on seeds that were not looked at while tuning
+FIRST_HELD_OUT = 1001
 
 
 @pytest.fixture(scope="module")
 def lab_records():
-    return [simulate_phantom(LAB, seed=s) for s in range(1, N_LAB + 1)]
+    return [simulate_phantom(LAB, seed=s) for s in range(FIRST_HELD_OUT, FIRST_HELD_OUT + N_LAB)]
 
 
 @pytest.fixture(scope="module")
@@ -35,6 +38,23 @@ def test_lab_quantiles_match_the_measured_list(lab_stats, key):
     got, want, tol = lab_stats[key], MEASURED[key], TOL[key]
     for g, w, t, q in zip(got, want, tol, ("p10", "median", "p90")):
         assert abs(g - w) <= t, f"{key} {q}: phantom {g:.3g}, measured {w:.3g} (tolerance {t})"
+
+
+def test_lab_dwell_decays_on_two_time_scales(lab_stats):
+    """Two-exponential fits of the noisy dwells find a fast ~0.3 s and a slow 2-5 s scale."""
+    fast, slow = lab_stats["dwell_tau_fast_s"], lab_stats["dwell_tau_slow_s"]
+    assert 0.2 <= fast[1] <= 0.4 and fast[0] >= 0.15 and fast[2] <= 0.6, fast
+    assert 2.0 <= slow[1] <= 5.0 and slow[0] >= 1.5 and slow[2] <= 6.0, slow
+
+
+def test_dwell_time_scales_recovers_known_constants():
+    rng = np.random.default_rng(3)
+    t = np.arange(0.0, 5.26, 0.01)
+    f = 2.0 + 0.6 * np.exp(-t / 0.3) + 0.9 * np.exp(-t / 3.0) + rng.normal(0.0, 0.012, t.size)
+    fast, slow = ph.dwell_time_scales(t, f)
+    assert fast == pytest.approx(0.3, rel=0.15) and slow == pytest.approx(3.0, rel=0.2)
+    one = 2.0 + 1.5 * np.exp(-t / 0.8)           # one scale: the fit does not invent a fast one
+    assert ph.dwell_time_scales(t, one)[0] == pytest.approx(0.8, rel=0.15)
 
 
 def test_lab_rupture_counts_match_the_measured_distribution(lab_stats):
@@ -61,8 +81,8 @@ def test_lab_ruptures_are_seen_by_the_measured_detector(lab_records):
 
 
 def test_lab_statistics_is_the_summary_of_the_lab_records(lab_stats):
-    assert lab_statistics(3) == ph.summarise(
-        [result_stats(simulate_phantom(LAB, seed=s)) for s in (1, 2, 3)])
+    assert lab_statistics(3, 7) == ph.summarise(
+        [result_stats(simulate_phantom(LAB, seed=s)) for s in (7, 8, 9)])
     assert lab_stats["n"] == N_LAB
 
 
@@ -79,12 +99,16 @@ def test_slower_insertion_has_relaxed_more_at_the_same_depth():
     for stage in (12.0, 18.0, 24.0):
         f_slow, f_fast = _at_stage(slow, stage, 1), _at_stage(fast, stage, 1)
         assert f_slow < f_fast - 0.1, (stage, f_slow, f_fast)
-    # the elastic part (membranes, cutting, friction) does not depend on the speed
+    # the elastic forces before relaxation (membranes, cutting, friction) do not depend on the
+    # speed; relaxed, the slower insertion's are smaller (more time to relax)
+    a, b = slow.truth["samples"], fast.truth["samples"]
+
+    def at20(smp, name):
+        ins = smp["phase"] == 1
+        return float(np.interp(20.0, smp["stage_mm"][ins], smp[name][ins]))
+    assert at20(a, "elastic_instant") == pytest.approx(at20(b, "elastic_instant"), rel=1e-6)
     for name in ("friction", "cutting"):
-        a, b = slow.truth["samples"], fast.truth["samples"]
-        sa = np.interp(20.0, a["stage_mm"][a["phase"] == 1], a[name][a["phase"] == 1])
-        sb = np.interp(20.0, b["stage_mm"][b["phase"] == 1], b[name][b["phase"] == 1])
-        assert sa == pytest.approx(sb, rel=1e-6)
+        assert at20(a, name) < at20(b, name) - 0.01, name
 
 
 def test_dwell_decay_is_the_same_maxwell_element_and_grows_with_speed():
@@ -95,15 +119,24 @@ def test_dwell_decay_is_the_same_maxwell_element_and_grows_with_speed():
         m = res.truth["cycles"][0]
         dwell = np.flatnonzero((t > m["insertion_end_s"]) & (t < m["retraction_start_s"]))
         k0 = dwell[0]
-        taus = res.spec.tissue.maxwell_tau_s
-        # during the dwell each branch decays from its own value with its own time constant
-        pred = sum(s[f"viscous_branch{b + 1}"][k0] * np.exp(-(t[dwell] - t[k0]) / tau)
+        ti = res.spec.tissue
+        taus, g_inf = ti.maxwell_tau_s, 1.0 - sum(ti.relax_g)
+        # during the dwell the unrelaxed elastic force holds; the total is its relaxed share
+        # plus one exponential per time constant (Maxwell branches and relaxing elastic parts)
+        inst = s["elastic_instant"][dwell]
+        assert np.ptp(inst) < 1e-12
+        td = t[dwell] - t[k0]
+        A = np.column_stack([np.exp(-td / tau) for tau in taus])
+        rest = s["total"][dwell] - g_inf * inst
+        coef, *_ = np.linalg.lstsq(A, rest, rcond=None)
+        assert np.max(np.abs(A @ coef - rest)) < 1e-9
+        assert np.all(coef > 0.0)
+        # the Maxwell branches decay from their own values with their own time constants
+        pred = sum(s[f"viscous_branch{b + 1}"][k0] * np.exp(-td / tau)
                    for b, tau in enumerate(taus))
-        elastic = (s["membrane"] + s["cutting"] + s["friction"])[dwell]
-        assert np.ptp(elastic) < 1e-12
-        assert np.max(np.abs(s["total"][dwell] - elastic - pred)) < 1e-9
+        assert np.max(np.abs(s["viscous"][dwell] - pred)) < 1e-9
         # fast first, then slow: most of the fast branch is gone after 1 s, the slow one not
-        f = s["total"][dwell] - elastic
+        f = s["total"][dwell] - g_inf * inst
         one = np.searchsorted(t[dwell], t[k0] + 1.0)
         fast_left = s["viscous_branch1"][dwell][one] / s["viscous_branch1"][k0]
         slow_left = s["viscous_branch2"][dwell][one] / s["viscous_branch2"][k0]
@@ -113,12 +146,53 @@ def test_dwell_decay_is_the_same_maxwell_element_and_grows_with_speed():
     assert decays[0] < decays[1] - 3.0
 
 
-def test_no_relaxation_without_the_maxwell_element():
-    spec = PRESETS["skin-on-muscle"]
-    spec = ph.replace(spec, tissue=ph.replace(spec.tissue, maxwell_n_mm=(0.0, 0.0)))
+def test_no_relaxation_without_the_maxwell_element_and_the_relaxing_shares():
+    base = PRESETS["skin-on-muscle"]
+    spec = ph.replace(base, tissue=ph.replace(base.tissue, maxwell_n_mm=(0.0, 0.0),
+                                              relax_g=(0.0, 0.0)))
+    assert abs(result_stats(simulate_phantom(spec, noise_n=0.0))["dwell_decay_pct"]) < 1e-9
+    # the elastic forces alone relax by their shares: g_k (1 - exp(-dwell/tau_k)) at most, much
+    # less as what was loaded early in the insertion has relaxed before the dwell (4.9 % here)
+    spec = ph.replace(base, tissue=ph.replace(base.tissue, maxwell_n_mm=(0.0, 0.0)))
     res = simulate_phantom(spec, noise_n=0.0)
-    st = result_stats(res)
-    assert abs(st["dwell_decay_pct"]) < 1e-9
+    ti, dwell = spec.tissue, spec.motion.dwell_s
+    most = sum(g * (1.0 - np.exp(-dwell / tau)) for g, tau in zip(ti.relax_g, ti.maxwell_tau_s))
+    decay = result_stats(res)["dwell_decay_pct"] / 100.0
+    assert 0.02 < decay < most, (decay, most)
+
+
+def test_each_tent_relaxes_from_its_own_start():
+    """A tent loaded monotonically over T seconds has relaxed, at its rupture, by less than if it
+    had all been loaded at its start: F >= R (g_inf + sum_k g_k exp(-T/tau_k)); a membrane that
+    inherited the relaxation memory of the one torn before it falls below that."""
+    res = simulate_phantom("artery-filled", speeds_mm_s=(3.0,), noise_n=0.0)
+    s, ti = res.truth["samples"], res.spec.tissue
+    g_inf = 1.0 - sum(ti.relax_g)
+    for rp in res.truth["ruptures"]:
+        k = np.searchsorted(res.t_s, rp["time_s"])
+        start = rp["tip_depth_mm"] - ti.layers[rp["layer"]].tent_mm
+        t0 = res.t_s[np.flatnonzero(s["tip_depth_mm"] > start)[0]]
+        T = rp["time_s"] - t0
+        floor = g_inf + sum(g * np.exp(-T / tau) for g, tau in zip(ti.relax_g, ti.maxwell_tau_s))
+        assert floor * rp["rupture_n"] < s["membrane"][k - 1] <= rp["rupture_n"], rp
+
+
+def test_relaxation_never_makes_a_contact_force_pull():
+    """A torn membrane keeps no memory of its loading and the tip cannot pull on the tissue
+    ahead of it: membrane and cutting forces stay >= 0; the shaft's grip relaxes per engaged
+    piece, so the friction after the tip leaves is exactly 0."""
+    for name in PRESETS:
+        res = simulate_phantom(name, speeds_mm_s=(1.0, 3.0), noise_n=0.0)
+        s = res.truth["samples"]
+        assert s["membrane"].min() >= 0.0 and s["cutting"].min() >= 0.0, name
+        ins = (s["phase"] == 1) & (s["tip_depth_mm"] > 0.5)
+        assert s["total"][ins].min() > 0.05, name
+        out = (s["phase"] == 3) & (s["tip_depth_mm"] <= 0.0)
+        assert np.all(s["friction"][out] == 0.0), name
+    bad = ph.replace(PRESETS["skin"], tissue=ph.replace(PRESETS["skin"].tissue,
+                                                        relax_g=(0.6, 0.5)))
+    with pytest.raises(ValueError, match="relax_g"):
+        simulate_phantom(bad)
 
 
 # --- truth and sensor ---------------------------------------------------------------------------
@@ -262,6 +336,7 @@ def test_command_prints_the_statistics(capsys):
     (["--rate", "-3"], "--rate"), (["liver"], "unknown phantom"), (["--speed", "1,x"], "--speed"),
     (["--force-sign", "2"], "--force-sign"), (["--jitter", "0.7"], "--jitter"), ([], "--out"),
     (["--surface", "40"], "--surface"), (["--gaps", "-1"], "--gaps"),
+    (["--stats", "--first-seed", "-1"], "--first-seed"),
 ])
 def test_command_refuses_bad_flags_with_one_line(tmp_path, capsys, argv, word):
     out = tmp_path / "bad.csv"
