@@ -79,6 +79,7 @@ class NodeMirror:
     model: int = 2
     base_id: int | None = None
     depth_timeout_us: int = 50000
+    resync_gap_us: int = 20000
     params_per_step: int = 1
     db: NteDatabase = field(init=False)
     estimates: list[EstimateOut] = field(default_factory=list)
@@ -96,6 +97,8 @@ class NodeMirror:
         self.depth: list[tuple[int, np.float32, np.float32]] = []   # (t, d, v), newest last
         self.forces: list[tuple[int, np.float32]] = []
         self.last_force_t: int | None = None
+        #: per stream, a sample held for a time jump (nte_node_pending_t)
+        self.pending: dict[str, dict | None] = {"Depth": None, "Force": None}
         self.param_next = 0
         self._start(self.model)
 
@@ -190,6 +193,10 @@ class NodeMirror:
         tn = self.depth[-1][0]
         if tn < t:
             if t - tn > timeout or (self.last_force_t or t) - tn > timeout:
+                p = self.pending["Depth"]
+                if (p is not None and 0 <= t - p["t"] <= timeout
+                        and (self.last_force_t or t) - p["t"] <= timeout):
+                    return False        # a held depth sample may decide it: wait
                 self._hold(t, force)
                 return True
             return False
@@ -218,22 +225,142 @@ class NodeMirror:
             self.forces.pop(0)
 
     # ------------------------------------------------------------------ input
-    def _unwrap(self, raw: int) -> tuple[int, int]:
-        if self.clock_raw is None:
+    def _unwrap(self, raw: int, clock: tuple[int | None, int] | None = None) -> tuple[int, int]:
+        """Unwrapped ticks of a 16-bit SensorTime against `clock` (default the shared one)."""
+        clock_raw, clock_ticks = clock if clock is not None else (self.clock_raw, self.clock_ticks)
+        if clock_raw is None:
             return raw + 65536, raw
-        d = (raw - self.clock_raw) & 0xFFFF
+        d = (raw - clock_raw) & 0xFFFF
         if d >= 0x8000:
             d -= 0x10000
-        return self.clock_ticks + d, raw
+        return clock_ticks + d, raw
+
+    _E2E_EVENT = {"wrong_length": "wrong_dlc", "bad_crc": "bad_crc",
+                  "repeated": "counter_repeated", "bad_counter": "counter_invalid"}
+
+    def _e2e_try(self, name: str, data: bytes, state: int | None) -> tuple[str, int | None]:
+        """E2E check of `data` against the counter state `state` (None: not synced), without
+        touching the receiver: (status, state after)."""
+        saved = self.rx.last.pop(name, None)
+        if state is not None:
+            self.rx.last[name] = state
+        status, _ = self.rx.check(name, data)
+        after = self.rx.last.pop(name, None)
+        if saved is not None:
+            self.rx.last[name] = saved
+        return status, after
+
+    def _commit_e2e(self, name: str, state: int | None, status: str) -> None:
+        if state is not None:
+            self.rx.last[name] = state
+        if status == "skipped":
+            self._count("counter_skipped")
+
+    def _decode_sample(self, name: str, data: bytes, state: int | None):
+        """(status, state after, sample (raw_t, a, b) or None); status 'out_of_range' for an
+        E2E-valid frame with a raw value outside the DBC range."""
+        status, after = self._e2e_try(name, data, state)
+        if status not in ("ok", "skipped"):
+            return status, after, None
+        sig = self.db.db.get_message_by_name(name).decode(bytes(data), scaling=False,
+                                                          decode_choices=False)
+        raw_t = int(sig["SensorTime"])
+        if name == "Depth":
+            dr, vr = int(sig["Depth"]), int(sig["Velocity"])
+            if not (DEPTH_RAW[0] <= dr <= DEPTH_RAW[1] and VELOCITY_RAW[0] <= vr <= VELOCITY_RAW[1]):
+                return "out_of_range", after, None
+            return status, after, (raw_t, F32(F32(dr) * F32(0.001)), F32(F32(vr) * F32(0.01)))
+        fr = int(sig["Force"])
+        if not FORCE_RAW[0] <= fr <= FORCE_RAW[1]:
+            return "out_of_range", after, None
+        return status, after, (raw_t, F32(F32(fr) * F32(0.0001)), F32(0.0))
+
+    def _newest(self, name: str) -> int | None:
+        if name == "Depth":
+            return self.depth[-1][0] if self.depth else None
+        return self.last_force_t
+
+    def _store(self, name: str, t: int, a: np.float32, b: np.float32) -> None:
+        if name == "Depth":
+            self.depth.append((t, a, b))
+            if len(self.depth) > 32:
+                self.depth.pop(0)
+        else:
+            if len(self.forces) >= 16:
+                self._count("queue_overflow")
+                return
+            self.last_force_t = t
+            self.forces.append((t, a))
+        self._process()
+
+    def _resync(self, name: str, t: int) -> None:
+        self._count("time_resync")
+        newest = self._newest(name)
+        if newest is None or t > newest:
+            return
+        if name == "Depth":
+            self.depth = []
+        else:
+            while self.forces:
+                tf, f = self.forces.pop(0)
+                self._hold(tf, f)
+            self.last_force_t = None
+
+    def _on_sample(self, name: str, data: bytes) -> None:
+        """The node's nte_node_on_sample: time rules with resynchronisation (nte_node.h)."""
+        gap = self.resync_gap_us // TICK_US
+        status, after, smp = self._decode_sample(name, data, self.rx.last.get(name))
+        t = d = 0
+        clk = (self.clock_raw, self.clock_ticks)
+        if smp is not None:
+            t, raw = self._unwrap(smp[0])
+            clk = (raw, t)
+            newest = self._newest(name)
+            d = 1 if newest is None else t - newest
+            if 0 < d <= gap:
+                if self.pending[name] is not None:
+                    self.pending[name] = None
+                    self._count("time_jump_dropped")
+                self._commit_e2e(name, after, status)
+                self.clock_raw, self.clock_ticks = clk
+                self._store(name, t, smp[1], smp[2])
+                return
+        p = self.pending[name]
+        if p is not None:
+            st_p, after_p, smp_p = self._decode_sample(name, data, p["after"])
+            if smp_p is not None:
+                t_p, raw_p = self._unwrap(smp_p[0], p["clock"])
+                if 0 < t_p - p["t"] <= gap:
+                    self.pending[name] = None
+                    self._resync(name, p["t"])
+                    self._commit_e2e(name, p["after"], p["status"])
+                    self.clock_raw, self.clock_ticks = p["clock"]
+                    self._store(name, p["t"], p["a"], p["b"])
+                    self._commit_e2e(name, after_p, st_p)
+                    self.clock_raw, self.clock_ticks = raw_p, t_p
+                    self._store(name, t_p, smp_p[1], smp_p[2])
+                    return
+        if smp is None:
+            if after is not None:
+                self.rx.last[name] = after
+            self._count(self._E2E_EVENT.get(status, "out_of_range"))
+            return
+        if -gap <= d <= 0:
+            self._commit_e2e(name, after, status)
+            self._count("time_backwards")
+            return
+        if p is not None:
+            self._count("time_jump_dropped")
+        self.pending[name] = {"t": t, "clock": clk, "after": after, "status": status,
+                              "a": smp[1], "b": smp[2]}
 
     def _e2e(self, name: str, data: bytes) -> dict | None:
-        status, lost = self.rx.check(name, data)
+        """E2E check of a Command frame (counted as the node counts it), then its raw signals."""
+        status, _ = self.rx.check(name, data)
         if status == "skipped":
             self._count("counter_skipped")
         if status not in ("ok", "skipped"):
-            self._count({"wrong_length": "wrong_dlc", "bad_crc": "bad_crc",
-                         "repeated": "counter_repeated",
-                         "bad_counter": "counter_invalid"}[status])
+            self._count(self._E2E_EVENT[status])
             return None
         return self.db.db.get_message_by_name(name).decode(bytes(data), scaling=False,
                                                             decode_choices=False)
@@ -246,6 +373,9 @@ class NodeMirror:
             return
         if len(data) != FRAME_LENGTH:
             self._count("wrong_dlc")
+            return
+        if name != "Command":
+            self._on_sample(name, bytes(data))
             return
         sig = self._e2e(name, bytes(data))
         if sig is None:
@@ -268,37 +398,6 @@ class NodeMirror:
             if refused:
                 self._count("command_refused")
             return
-        raw_t = int(sig["SensorTime"])
-        if name == "Depth":
-            dr, vr = int(sig["Depth"]), int(sig["Velocity"])
-            if not (DEPTH_RAW[0] <= dr <= DEPTH_RAW[1] and VELOCITY_RAW[0] <= vr <= VELOCITY_RAW[1]):
-                self._count("out_of_range")
-                return
-            t, raw = self._unwrap(raw_t)
-            if self.depth and t <= self.depth[-1][0]:
-                self._count("time_backwards")
-                return
-            self.clock_raw, self.clock_ticks = raw, t
-            self.depth.append((t, F32(F32(dr) * F32(0.001)), F32(F32(vr) * F32(0.01))))
-            if len(self.depth) > 32:
-                self.depth.pop(0)
-            self._process()
-            return
-        fr = int(sig["Force"])
-        if not FORCE_RAW[0] <= fr <= FORCE_RAW[1]:
-            self._count("out_of_range")
-            return
-        t, raw = self._unwrap(raw_t)
-        if self.last_force_t is not None and t <= self.last_force_t:
-            self._count("time_backwards")
-            return
-        if len(self.forces) >= 16:
-            self._count("queue_overflow")
-            return
-        self.clock_raw, self.clock_ticks = raw, t
-        self.last_force_t = t
-        self.forces.append((t, F32(F32(fr) * F32(0.0001))))
-        self._process()
 
     def feed_all(self, frames: Iterable) -> "NodeMirror":
         for m in frames:

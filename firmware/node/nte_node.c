@@ -16,7 +16,8 @@
 static const char* const nte_node_event_names[NTE_NODE_EVENT_COUNT] = {
     "wrong_dlc",      "unknown_id",    "bad_crc",        "counter_invalid", "counter_repeated",
     "counter_skipped", "out_of_range", "time_backwards", "queue_overflow",  "send_failed",
-    "command_refused", "stale",        "receive_error",  "encode_error"};
+    "command_refused", "stale",        "receive_error",  "encode_error",    "time_jump_dropped",
+    "time_resync"};
 
 /* Signed difference a - b of two unwrapped tick counts (they wrap modulo 2^32). */
 static int32_t nte_node_tdiff(uint32_t a, uint32_t b)
@@ -44,6 +45,7 @@ void nte_node_config_default(nte_node_config_t* cfg, int32_t model)
     cfg->heartbeat_period_us = 100000u;
     cfg->params_per_step = 1u;
     cfg->rx_budget = 64u;
+    cfg->resync_gap_us = 20000u;
 }
 
 static nte_node_err_t nte_node_check(const nte_node_config_t* cfg, const nte_node_port_t* port)
@@ -57,7 +59,8 @@ static nte_node_err_t nte_node_check(const nte_node_config_t* cfg, const nte_nod
         (cfg->depth_timeout_us > 3000000u) || (cfg->heartbeat_period_us < 1000u) ||
         (cfg->heartbeat_period_us > 10000000u) || (cfg->params_per_step < 1u) ||
         (cfg->params_per_step > (uint32_t)NTE_FRAMES_PARAM_COUNT) || (cfg->rx_budget < 1u) ||
-        (cfg->rx_budget > 65535u)) {
+        (cfg->rx_budget > 65535u) || (cfg->resync_gap_us < 1000u) ||
+        (cfg->resync_gap_us > 3000000u)) {
         return nte_node_err_bad_config;
     }
     if ((cfg->estimator[0].model != 1) || (cfg->estimator[1].model != 2) ||
@@ -235,7 +238,8 @@ static void nte_node_heartbeat(nte_node_t* self, uint64_t now)
     hb.uptime_s = (float)(uint32_t)((up_us / 100000u) % 1048576u) * 0.1f;
     hb.e2e_errors = ev[nte_node_ev_wrong_dlc] + ev[nte_node_ev_bad_crc] +
                     ev[nte_node_ev_counter_invalid] + ev[nte_node_ev_counter_repeated];
-    hb.range_errors = ev[nte_node_ev_out_of_range] + ev[nte_node_ev_time_backwards];
+    hb.range_errors = ev[nte_node_ev_out_of_range] + ev[nte_node_ev_time_backwards] +
+                      ev[nte_node_ev_time_jump_dropped];
     hb.step_time_s = (float)self->step_time_max_us * 1.0e-6f;
     if (nte_frames_encode_heartbeat(&hb, &self->tx[NTE_NODE_OUT_HEARTBEAT], data) ==
         nte_frames_ok) {
@@ -317,6 +321,14 @@ static int nte_node_decide(nte_node_t* self, const nte_node_force_t* f)
          * force sample shows that none came within the timeout */
         if ((nte_node_tdiff(f->t, newest->t) > timeout) ||
             (nte_node_tdiff(self->last_force_t, newest->t) > timeout)) {
+            /* a depth sample held for a time jump at or before t_f (within the timeout) would
+             * decide it: wait for its confirmation while later forces stay within the timeout */
+            const nte_node_pending_t* p = &self->pending[NTE_NODE_IN_DEPTH];
+            if (p->held && (nte_node_tdiff(f->t, p->t) >= 0) &&
+                (nte_node_tdiff(f->t, p->t) <= timeout) &&
+                (nte_node_tdiff(self->last_force_t, p->t) <= timeout)) {
+                return 0;
+            }
             nte_node_hold(self);
             return 1;
         }
@@ -387,63 +399,188 @@ static bool nte_node_decoded(nte_node_t* self, nte_frames_err_t err, nte_e2e_res
     return false;
 }
 
-static void nte_node_on_depth(nte_node_t* self, const nte_node_frame_t* fr)
+/* A decoded depth or force sample before its time is checked. */
+typedef struct nte_node_in_t {
+    uint16_t raw_t;
+    float a; /* depth_mm or force_n */
+    float b; /* velocity_mm_s (depth only) */
+} nte_node_in_t;
+
+/* Decode a depth (stream 0) or force (stream 1) frame with the E2E state `rx`. */
+static nte_frames_err_t nte_node_decode_sample(uint32_t stream, nte_e2e_rx_t* rx,
+                                               const nte_node_frame_t* fr, nte_node_in_t* in,
+                                               nte_e2e_result_t* e2e, uint8_t* lost)
 {
-    nte_frames_depth_t d;
-    nte_e2e_result_t e2e = nte_e2e_ok;
-    uint8_t lost = 0u;
-    const nte_frames_err_t err = nte_frames_decode_depth(&self->rx[NTE_NODE_IN_DEPTH], fr->data,
-                                                         fr->len, &d, &e2e, &lost);
-    if (!nte_node_decoded(self, err, e2e, lost)) {
-        return;
+    nte_frames_err_t err;
+    (void)memset(in, 0, sizeof *in);
+    if (stream == NTE_NODE_IN_DEPTH) {
+        nte_frames_depth_t d;
+        err = nte_frames_decode_depth(rx, fr->data, fr->len, &d, e2e, lost);
+        if (err == nte_frames_ok) {
+            in->raw_t = d.time_ticks;
+            in->a = d.depth_mm;
+            in->b = d.velocity_mm_s;
+        }
+    } else {
+        nte_frames_force_t f;
+        err = nte_frames_decode_force(rx, fr->data, fr->len, &f, e2e, lost);
+        if (err == nte_frames_ok) {
+            in->raw_t = f.time_ticks;
+            in->a = f.force_n;
+        }
     }
-    nte_frames_clock_t clk = self->clock;
-    const uint32_t t = nte_frames_clock_unwrap(&clk, d.time_ticks);
-    if ((self->depth_count > 0u) && (nte_node_tdiff(t, nte_node_depth_at(self, 0u)->t) <= 0)) {
-        nte_node_count(self, nte_node_ev_time_backwards);
-        return;
+    return err;
+}
+
+/* Newest accepted time of a stream; false if the stream has none yet. */
+static bool nte_node_newest(const nte_node_t* self, uint32_t stream, uint32_t* t)
+{
+    if (stream == NTE_NODE_IN_DEPTH) {
+        if (self->depth_count == 0u) {
+            return false;
+        }
+        *t = nte_node_depth_at(self, 0u)->t;
+        return true;
     }
-    self->clock = clk;
-    self->depth[self->depth_next].t = t;
-    self->depth[self->depth_next].depth_mm = d.depth_mm;
-    self->depth[self->depth_next].velocity_mm_s = d.velocity_mm_s;
-    self->depth_next = (self->depth_next + 1u) % (uint32_t)NTE_NODE_DEPTH_HISTORY;
-    if (self->depth_count < (uint32_t)NTE_NODE_DEPTH_HISTORY) {
-        self->depth_count++;
+    *t = self->last_force_t;
+    return self->have_force;
+}
+
+/* Store an accepted sample of `stream` at unwrapped time t (later than the stream's newest). */
+static void nte_node_store(nte_node_t* self, uint32_t stream, uint32_t t, float a, float b)
+{
+    if (stream == NTE_NODE_IN_DEPTH) {
+        self->depth[self->depth_next].t = t;
+        self->depth[self->depth_next].depth_mm = a;
+        self->depth[self->depth_next].velocity_mm_s = b;
+        self->depth_next = (self->depth_next + 1u) % (uint32_t)NTE_NODE_DEPTH_HISTORY;
+        if (self->depth_count < (uint32_t)NTE_NODE_DEPTH_HISTORY) {
+            self->depth_count++;
+        }
+    } else {
+        if (self->force_count >= (uint32_t)NTE_NODE_FORCE_QUEUE) {
+            nte_node_count(self, nte_node_ev_queue_overflow);
+            return;
+        }
+        self->have_force = true;
+        self->last_force_t = t;
+        const uint32_t k = (self->force_head + self->force_count) % (uint32_t)NTE_NODE_FORCE_QUEUE;
+        self->force[k].t = t;
+        self->force[k].force_n = a;
+        self->force_count++;
     }
-    self->counters.rx_accepted[NTE_NODE_IN_DEPTH]++;
+    self->counters.rx_accepted[stream]++;
     nte_node_process_forces(self);
 }
 
-static void nte_node_on_force(nte_node_t* self, const nte_node_frame_t* fr)
+/* A confirmed jump of the sensor clock to time t: a jump back restarts the stream's timeline
+ * (depth: the history is forgotten; force: the samples still waiting are published stale). */
+static void nte_node_resync(nte_node_t* self, uint32_t stream, uint32_t t)
 {
-    nte_frames_force_t f;
-    nte_e2e_result_t e2e = nte_e2e_ok;
-    uint8_t lost = 0u;
-    const nte_frames_err_t err = nte_frames_decode_force(&self->rx[NTE_NODE_IN_FORCE], fr->data,
-                                                         fr->len, &f, &e2e, &lost);
-    if (!nte_node_decoded(self, err, e2e, lost)) {
+    uint32_t newest = 0u;
+    nte_node_count(self, nte_node_ev_time_resync);
+    if (!nte_node_newest(self, stream, &newest) || (nte_node_tdiff(t, newest) > 0)) {
         return;
     }
+    if (stream == NTE_NODE_IN_DEPTH) {
+        self->depth_count = 0u;
+        self->depth_next = 0u;
+    } else {
+        while (self->force_count > 0u) {
+            nte_node_hold(self);
+            self->force_head = (self->force_head + 1u) % (uint32_t)NTE_NODE_FORCE_QUEUE;
+            self->force_count--;
+        }
+        self->have_force = false;
+    }
+}
+
+/* Commit a decoded frame's E2E state and account its counter skip. */
+static void nte_node_commit_e2e(nte_node_t* self, uint32_t stream, const nte_e2e_rx_t* rx,
+                                nte_e2e_result_t e2e, uint8_t lost)
+{
+    self->rx[stream] = *rx;
+    (void)nte_node_decoded(self, nte_frames_ok, e2e, lost);
+}
+
+/* A depth or force frame.  Time rules (nte_node.h, "TIME"): a sample later than its stream's
+ * newest by at most resync_gap is accepted; one not later by at most resync_gap is dropped
+ * (time_backwards); any other is held, with its E2E state and clock uncommitted, until the
+ * next frame of the stream: one that continues the old timeline drops it (time_jump_dropped),
+ * one that continues the held sample confirms it (time_resync, both accepted). */
+static void nte_node_on_sample(nte_node_t* self, uint32_t stream, const nte_node_frame_t* fr)
+{
+    nte_node_pending_t* p = &self->pending[stream];
+    const int32_t gap = (int32_t)(self->cfg.resync_gap_us / NTE_NODE_TICK_US);
+    nte_e2e_rx_t rx = self->rx[stream];
+    nte_e2e_result_t e2e = nte_e2e_ok;
+    uint8_t lost = 0u;
+    nte_node_in_t in;
+    const nte_frames_err_t err = nte_node_decode_sample(stream, &rx, fr, &in, &e2e, &lost);
     nte_frames_clock_t clk = self->clock;
-    const uint32_t t = nte_frames_clock_unwrap(&clk, f.time_ticks);
-    if (self->have_force && (nte_node_tdiff(t, self->last_force_t) <= 0)) {
+    uint32_t t = 0u;
+    uint32_t newest = 0u;
+    int32_t d = 0;
+    if (err == nte_frames_ok) {
+        t = nte_frames_clock_unwrap(&clk, in.raw_t);
+        d = nte_node_newest(self, stream, &newest) ? nte_node_tdiff(t, newest) : 1;
+        if ((d > 0) && (d <= gap)) {
+            if (p->held) {
+                p->held = false;
+                nte_node_count(self, nte_node_ev_time_jump_dropped);
+            }
+            nte_node_commit_e2e(self, stream, &rx, e2e, lost);
+            self->clock = clk;
+            nte_node_store(self, stream, t, in.a, in.b);
+            return;
+        }
+    }
+    if (p->held) {
+        /* does this frame continue the held one's timeline? */
+        nte_e2e_rx_t rx_p = p->rx;
+        nte_e2e_result_t e2e_p = nte_e2e_ok;
+        uint8_t lost_p = 0u;
+        nte_node_in_t in_p;
+        if (nte_node_decode_sample(stream, &rx_p, fr, &in_p, &e2e_p, &lost_p) == nte_frames_ok) {
+            nte_frames_clock_t clk_p = p->clock;
+            const uint32_t t_p = nte_frames_clock_unwrap(&clk_p, in_p.raw_t);
+            const int32_t d_p = nte_node_tdiff(t_p, p->t);
+            if ((d_p > 0) && (d_p <= gap)) {
+                const nte_node_pending_t held = *p;
+                p->held = false;
+                nte_node_resync(self, stream, held.t);
+                nte_node_commit_e2e(self, stream, &held.rx, held.e2e, held.lost);
+                self->clock = held.clock;
+                nte_node_store(self, stream, held.t, held.a, held.b);
+                nte_node_commit_e2e(self, stream, &rx_p, e2e_p, lost_p);
+                self->clock = clk_p;
+                nte_node_store(self, stream, t_p, in_p.a, in_p.b);
+                return;
+            }
+        }
+    }
+    if (err != nte_frames_ok) {
+        self->rx[stream] = rx; /* a range error follows a valid E2E check: the counter moved */
+        (void)nte_node_decoded(self, err, e2e, lost);
+        return;
+    }
+    if ((d <= 0) && (d >= -gap)) {
+        nte_node_commit_e2e(self, stream, &rx, e2e, lost);
         nte_node_count(self, nte_node_ev_time_backwards);
         return;
     }
-    if (self->force_count >= (uint32_t)NTE_NODE_FORCE_QUEUE) {
-        nte_node_count(self, nte_node_ev_queue_overflow);
-        return;
+    /* a jump: hold it (a previously held frame is dropped) */
+    if (p->held) {
+        nte_node_count(self, nte_node_ev_time_jump_dropped);
     }
-    self->clock = clk;
-    self->have_force = true;
-    self->last_force_t = t;
-    self->force[(self->force_head + self->force_count) % (uint32_t)NTE_NODE_FORCE_QUEUE].t = t;
-    self->force[(self->force_head + self->force_count) % (uint32_t)NTE_NODE_FORCE_QUEUE]
-        .force_n = f.force_n;
-    self->force_count++;
-    self->counters.rx_accepted[NTE_NODE_IN_FORCE]++;
-    nte_node_process_forces(self);
+    p->held = true;
+    p->t = t;
+    p->clock = clk;
+    p->rx = rx;
+    p->e2e = e2e;
+    p->lost = lost;
+    p->a = in.a;
+    p->b = in.b;
 }
 
 static void nte_node_on_command(nte_node_t* self, const nte_node_frame_t* fr)
@@ -491,9 +628,9 @@ static void nte_node_on_frame(nte_node_t* self, const nte_node_frame_t* fr)
         return;
     }
     if (fr->id == nte_node_input_id(self, NTE_NODE_IN_DEPTH)) {
-        nte_node_on_depth(self, fr);
+        nte_node_on_sample(self, NTE_NODE_IN_DEPTH, fr);
     } else if (fr->id == nte_node_input_id(self, NTE_NODE_IN_FORCE)) {
-        nte_node_on_force(self, fr);
+        nte_node_on_sample(self, NTE_NODE_IN_FORCE, fr);
     } else if (fr->id == nte_node_input_id(self, NTE_NODE_IN_COMMAND)) {
         nte_node_on_command(self, fr);
     } else {

@@ -21,6 +21,23 @@
  *   streams are not skewed on the bus by more than the timeout.  The port clock is used only for
  *   the heartbeat period, the uptime and the step-time measurement.
  *
+ * TIME JUMPS (resynchronisation)
+ *   A sample later than its stream's newest by at most `resync_gap_us` is accepted; one at most
+ *   `resync_gap_us` older (a duplicate or a reordered frame) is dropped as time_backwards.  A
+ *   sample further away, forward or backward, is a time jump and is not trusted alone: it is held,
+ *   its E2E counter state and the clock left uncommitted, until the next frame of its stream.  If
+ *   that frame continues the old timeline, the held one is dropped (time_jump_dropped); if it
+ *   continues the held one (later by at most `resync_gap_us`), the jump is confirmed
+ *   (time_resync) and both are accepted.  A jump back restarts the stream: the depth history is
+ *   forgotten, the force samples waiting for depth are published stale.  Consequences: a single
+ *   forged or corrupted frame that passes the CRC with a time jump costs that frame only (the
+ *   next genuine frame is checked against the counter state before it); a real clock jump, or
+ *   the first sample after a gap longer than `resync_gap_us`, costs one sample period of latency
+ *   and no sample.  A frame within `resync_gap_us` of the stream is indistinguishable from a
+ *   genuine one (E2E is integrity, not authentication): accepted, it can cost the genuine
+ *   samples of the next `resync_gap_us`.  A last sample after a jump with nothing behind it
+ *   stays held.
+ *
  * THE PORT INTERFACE (bring the node to a board by writing these three functions)
  *   nte_node_port_t holds three function pointers and a context pointer passed back to each:
  *     receive(ctx, frame)  NON-BLOCKING: 1 = *frame filled with one received frame, 0 = nothing
@@ -122,10 +139,13 @@ typedef enum nte_node_event_t {
                                            estimator, freeze adaptation): ignored */
     nte_node_ev_stale = 11,           /**< force sample without recent depth: estimate held */
     nte_node_ev_receive_error = 12,   /**< port receive() reported an error */
-    nte_node_ev_encode_error = 13     /**< an output could not be encoded (non-finite): the
+    nte_node_ev_encode_error = 13,    /**< an output could not be encoded (non-finite): the
                                            Estimate is sent with Fault set instead */
+    nte_node_ev_time_jump_dropped = 14, /**< sample held for a time jump and not confirmed by
+                                           the next sample of its stream: dropped */
+    nte_node_ev_time_resync = 15      /**< time jump confirmed: the stream resynchronised */
 } nte_node_event_t;
-#define NTE_NODE_EVENT_COUNT 14
+#define NTE_NODE_EVENT_COUNT 16
 
 /** Counters (monotonic, wrap modulo 2^32); public, the application may clear them. */
 typedef struct nte_node_counters_t {
@@ -147,6 +167,9 @@ typedef struct nte_node_config_t {
     uint32_t heartbeat_period_us; /**< port clock, 1000..10000000 us (default 100000) */
     uint32_t params_per_step;     /**< Params frames after each step, 1..7 (default 1) */
     uint32_t rx_budget;           /**< frames received per nte_node_poll, 1..65535 (default 64) */
+    uint32_t resync_gap_us;       /**< a sample further than this (sensor time) from its stream's
+                                       newest is a time jump, held until confirmed (see TIME),
+                                       1000..3000000 us (default 20000) */
 } nte_node_config_t;
 
 /** Result of the node functions: 0 success, negative error. */
@@ -175,6 +198,18 @@ typedef struct nte_node_force_t {
     float force_n;
 } nte_node_force_t;
 
+/** A sample held for a time jump, with the E2E state and clock it would commit. */
+typedef struct nte_node_pending_t {
+    bool held;
+    uint32_t t;                /**< unwrapped against `clock` */
+    nte_frames_clock_t clock;  /**< the shared clock after this sample */
+    nte_e2e_rx_t rx;           /**< the stream's E2E state after this sample */
+    nte_e2e_result_t e2e;
+    uint8_t lost;
+    float a;                   /**< depth_mm or force_n */
+    float b;                   /**< velocity_mm_s (depth) */
+} nte_node_pending_t;
+
 /** One node.  Every field except `counters` is private. */
 typedef struct nte_node_t {
     nte_node_config_t cfg;
@@ -191,6 +226,7 @@ typedef struct nte_node_t {
     uint32_t force_head;
     uint32_t force_count;
     bool have_force;
+    nte_node_pending_t pending[2]; /* depth, force */
     uint32_t last_force_t;        /* newest accepted force time (queued or processed) */
     nte_frames_estimate_t last;   /* last published estimate values (held when stale) */
     uint8_t param_next;

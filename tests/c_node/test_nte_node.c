@@ -506,6 +506,112 @@ static void test_stale_then_recovery(void** state)
     assert_true(memcmp(&got[150].force_n, &got[199].force_n, sizeof(float)) != 0);
 }
 
+/* A frame that passes the CRC with a sensor time far ahead of or behind its stream (a forged or
+ * corrupted frame carrying the counter the next genuine frame will have) costs that frame
+ * only: every genuine frame is accepted and every estimate equals the clean run's. */
+static void test_forged_time_jump_costs_one_frame(void** state)
+{
+    static const int32_t jumps[] = {50000, -50000, 1000, -1000, 32000, -32000};
+    nte_node_config_t cfg;
+    bench_t b;
+    (void)state;
+    nte_node_config_default(&cfg, 2);
+    start(&g_node_a, &g_port_a, &cfg);
+    bench_init(&b);
+    scenario(&g_port_a, &b, 500u, 10u, 40u, 0);
+    run_all(&g_node_a, &g_port_a);
+    for (uint32_t stream = 0u; stream < 2u; stream++) {
+        for (size_t j = 0u; j < sizeof jumps / sizeof jumps[0]; j++) {
+            uint32_t inserted = 0u;
+            start(&g_node_b, &g_port_b, &cfg);
+            bench_init(&b);
+            const uint32_t t0 = 500u;
+            for (uint32_t t = t0; t <= t0 + 39u * 50u; t++) {
+                const bool dep = ((t - t0) % 10u) == 0u;
+                const bool frc = ((t - t0) % 50u) == 0u;
+                if (dep) {
+                    push(&g_port_b, depth_frame(&b, t, depth_at(t - t0), 10.0f));
+                }
+                if (frc) {
+                    push(&g_port_b, force_frame(&b, t, force_at(t - t0)));
+                }
+                if (frc && ((((t - t0) / 50u) % 6u) == 3u) && (t < t0 + 39u * 50u)) {
+                    const uint32_t tj = (uint32_t)((int32_t)t + jumps[j]);
+                    if (stream == 0u) {
+                        const nte_e2e_tx_t saved = b.depth;
+                        push(&g_port_b, depth_frame(&b, tj, 3.0f, -20.0f));
+                        b.depth = saved;
+                    } else {
+                        const nte_e2e_tx_t saved = b.force;
+                        push(&g_port_b, force_frame(&b, tj, 4.0f));
+                        b.force = saved;
+                    }
+                    inserted++;
+                }
+            }
+            run_all(&g_node_b, &g_port_b);
+            assert_true(inserted > 0u);
+            for (uint32_t e = 0u; e < (uint32_t)NTE_NODE_EVENT_COUNT; e++) {
+                const uint32_t expect =
+                    (e == (uint32_t)nte_node_ev_time_jump_dropped) ? inserted : 0u;
+                if (g_node_b.counters.events[e] != expect) {
+                    print_error("stream %u jump %d event %s\n", (unsigned)stream,
+                                (int)jumps[j], nte_node_event_name(e));
+                }
+                assert_int_equal(g_node_b.counters.events[e], expect);
+            }
+            assert_int_equal(g_node_b.counters.frames_lost, 0u);
+            assert_int_equal(g_node_b.counters.rx_accepted[0], g_node_a.counters.rx_accepted[0]);
+            assert_int_equal(g_node_b.counters.rx_accepted[1], g_node_a.counters.rx_accepted[1]);
+            assert_same_estimates(&g_port_a, &g_port_b);
+        }
+    }
+}
+
+/* A real jump of the sensor clock (both streams, forward or back): confirmed by the next
+ * sample of each stream, no sample lost, estimates fresh again within 50 ms of data. */
+static void test_real_clock_jump_recovers(void** state)
+{
+    static const int32_t jumps[] = {20000, -20000, 600, -600};
+    nte_node_config_t cfg;
+    bench_t b;
+    static nte_frames_estimate_t got[MAX_FRAMES];
+    (void)state;
+    nte_node_config_default(&cfg, 2);
+    for (size_t j = 0u; j < sizeof jumps / sizeof jumps[0]; j++) {
+        start(&g_node_a, &g_port_a, &cfg);
+        bench_init(&b);
+        /* 1 s of data (depth 1 kHz, force 200 Hz); the sensor clock jumps at 0.5 s */
+        uint32_t n_force = 0u;
+        for (uint32_t k = 0u; k < 10000u; k += 10u) {
+            const uint32_t t = (k < 5000u) ? (1000u + k) : (uint32_t)(1000 + (int32_t)k + jumps[j]);
+            push(&g_port_a, depth_frame(&b, t, depth_at(k), 10.0f));
+            if ((k % 50u) == 0u) {
+                push(&g_port_a, force_frame(&b, t, force_at(k)));
+                n_force++;
+            }
+        }
+        run_all(&g_node_a, &g_port_a);
+        const size_t n = estimates(&g_port_a, got, MAX_FRAMES);
+        const uint32_t* ev = g_node_a.counters.events;
+        assert_int_equal(n, n_force); /* one Estimate per force sample */
+        assert_int_equal(g_node_a.counters.rx_accepted[1], n_force);
+        assert_int_equal(g_node_a.counters.rx_accepted[0], 1000u);
+        assert_int_equal(ev[nte_node_ev_time_resync], 2u);
+        assert_int_equal(ev[nte_node_ev_time_jump_dropped], 0u);
+        assert_int_equal(ev[nte_node_ev_time_backwards], 0u);
+        /* every force from 50 ms after the jump on is a fresh step */
+        for (size_t i = 110u; i < n; i++) {
+            if (got[i].stale) {
+                print_error("jump %d: estimate %u stale\n", (int)jumps[j], (unsigned)i);
+            }
+            assert_false(got[i].stale);
+        }
+        assert_true(ev[nte_node_ev_stale] <= 10u);
+        assert_int_equal(g_node_a.counters.steps + ev[nte_node_ev_stale], n_force);
+    }
+}
+
 /* Forces without depth: the queue holds NTE_NODE_FORCE_QUEUE, the next is dropped, counted. */
 static void test_queue_overflow(void** state)
 {
@@ -681,6 +787,8 @@ int main(void)
         cmocka_unit_test(test_bad_frames_counted_and_harmless),
         cmocka_unit_test(test_skipped_counter),
         cmocka_unit_test(test_stale_then_recovery),
+        cmocka_unit_test(test_forged_time_jump_costs_one_frame),
+        cmocka_unit_test(test_real_clock_jump_recovers),
         cmocka_unit_test(test_queue_overflow),
         cmocka_unit_test(test_send_failure),
         cmocka_unit_test(test_commands),

@@ -45,8 +45,110 @@ def test_without_af_can_or_interface() -> None:
     (["--iface", "vcan0", "--preset", "nope"], "unknown preset 'nope'"),
     (["--iface", "vcan0", "--base-id", "0x7F0"], "invalid node configuration"),
     (["--iface", "vcan0", "--params-per-step", "9"], "invalid node configuration"),
+    (["--iface", "vcan0", "--resync-gap-ms", "0"], "invalid node configuration"),
+    (["--replay", "/nonexistent/in.log"], "argument --replay: cannot read /nonexistent/in.log"),
+    (["--replay", "/dev/null", "--record", "/nonexistent/out.log"],
+     "argument --record: cannot write /nonexistent/out.log"),
+    (["--replay", "/dev/null", "--received", "x.log"], "argument --received: not with --replay"),
 ])
 def test_bad_arguments(args: list[str], text: str) -> None:
     r = subprocess.run([str(node_binary()), *args], capture_output=True, text=True, timeout=20)
     assert r.returncode == 2
     assert text in r.stderr
+
+
+# ------------------------------------------------------------------------------------------
+# nte-node --replay: the C node on a candump log, no CAN needed, against the Python mirror.
+import sys  # noqa: E402
+
+import can  # noqa: E402
+
+sys.path.insert(0, str(ROOT))
+from host_bench.cli import scenario_frames, write_candump  # noqa: E402
+from host_bench.dbc import NteDatabase  # noqa: E402
+from host_bench.faults import burst, clock_jump  # noqa: E402
+from host_bench.node_mirror import NodeMirror, compare, node_outputs  # noqa: E402
+
+DB = NteDatabase()
+
+
+@pytest.fixture(scope="module")
+def paper_frames(tmp_path_factory: pytest.TempPathFactory) -> list:
+    """A 3.5 s paper insertion (20 mm at 10 mm/s, 0.5 s dwell): depth 1 kHz, force 200 Hz."""
+    csv = tmp_path_factory.mktemp("paper") / "paper.csv"
+    subprocess.run([sys.executable, "-m", "reference_py", "simulate", "--preset", "paper-10mms",
+                    "--depth", "20", "--dwell", "0.5", "--seed", "1", "--out", str(csv)],
+                   check=True, cwd=ROOT, stdout=subprocess.DEVNULL)
+    return scenario_frames(str(csv), DB, 1000.0)
+
+
+def replay_node(tmp_path: Path, frames: list, tag: str) -> tuple[list, dict]:
+    """Run nte-node --replay on `frames`: (frames it sent, its counters)."""
+    log, rec, stats = (tmp_path / f"{tag}.in.log", tmp_path / f"{tag}.out.log",
+                       tmp_path / f"{tag}.stats.json")
+    write_candump(log, frames, "vcan0", 1.0)
+    r = subprocess.run([str(node_binary()), "--replay", str(log), "--record", str(rec),
+                        "--stats", str(stats), "--model", "2", "--preset", "paper-10mms"],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    import json
+    return list(can.CanutilsLogReader(str(rec))), json.loads(stats.read_text())
+
+
+def assert_node_equals_mirror(sent: list, mirror: NodeMirror) -> None:
+    est, par, bad = node_outputs(DB, sent)
+    res = compare(mirror, est, par)
+    assert bad == 0
+    assert res["estimates_node"] == res["estimates_reference"] > 0
+    assert res["estimate_mismatches"] == 0, res["first_mismatch"]
+    assert res["params_node"] == res["params_reference"]
+    assert res["param_value_mismatches"] == 0
+    assert res["param_std_beyond_1lsb"] == 0
+
+
+def test_replay_burst_on_input_ids_costs_nothing(tmp_path: Path, paper_frames: list) -> None:
+    """A seeded burst every 0.5 s on the Depth and Force ids -- random frames and frames crafted
+    to pass the CRC with a sensor time 50 ms..3 s ahead or behind, carrying the counter of the
+    next genuine frame -- costs no genuine frame: the node publishes exactly what it publishes
+    without the burst, and exactly what the mirror computes on what it received."""
+    frames, rep = burst(paper_frames, DB, seed=2026)
+    assert rep.crafted_forward > 0 and rep.crafted_backward > 0 and rep.random_frames > 50
+    sent, st = replay_node(tmp_path, frames, "burst")
+    clean, st0 = replay_node(tmp_path, paper_frames, "clean")
+    mirror = NodeMirror().feed_all(m for _, m in frames)
+    assert_node_equals_mirror(sent, mirror)
+    # no genuine frame lost, nothing displaced: same accepted frames, same estimates
+    assert st["rx_accepted"] == st0["rx_accepted"]
+    n_depth = sum(1 for _, m in paper_frames if m.arbitration_id == DB.frame_id("Depth"))
+    assert st["rx_accepted"]["depth"] == n_depth
+    assert st["rx_accepted"]["force"] == len(paper_frames) - n_depth == st["steps"]
+    ev = st["events"]
+    assert ev["time_jump_dropped"] == rep.crafted_forward + rep.crafted_backward
+    assert ev["wrong_dlc"] + ev["bad_crc"] + ev["counter_invalid"] == rep.random_frames
+    assert ev["time_backwards"] == ev["stale"] == ev["time_resync"] == ev["counter_repeated"] == 0
+    assert st["frames_lost"] == 0
+    a, _, _ = node_outputs(DB, sent)
+    b, _, _ = node_outputs(DB, clean)
+    assert [e.key() for e in a] == [e.key() for e in b]
+
+
+@pytest.mark.parametrize("jump_s", [2.0, -1.0, 0.03, -0.03])
+def test_replay_real_clock_jump_recovers(tmp_path: Path, paper_frames: list,
+                                         jump_s: float) -> None:
+    """The sensor clock jumps at 2.0 s: the node resynchronises each stream on its next sample
+    (no sample lost, estimates fresh again within 50 ms of data) and equals the mirror."""
+    frames = clock_jump(paper_frames, DB, 2.0, jump_s)
+    sent, st = replay_node(tmp_path, frames, "jump")
+    mirror = NodeMirror().feed_all(m for _, m in frames)
+    assert_node_equals_mirror(sent, mirror)
+    n_force = sum(1 for _, m in frames if m.arbitration_id == DB.frame_id("Force"))
+    ev = st["events"]
+    assert st["rx_accepted"]["force"] == n_force
+    assert ev["time_resync"] == 2 and ev["time_jump_dropped"] == ev["time_backwards"] == 0
+    est, _, _ = node_outputs(DB, sent)
+    assert len(est) == n_force
+    # the forces from 50 ms after the jump on are fresh steps
+    t_force = [t for t, m in frames if m.arbitration_id == DB.frame_id("Force")]
+    late = [e for t, e in zip(t_force, est) if t >= 2.05]
+    assert late and not any(e.stale for e in late)
+    assert ev["stale"] <= 10

@@ -3,14 +3,22 @@
  *
  *   nte-node --iface vcan0 [--base-id 0x200] [--model 1|2] [--preset NAME]
  *            [--depth-timeout-ms MS] [--heartbeat-ms MS] [--params-per-step N]
- *            [--no-kernel-filter] [--ready FILE] [--stats FILE]
+ *            [--resync-gap-ms MS] [--no-kernel-filter] [--ready FILE] [--stats FILE]
+ *            [--record OUT.log] [--received IN.log]
+ *   nte-node --replay IN.log [--record OUT.log] [same options; --iface names the output]
  *
  * Runs the node loop (firmware/node) until SIGINT or SIGTERM, then prints its counters on
- * stderr, writes them as JSON to --stats FILE (also on SIGUSR1) and exits 0.
+ * stderr, writes them as JSON to --stats FILE (also on SIGUSR1) and exits 0.  With --replay the
+ * node reads its frames from a candump -L log instead of a CAN interface (the log's timestamps
+ * are its clock), writes what it sends to --record (candump -L; default stdout) and stops at the
+ * end of the log: deterministic, no CAN needed.  On an interface, --record and --received log
+ * every frame the node sends / receives (candump -L, port clock): exact bookkeeping on a shared
+ * bus, where other senders may use the node's ids.
  * Exit status: 0 clean stop, 2 bad arguments, 3 AF_CAN unavailable in this kernel,
  * 4 no such CAN interface, 1 other failure.
  */
 #include "nte_node.h"
+#include "nte_port_log.h"
 #include "nte_port_socketcan.h"
 #include "nte_presets.h"
 
@@ -47,7 +55,11 @@ typedef struct args_t {
     const char* preset;
     const char* ready;
     const char* stats;
+    const char* replay;
+    const char* record;
+    const char* received;
     unsigned long base_id;
+    unsigned long resync_gap_ms;
     int model;
     unsigned long timeout_ms;
     unsigned long heartbeat_ms;
@@ -60,10 +72,16 @@ static int usage(const char* err)
     fprintf(stderr,
             "usage: " PROG " --iface IFACE [--base-id 0x200] [--model 1|2] [--preset NAME]\n"
             "       [--depth-timeout-ms 50] [--heartbeat-ms 100] [--params-per-step 1]\n"
-            "       [--no-kernel-filter] [--ready FILE] [--stats FILE]\n"
+            "       [--resync-gap-ms 20] [--no-kernel-filter] [--ready FILE] [--stats FILE]\n"
+            "       [--record OUT.log] [--received IN.log]\n"
+            "       " PROG " --replay IN.log [--record OUT.log] [the options above]\n"
             "The needle-tissue force estimator as a CAN node (frames: firmware/can/nte.dbc).\n"
-            "Stops on SIGINT/SIGTERM; SIGUSR1 rewrites --stats. Exit status: 0 stopped, 2 bad\n"
-            "arguments, 3 no AF_CAN in this kernel, 4 no such CAN interface, 1 other error.\n");
+            "Stops on SIGINT/SIGTERM; SIGUSR1 rewrites --stats. --replay reads the frames of a\n"
+            "candump -L log (its timestamps are the clock) instead of an interface, writes the\n"
+            "frames sent to --record (candump -L, default stdout) and stops at its end. On an\n"
+            "interface, --record/--received log the frames the node sends/receives.\n"
+            "Exit status: 0 stopped, 2 bad arguments, 3 no AF_CAN in this kernel, 4 no such CAN\n"
+            "interface, 1 other error.\n");
     if (err != NULL) {
         fprintf(stderr, PROG ": error: %s\n", err);
     }
@@ -88,6 +106,7 @@ static int parse_args(int argc, char** argv, args_t* a)
     a->timeout_ms = 50u;
     a->heartbeat_ms = 100u;
     a->params_per_step = 1u;
+    a->resync_gap_ms = 20u;
     a->kernel_filter = 1;
     for (int i = 1; i < argc; i++) {
         const char* o = argv[i];
@@ -113,6 +132,12 @@ static int parse_args(int argc, char** argv, args_t* a)
             a->ready = v;
         } else if (strcmp(o, "--stats") == 0) {
             a->stats = v;
+        } else if (strcmp(o, "--replay") == 0) {
+            a->replay = v;
+        } else if (strcmp(o, "--record") == 0) {
+            a->record = v;
+        } else if (strcmp(o, "--received") == 0) {
+            a->received = v;
         } else if (strcmp(o, "--model") == 0) {
             if ((strcmp(v, "1") != 0) && (strcmp(v, "2") != 0)) {
                 return usage("argument --model: 1 or 2");
@@ -126,13 +151,18 @@ static int parse_args(int argc, char** argv, args_t* a)
             a->heartbeat_ms = u;
         } else if ((strcmp(o, "--params-per-step") == 0) && (parse_ulong(v, &u) == 0)) {
             a->params_per_step = u;
+        } else if ((strcmp(o, "--resync-gap-ms") == 0) && (parse_ulong(v, &u) == 0)) {
+            a->resync_gap_ms = u;
         } else {
             (void)snprintf(msg, sizeof msg, "bad argument: %s %s", o, v);
             return usage(msg);
         }
     }
-    if (a->iface == NULL) {
-        return usage("the following argument is required: --iface");
+    if ((a->iface == NULL) && (a->replay == NULL)) {
+        return usage("the following argument is required: --iface (or --replay)");
+    }
+    if ((a->received != NULL) && (a->replay != NULL)) {
+        return usage("argument --received: not with --replay (the input is the log)");
     }
     return 0;
 }
@@ -203,6 +233,115 @@ static void dump_stats(const char* path, const nte_node_t* n, const nte_port_soc
     }
 }
 
+/* A port that logs every frame passing through another one (--record, --received). */
+typedef struct tap_t {
+    nte_node_port_t inner;
+    FILE* sent;
+    FILE* received;
+} tap_t;
+
+static void tap_write(FILE* f, uint64_t t_us, const nte_node_frame_t* fr)
+{
+    if (fr->extended) {
+        fprintf(f, "(%llu.%06llu) can %08X#", (unsigned long long)(t_us / 1000000u),
+                (unsigned long long)(t_us % 1000000u), (unsigned)fr->id);
+    } else {
+        fprintf(f, "(%llu.%06llu) can %03X#", (unsigned long long)(t_us / 1000000u),
+                (unsigned long long)(t_us % 1000000u), (unsigned)fr->id);
+    }
+    if (fr->remote) {
+        fputc('R', f);
+    }
+    for (uint32_t i = 0u; (i < fr->len) && (i < 8u) && !fr->remote; i++) {
+        fprintf(f, "%02X", (unsigned)fr->data[i]);
+    }
+    fputc('\n', f);
+}
+
+static int tap_receive(void* ctx, nte_node_frame_t* frame)
+{
+    tap_t* t = (tap_t*)ctx;
+    const int r = t->inner.receive(t->inner.ctx, frame);
+    if ((r == 1) && (t->received != NULL)) {
+        tap_write(t->received, t->inner.now_us(t->inner.ctx), frame);
+    }
+    return r;
+}
+
+static int tap_send(void* ctx, const nte_node_frame_t* frame)
+{
+    tap_t* t = (tap_t*)ctx;
+    const int r = t->inner.send(t->inner.ctx, frame);
+    if ((r >= 0) && (t->sent != NULL)) {
+        tap_write(t->sent, t->inner.now_us(t->inner.ctx), frame);
+    }
+    return r;
+}
+
+static uint64_t tap_now(void* ctx)
+{
+    const tap_t* t = (const tap_t*)ctx;
+    return t->inner.now_us(t->inner.ctx);
+}
+
+static FILE* open_log(const char* flag, const char* path)
+{
+    FILE* f = fopen(path, "w");
+    if (f == NULL) {
+        fprintf(stderr, PROG ": error: argument %s: cannot write %s: %s\n", flag, path,
+                strerror(errno));
+    }
+    return f;
+}
+
+/* --replay: the node over log files, to the end of the input. */
+static int run_replay(const args_t* a, const nte_node_config_t* cfg, nte_node_t* node)
+{
+    static nte_port_socketcan_t none;
+    nte_port_log_t lp;
+    memset(&lp, 0, sizeof lp);
+    none.fd = -1;
+    lp.iface = (a->iface != NULL) ? a->iface : "vcan0";
+    lp.in = fopen(a->replay, "r");
+    if (lp.in == NULL) {
+        fprintf(stderr, PROG ": error: argument --replay: cannot read %s: %s\n", a->replay,
+                strerror(errno));
+        return EXIT_USAGE;
+    }
+    lp.out = stdout;
+    if (a->record != NULL) {
+        lp.out = fopen(a->record, "w");
+        if (lp.out == NULL) {
+            fprintf(stderr, PROG ": error: argument --record: cannot write %s: %s\n", a->record,
+                    strerror(errno));
+            (void)fclose(lp.in);
+            return EXIT_USAGE;
+        }
+    }
+    nte_node_port_t port = nte_port_log_port(&lp);
+    int status = 0;
+    if (nte_node_init(node, cfg, &port) != nte_node_ok) {
+        status = 1;
+    } else {
+        while (lp.eof == 0) {
+            (void)nte_node_poll(node);
+        }
+        dump_stats(a->stats, node, &none);
+    }
+    (void)fclose(lp.in);
+    if ((lp.out != stdout) && (fclose(lp.out) != 0)) {
+        fprintf(stderr, PROG ": error: cannot write %s: %s\n", a->record, strerror(errno));
+        status = 1;
+    } else if ((lp.out == stdout) && (fflush(stdout) != 0)) {
+        status = 1;
+    }
+    if (lp.lines_bad > 0u) {
+        fprintf(stderr, PROG ": %u line(s) of %s are not CAN frames: skipped\n",
+                (unsigned)lp.lines_bad, a->replay);
+    }
+    return status;
+}
+
 int main(int argc, char** argv)
 {
     static nte_node_t node;
@@ -224,6 +363,7 @@ int main(int argc, char** argv)
     cfg.depth_timeout_us = (uint32_t)((a.timeout_ms <= 3000u) ? a.timeout_ms * 1000u : 0u);
     cfg.heartbeat_period_us = (uint32_t)((a.heartbeat_ms <= 10000u) ? a.heartbeat_ms * 1000u : 0u);
     cfg.params_per_step = (uint32_t)((a.params_per_step <= 7u) ? a.params_per_step : 0u);
+    cfg.resync_gap_us = (uint32_t)((a.resync_gap_ms <= 3000u) ? a.resync_gap_ms * 1000u : 0u);
     if ((estimator_config(&cfg.estimator[0], 1, p) != 0) ||
         (estimator_config(&cfg.estimator[1], 2, p) != 0)) {
         return usage("preset: f1 must exceed -f2");
@@ -240,10 +380,13 @@ int main(int argc, char** argv)
             (void)snprintf(msg, sizeof msg,
                            "invalid node configuration (nte_node_err %d): base id <= 0x7ED, "
                            "depth timeout 1..3000 ms, heartbeat 1..10000 ms, params per step "
-                           "1..7",
+                           "1..7, resync gap 1..3000 ms",
                            (int)err);
             return usage(msg);
         }
+    }
+    if (a.replay != NULL) {
+        return run_replay(&a, &cfg, &node);
     }
     const int rc = nte_port_socketcan_open(&sock, a.iface, ids, a.kernel_filter ? 3u : 0u, msg,
                                            sizeof msg);
@@ -253,7 +396,16 @@ int main(int argc, char** argv)
                : (rc == nte_port_err_no_iface) ? EXIT_NO_IFACE
                                               : 1;
     }
-    nte_node_port_t port = nte_port_socketcan_port(&sock);
+    static tap_t tap;
+    tap.inner = nte_port_socketcan_port(&sock);
+    tap.sent = (a.record != NULL) ? open_log("--record", a.record) : NULL;
+    tap.received = (a.received != NULL) ? open_log("--received", a.received) : NULL;
+    if (((a.record != NULL) && (tap.sent == NULL)) ||
+        ((a.received != NULL) && (tap.received == NULL))) {
+        nte_port_socketcan_close(&sock);
+        return EXIT_USAGE;
+    }
+    nte_node_port_t port = {&tap, tap_receive, tap_send, tap_now};
     if (nte_node_init(&node, &cfg, &port) != nte_node_ok) {
         nte_port_socketcan_close(&sock);
         return 1;
@@ -300,5 +452,12 @@ int main(int argc, char** argv)
     dump_stats(a.stats, &node, &sock);
     write_stats(&node, &sock, stderr);
     nte_port_socketcan_close(&sock);
-    return 0;
+    int status = 0;
+    if ((tap.sent != NULL) && (fclose(tap.sent) != 0)) {
+        status = 1;
+    }
+    if ((tap.received != NULL) && (fclose(tap.received) != 0)) {
+        status = 1;
+    }
+    return status;
 }
