@@ -5,9 +5,6 @@ when the recorder logged it, the stage velocity (mm/s).  Readers are chosen by f
 :data:`READERS`: CSV (the tools' one reader: a spreadsheet export with a byte-order mark and
 quoted cells is fine) and candump logs (``.log``, ``candump -l``/``-L``) decoded with the
 project's DBC (firmware/can/nte.dbc through host_bench.dbc, end-to-end checks included).
-
-Values outside a physical range are refused (|force| > MAX_ABS_FORCE_N, |depth| > MAX_ABS_DEPTH_MM):
-a 1e300 N sample is a broken file, not a measurement.
 """
 from __future__ import annotations
 
@@ -22,11 +19,6 @@ from ..tools.csvio import CsvError, Units
 from ..tools.csvio import read_trial as read_csv_trial
 
 REQUIRED = ("t_s", "depth_mm", "force_n")
-#: the largest force (N) and depth (mm) a needle-insertion record can hold
-MAX_ABS_FORCE_N = 1000.0
-MAX_ABS_DEPTH_MM = 10000.0
-_LIMITS = {"force_n": MAX_ABS_FORCE_N, "depth_mm": MAX_ABS_DEPTH_MM,
-           "velocity_mm_s": 10000.0}
 OPTIONAL = ("velocity_mm_s",)
 
 
@@ -71,16 +63,6 @@ def read_csv(path: Path, units: Units | None = None) -> Trial:
         raise InputError(exc) from None
     if len(tr.t_s) < 2:
         raise InputError(path, None, None, "fewer than 2 data rows")
-    for name, lim in _LIMITS.items():
-        if name == "velocity_mm_s" and not tr.velocity_given:
-            continue
-        col = getattr(tr, name)
-        bad = np.flatnonzero(np.abs(col) > lim)
-        if len(bad):
-            k = int(bad[0])
-            line = tr.lines[k] if k < len(tr.lines) else None
-            raise InputError(path, line, name, f"{col[k]:g} is outside the physical range "
-                             f"(|{name}| <= {lim:g})")
     return Trial(path.stem, tr.t_s, tr.depth_mm, tr.force_n,
                  tr.velocity_mm_s if tr.velocity_given else None)
 
