@@ -7,7 +7,8 @@
  *           [--init-seed K] [--init-factor F] [--schedule all|rotate] [--precision P]
  *           --out EST.csv
  *
- * Exit status 0 on success, 2 on bad input (message "FILE:LINE: column 'NAME': reason").
+ * -h/--help lists every flag and its default.  Exit status 0 on success, 2 on bad input: one
+ * line on stderr ("FILE:LINE: column 'NAME': reason" or "argument --flag: why").
  */
 #include "csv_in.h"
 #include "nte.h"
@@ -46,16 +47,42 @@ typedef struct args_t {
     double factor;
 } args_t;
 
+/* A refusal: one line on stderr, exit status 2 (the Python tools' form). */
 static int usage(const char* msg)
 {
-    fprintf(stderr,
-            "usage: " PROG " FILE.csv --model 1|2 [--estimator bank|robust] [--preset NAME]\n"
-            "       [--profile default|paper] [--init-seed K] [--init-factor F]\n"
-            "       [--schedule all|rotate] [--precision " PRECISION "] --out EST.csv\n");
-    if (msg != NULL) {
-        fprintf(stderr, PROG ": error: %s\n", msg);
-    }
+    fprintf(stderr, PROG ": error: %s (see " PROG " --help)\n", msg);
     return EXIT_BAD_INPUT;
+}
+
+/* --help: every flag and its default, on stdout. */
+static void help(void)
+{
+    printf("usage: " PROG " FILE.csv --model 1|2 [--estimator bank|robust] [--preset NAME]\n"
+           "       [--profile default|paper] [--init-seed K] [--init-factor F]\n"
+           "       [--schedule all|rotate] [--precision " PRECISION "] --out EST.csv\n"
+           "\n"
+           "Run the estimator (C library, " PRECISION ") over a CSV of t_s, depth_mm, force_n\n"
+           "(velocity_mm_s optional, else central differences of depth) and write one row per\n"
+           "sample: t_s, force_hat_n, z, innovation_n, status, every identified parameter and\n"
+           "its sd (the robust estimator adds confidence). The C twin of nte-ref estimate.\n"
+           "\n"
+           "  FILE.csv               the insertion (no default)\n"
+           "  --model 1|2            force model (no default)\n"
+           "  --estimator bank|robust  (default: bank)\n"
+           "  --preset NAME          starting parameters (default: %s)\n"
+           "  --profile default|paper  tuning (default: default)\n"
+           "  --init-seed K          0: start at the preset; K > 0: factors drawn with seed K,\n"
+           "                         0..9223372036854775807 (default: 0)\n"
+           "  --init-factor F        spread of the starting factors, 1..100 (default: 5)\n"
+           "  --schedule all|rotate  filters per sample (default: all)\n"
+           "  --precision " PRECISION "    the only precision of this binary\n"
+           "                         (default: " PRECISION ")\n"
+           "  --out EST.csv          the estimates to write (no default)\n"
+           "  -h, --help             this help\n"
+           "\n"
+           "Exit status: 0 success, 2 bad input (one line on stderr naming the flag or\n"
+           "FILE:LINE: column 'NAME': reason).\n",
+           NTE_PRESET_DEFAULT);
 }
 
 static int parse_args(int argc, char** argv, args_t* a)
@@ -72,17 +99,25 @@ static int parse_args(int argc, char** argv, args_t* a)
     a->seed = 0;
     a->factor = 5.0;
     for (int i = 1; i < argc; i++) {
+        if ((strcmp(argv[i], "--help") == 0) || (strcmp(argv[i], "-h") == 0)) {
+            help();
+            exit(0);
+        }
+    }
+    for (int i = 1; i < argc; i++) {
         const char* opt = argv[i];
+        if ((opt[0] == '-') && (opt[1] != '-') && (opt[1] != '\0')) {
+            (void)snprintf(msg, sizeof msg, "unrecognized arguments: %s", opt);
+            return usage(msg);
+        }
         if (strncmp(opt, "--", 2) != 0) {
             if (a->csv != NULL) {
-                return usage("more than one input file");
+                (void)snprintf(msg, sizeof msg, "unrecognized arguments: %s (one input file)",
+                               opt);
+                return usage(msg);
             }
             a->csv = opt;
             continue;
-        }
-        if ((strcmp(opt, "--help") == 0) || (strcmp(opt, "-h") == 0)) {
-            (void)usage(NULL);
-            exit(0);
         }
         const char* eq = strchr(opt, '=');
         char name[64];
@@ -138,16 +173,22 @@ static int parse_args(int argc, char** argv, args_t* a)
         } else if (strcmp(name, "--init-seed") == 0) {
             errno = 0;
             a->seed = strtoll(val, &end, 10);
-            if ((end == val) || (*end != '\0') || (errno != 0)) {
-                (void)snprintf(msg, sizeof msg, "argument --init-seed: invalid int value: '%s'",
-                               val);
+            if ((end == val) || (*end != '\0') || (errno != 0) || (a->seed < 0)) {
+                (void)snprintf(msg, sizeof msg,
+                               "argument --init-seed: must be >= 0 and <= 9223372036854775807 "
+                               "(got %s)", val);
                 return usage(msg);
             }
         } else if (strcmp(name, "--init-factor") == 0) {
             a->factor = strtod(val, &end);
             if ((end == val) || (*end != '\0')) {
+                (void)snprintf(msg, sizeof msg, "argument --init-factor: not a number: '%s'",
+                               val);
+                return usage(msg);
+            }
+            if (!((a->factor >= 1.0) && (a->factor <= 100.0))) { /* also NaN */
                 (void)snprintf(msg, sizeof msg,
-                               "argument --init-factor: invalid float value: '%s'", val);
+                               "argument --init-factor: must be >= 1 and <= 100 (got %s)", val);
                 return usage(msg);
             }
         } else if (strcmp(name, "--out") == 0) {

@@ -184,3 +184,56 @@ def test_help_lists_every_flag_and_its_default(cmd, capsys):
         else:
             assert act.required or act.const is not None or "default" in (act.help or ""), \
                 act.dest
+
+
+# -- the C programs: --help with every flag and default, one-line refusals, exit status 2 ----
+
+C_BIN = Path(__file__).resolve().parents[2] / "build" / "host" / "bin"
+
+
+def _c(name: str, *args: str) -> subprocess.CompletedProcess:
+    exe = C_BIN / name
+    if not exe.exists():
+        pytest.skip(f"{exe} missing: build the firmware first (make build)")
+    return subprocess.run([str(exe), *args], capture_output=True, text=True, timeout=60)
+
+
+@pytest.mark.parametrize("prog", ["nte-run", "nte-run-double"])
+def test_c_run_help_and_refusals(prog, tmp_path):
+    for flag in ("-h", "--help"):
+        r = _c(prog, flag)
+        assert r.returncode == 0 and r.stderr == ""
+        for text in ("--model 1|2", "--estimator bank|robust  (default: bank)",
+                     "(default: paper-10mms)", "--profile default|paper  tuning (default: "
+                     "default)", "(default: 0)", "1..100 (default: 5)", "(default: all)",
+                     "--out EST.csv", "-h, --help"):
+            assert text in r.stdout, (flag, text)
+    out = tmp_path / "o.csv"
+    cases = [
+        (["x.csv", "-x"], "unrecognized arguments: -x"),
+        (["x.csv", "--model", "3", "--out", str(out)], "argument --model: invalid choice: '3'"),
+        (["x.csv", "--model", "2", "--out", str(out), "--init-factor", "0.5"],
+         "argument --init-factor: must be >= 1 and <= 100 (got 0.5)"),
+        (["x.csv", "--model", "2", "--out", str(out), "--init-factor", "nan"],
+         "argument --init-factor: must be >= 1 and <= 100 (got nan)"),
+        (["x.csv", "--model", "2", "--out", str(out), "--init-seed", "-1"],
+         "argument --init-seed: must be >= 0 and <= 9223372036854775807 (got -1)"),
+        (["x.csv", "--model", "2"], "the following arguments are required: --out"),
+        (["a.csv", "b.csv"], "unrecognized arguments: b.csv (one input file)"),
+    ]
+    for argv, message in cases:
+        r = _c(prog, *argv)
+        assert r.returncode == 2, (argv, r.stderr)
+        assert r.stderr.splitlines() == [f"{prog}: error: {message} (see {prog} --help)"]
+        assert r.stdout == "" and not out.exists()
+
+
+@pytest.mark.parametrize("prog", ["nte-bench-c", "nte-bench-c-double"])
+def test_c_bench_help_and_refusal(prog):
+    r = _c(prog, "--help")
+    assert r.returncode == 0 and r.stdout.startswith(f"usage: {prog} [-h]")
+    assert "No flags" in r.stdout
+    r = _c(prog, "--samples", "5")
+    assert r.returncode == 2 and r.stdout == ""
+    assert r.stderr.splitlines() == [f"{prog}: error: unrecognized arguments: --samples "
+                                     f"(see {prog} --help)"]
