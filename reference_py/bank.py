@@ -41,6 +41,9 @@ STATUS_OUT_OF_TISSUE = 1 << 5   # depth <= 0: z held at 0
 STATUS_CLIPPED = 1 << 6         # a scaled parameter hit |u| = u_max
 STATUS_FLOORED = 1 << 7         # a variance was raised to its floor
 STATUS_SIGN_UNCERTAIN = 1 << 8  # R inflated: the smooth sign may disagree with the motion
+# bits 9 and 10 are the robust estimator's (robust.py)
+STATUS_DIVERGED = 1 << 11       # a predicted force or z left its range (_in_range): filter
+#                                 reset, z at its steady state; never published out of range
 STATUS_NAMES = ("init", "rejected", "gated", "filter_reset", "gap", "out_of_tissue", "clipped",
                 "floored", "sign_uncertain")
 
@@ -193,37 +196,59 @@ class FilterBank:
                 pred = rk3_step(R, self.th, z_prev, l_prev, l, dt, cfg.substeps, names)
                 active = run
             d = depth_terms(R, self.th, l)
-            x, P_pred = self._predict(i, names, pred, d, gap | surface, surface)
-            innovation, hrow, r_eff, st = self._measure(names, d, x[0], s, v, y, active)
+            x, P_pred, z_ss = self._predict(i, names, pred, d, gap | surface, surface)
+            innovation, hrow, r_eff, in_range, st = self._measure(names, d, x[0], s, v, y,
+                                                                  active)
             status |= st
             z_i, nis, st = self._update_and_guard(i, names, x, P_pred, hrow, innovation, r_eff,
-                                                  active, run)
+                                                  active, run, in_range, z_ss)
             status |= st
             z_post = np.where(active, z_i, z_post)
             if rotate or i == 0:
-                innovation0 = np.where(active, innovation, innovation0)
-                nis0 = np.where(active, nis, nis0)
+                # a diverged prior's innovation is not published (it may not be finite)
+                innovation0 = np.where(active, np.where(in_range, innovation, R.c(0.0)),
+                                       innovation0)
+                # an overflowed NIS (tiny R) is published saturated at COST_HUGE
+                huge = R.c(1.0e30)
+                nis = np.where(nis <= huge, nis, huge)
+                nis0 = np.where(active, np.where(in_range, nis, R.c(0.0)), nis0)
 
         z_post = np.where(surface & run, R.c(0.0), z_post)
         self.z = np.where(run, z_post, np.where(first, R.c(0.0), self.z))
         # posterior output with the final shared model
         d = depth_terms(R, self.th, l)
         o = output(self.th, d, self.z, s)
-        innov = np.where(run, innovation0, y - o.h)
+        force = o.h
+        bad = (run | first) & ~self._in_range(d, self.z, force)
+        if np.any(bad):
+            # never publish a force or z outside their range: z to its steady state, and if the
+            # parameters still put the force out of range, the force saturated (NaN: 0)
+            z_ss = steady_state_z(R, self.th, d)
+            z_fix = np.where(np.isfinite(z_ss), z_ss, R.c(0.0))
+            self.z = np.where(bad, z_fix, self.z)
+            o_fix = output(self.th, d, z_fix, s)
+            fmax = c.force_max
+            h = o_fix.h
+            h = np.where(np.abs(h) <= fmax, h,
+                         np.where(h > fmax, fmax, np.where(h < -fmax, -fmax, R.c(0.0))))
+            force = np.where(bad, h, force)
+            status |= np.where(bad, np.uint32(STATUS_DIVERGED), np.uint32(0))
+        innov = np.where(run, innovation0, y - force)
         nis = np.where(run, nis0, R.c(0.0))
         params, sds = self.parameter_estimates()
-        return StepOutput(o.h, self.z, innov, nis, status, params, sds)
+        return StepOutput(force, self.z, innov, nis, status, params, sds)
 
     def _predict(self, i: int, names: tuple[str, ...], pred: Rk3Result, d: DepthTerms,
-                 restart: Array, surface: Array) -> tuple[list[Array], Matrix]:
-        """Filter i's prior state (z restarted at the surface or after a gap) and its
-        predicted covariance F P F^T + Q."""
+                 restart: Array, surface: Array) -> tuple[list[Array], Matrix, Array]:
+        """Filter i's prior state (z restarted at the surface or after a gap), its predicted
+        covariance F P F^T + Q, and z's steady state (0 out of tissue or where not finite)."""
         R, c = self.R, self.c
         B = self.batch
         zero = R.c(0.0)
         # out of tissue z is 0; after a gap it has relaxed to its steady state: either way
         # the prior z carries no memory of z(k-1)
-        z_restart = np.where(surface, zero, steady_state_z(R, self.th, d))
+        z_ss = steady_state_z(R, self.th, d)
+        z_restart = np.where(surface, zero, z_ss)
         zp = np.where(restart, z_restart, pred.z)
         F: Matrix = [[np.where(restart, zero, pred.dz_dz0)] +
                      [np.where(restart, zero, pred.dz_du[nm]) for nm in names]]
@@ -233,11 +258,12 @@ class FilterBank:
         q = [c.q_z] + [c.q_u[nm] for nm in names]
         P_pred = predict_covariance(self.P[i], F, q)
         x = [zp] + [self.u[IDX[nm]] for nm in names]
-        return x, P_pred
+        return x, P_pred, np.where(np.isfinite(z_ss), z_ss, zero)
 
     def _measure(self, names: tuple[str, ...], d: DepthTerms, zp: Array, s: Array, v: Array,
-                 y: Array, active: Array) -> tuple[Array, list[Array], Array, Array]:
-        """The predicted force's innovation, its Jacobian row and the effective R."""
+                 y: Array, active: Array) -> tuple[Array, list[Array], Array, Array, Array]:
+        """The predicted force's innovation, its Jacobian row, the effective R, and whether
+        the prior z and its force are within their physical range (_in_range)."""
         R, c, cfg = self.R, self.c, self.cfg
         zero = R.c(0.0)
         status = np.zeros(self.batch, dtype=np.uint32)
@@ -253,11 +279,19 @@ class FilterBank:
             status |= np.where(active & moving & (w * w > c.r), np.uint32(STATUS_SIGN_UNCERTAIN),
                                np.uint32(0))
         innovation = y - o.h
-        return innovation, hrow, r_eff, status
+        return innovation, hrow, r_eff, self._in_range(d, zp, o.h), status
+
+    def _in_range(self, d: DepthTerms, z: Array, h: Array) -> Array:
+        """The physical range of a predicted force h = sigma0 z l + ... and of z: both |h| and
+        the elastic part |sigma0 z l| within force_max_n (|z| <= force_max_n / (sigma0 l)).
+        NaN is out of range."""
+        fmax = self.c.force_max
+        return (np.abs(h) <= fmax) & (np.abs((self.th.sigma0 * z) * d.l) <= fmax)
 
     def _update_and_guard(self, i: int, names: tuple[str, ...], x: list[Array], P_pred: Matrix,
                           hrow: list[Array], innovation: Array, r_eff: Array, active: Array,
-                          run: Array) -> tuple[Array, Array, Array]:
+                          run: Array, in_range: Array, z_ss: Array
+                          ) -> tuple[Array, Array, Array]:
         """The gated Joseph update (active filters), the guard, and the commit of filter i's
         covariance and parameters to the shared model.  Returns its posterior z, the NIS and
         the status bits."""
@@ -277,8 +311,9 @@ class FilterBank:
                 for a in range(len(x))]
         # a prior that is not positive definite (or a non-positive innovation variance)
         # can still yield a plausible-looking posterior: judge the filter on both
-        prior_ok = positive_definite(R, P_pred) & (upd.s > zero)
-        newx, newP, st = self._guard(newx, newP, x, prior_ok)
+        # and a prior whose force left its physical range has diverged
+        prior_ok = positive_definite(R, P_pred) & (upd.s > zero) & in_range
+        newx, newP, st = self._guard(newx, newP, x, prior_ok, ~in_range, z_ss)
         status |= np.where(run, st, np.uint32(0))
         # commit: every filter of a running sample keeps its propagated covariance
         self.P[i] = [[np.where(run, newP[a][b], self.P[i][a][b]) for b in range(len(x))]
@@ -288,11 +323,12 @@ class FilterBank:
         self.th = self.scaled.refresh(self.th, self.u, names)
         return newx[0], upd.nis, status
 
-    def _guard(self, x: list[Array], P: Matrix, x_prior: list[Array], prior_ok: Array
-               ) -> tuple[list[Array], Matrix, Array]:
+    def _guard(self, x: list[Array], P: Matrix, x_prior: list[Array], prior_ok: Array,
+               diverged: Array, z_ss: Array) -> tuple[list[Array], Matrix, Array]:
         """Clip |u|, floor variances, and reset the filter when P or x went bad.
 
-        Reset: P back to its initial value, the state back to the prior (0 where not finite).
+        Reset: P back to its initial value, the state back to the prior (0 where not finite);
+        z of a diverged filter (its predicted force out of range) to its steady state z_ss.
         """
         R, c = self.R, self.c
         n = len(x)
@@ -312,8 +348,10 @@ class FilterBank:
         P0 = self._p0(n)
         x = [np.where(ok, x[a], np.where(np.isfinite(x_prior[a]), x_prior[a], R.c(0.0)))
              for a in range(n)]
+        x[0] = np.where(diverged, z_ss, x[0])
         P = [[np.where(ok, P[a][b], P0[a][b]) for b in range(n)] for a in range(n)]
         status |= np.where(ok, np.uint32(0), np.uint32(STATUS_FILTER_RESET))
+        status |= np.where(diverged, np.uint32(STATUS_DIVERGED), np.uint32(0))
         return x, P, status
 
     # ------------------------------------------------------------------------------------

@@ -161,6 +161,31 @@ def state_rate_du(th: Theta, d: DepthTerms, z: Array, name: str) -> Array | None
     raise ValueError(name)
 
 
+def decay_du(th: Theta, d: DepthTerms, name: str) -> tuple[Array, Array] | None:
+    """The exponential step's partials (JACOBIANS.md §5b): d lambda/d u_name and d zq/d u_name
+    for the decay rate lambda = l b and the quasi-steady state zq = beta / b, or None when
+    neither depends on u_name (sigma1, sigma2)."""
+    lam = d.l * d.b
+    zq = th.beta / d.b
+    if name in ("sigma1", "sigma2"):
+        return None
+    if name == "sigma0":
+        return lam, -zq
+    if name == "beta":
+        return lam - lam, zq
+    if name == "f1":
+        dg = th.ex
+    elif name == "f2":
+        dg = d.e * th.f2 + th.mkf2
+    elif name == "alpha":
+        dg = d.dg_dalpha * th.alpha
+    else:
+        raise ValueError(name)
+    # every other parameter acts through g:  d lambda = -lambda dg/g,  d zq = zq dg/g
+    G = dg * d.inv_g
+    return -(lam * G), zq * G
+
+
 # ------------------------------------------------------------------------------------------
 # Output (measurement) equation
 # ------------------------------------------------------------------------------------------

@@ -1,10 +1,20 @@
-"""One sample of the state equation by Kutta's third-order Runge-Kutta method, with sensitivities.
+"""One sample of the state equation, stable at every rate, with sensitivities.
 
-Kutta's classic RK3 (Butcher tableau c = (0, 1/2, 1), a21 = 1/2, a31 = -1, a32 = 2,
-b = (1/6, 4/6, 1/6)) on ``substeps`` equal sub-steps of the sample interval.  Depth is
-interpolated linearly between the two samples.  Alongside z the step carries the forward
-sensitivities dz/dz0 and dz/du_j (the exact derivative of the *discrete* map, obtained by
-differentiating every stage; JACOBIANS.md §3), which are the transition Jacobian the EKF needs.
+The state equation dz/dt = l beta - lambda z, lambda = l b = l sigma0 / g(l), is linear in z.
+Each of ``substeps`` equal sub-steps h of the sample interval (depth interpolated linearly
+between the two samples) takes one of two steps, chosen from the decay rates lambda at the
+sub-step's start, middle and end depths (terms the step computes anyway):
+
+* h * max(lambda) <= EXP_BOUND (1): Kutta's classic RK3 (Butcher tableau c = (0, 1/2, 1),
+  a21 = 1/2, a31 = -1, a32 = 2, b = (1/6, 4/6, 1/6)), third order, accurate and monotone
+  there (its stability interval on the negative axis ends at h lambda = 2.51);
+* otherwise the exponential midpoint step, exact for coefficients frozen at the mid depth:
+  z1 = zq + E (z0 - zq), E = exp(-h lambda_m), zq = beta / b_m (the quasi-steady state);
+  second order, unconditionally stable (|E| < 1), monotone.
+
+Alongside z the step carries the forward sensitivities dz/dz0 and dz/du_j (the exact derivative
+of the *discrete* map, obtained by differentiating every stage; JACOBIANS.md §5, §5b), which
+are the transition Jacobian the EKF needs.
 """
 from __future__ import annotations
 
@@ -13,7 +23,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from .fmath import Array, Real
-from .model import Theta, clamp_depth, depth_terms, state_rate, state_rate_du, state_rate_dz
+from .model import (Theta, clamp_depth, decay_du, depth_terms, state_rate, state_rate_du,
+                    state_rate_dz)
+
+#: a sub-step whose h * lambda exceeds this takes the exponential step (see above)
+EXP_BOUND = 1.0
 
 
 @dataclass
@@ -35,6 +49,8 @@ def rk3_step(R: Real, th: Theta, z: Array, l_a: Array, l_b: Array, dt: Array, su
     h6 = h / R.c(6.0)
     twoh = h * R.c(2.0)
     four = R.c(4.0)
+    one = R.c(1.0)
+    bound = R.c(EXP_BOUND)
     dl = l_b - l_a
     s_z = np.ones_like(z)  # dz/dz0
     s_u = {p: np.zeros_like(z) for p in params}
@@ -77,6 +93,30 @@ def rk3_step(R: Real, th: Theta, z: Array, l_a: Array, l_b: Array, dt: Array, su
                 q3 = q3 + r3
             new_s_u[p] = s + h6 * ((q1 + four * q2) + q3)
 
-        z = z + h6 * ((k1 + four * k2) + k3)
+        z_rk = z + h6 * ((k1 + four * k2) + k3)
+
+        # the largest decay rate -fz of the sub-step decides (NaN compares false: RK3)
+        lo = np.where(fzm < fz0, fzm, fz0)
+        lo = np.where(fz1 < lo, fz1, lo)
+        stiff = (h * (-lo)) > bound
+        if np.any(stiff):
+            # exponential midpoint: z1 = zq + E (z0 - zq), exact for frozen mid-depth terms
+            lam = -fzm
+            E = R.exp(-(h * lam))
+            zq = th.beta / dm.b
+            dz0 = z - zq
+            z_ex = zq + E * dz0
+            new_s_z = np.where(stiff, E * s_z, new_s_z)
+            one_e = one - E
+            for p in params:
+                part = decay_du(th, dm, p)
+                if part is None:
+                    s_ex = E * s_u[p]
+                else:
+                    lam_u, zq_u = part
+                    s_ex = (E * s_u[p] - (dz0 * E) * (h * lam_u)) + one_e * zq_u
+                new_s_u[p] = np.where(stiff, s_ex, new_s_u[p])
+            z_rk = np.where(stiff, z_ex, z_rk)
+        z = z_rk
         s_z, s_u = new_s_z, new_s_u
     return Rk3Result(z, s_z, s_u)

@@ -206,6 +206,16 @@ typedef enum nte_err_t {
                                               (confidence >= converged_confidence) and moved
                                               no parameter by more than converged_change
                                               (relative) since the previous one */
+/* Bank and robust estimator. */
+#define NTE_STATUS_DIVERGED (1U << 11U) /**< a predicted force h (N) or the dimensionless z
+                                             left its physical range: |h| > force_max_n or
+                                             |sigma0 z l| > force_max_n (N; l in mm).  That
+                                             filter was reset (P to P0, z to its steady state
+                                             beta g / sigma0), or, for the published output,
+                                             z was set to its steady state and the force
+                                             saturated at +-force_max_n (NaN: 0).  A
+                                             published force_hat_n never leaves
+                                             +-force_max_n. */
 
 /* Causes of a rejected sample (same values as reference_py/bank.py REJECT_*). */
 #define NTE_REJECT_NONFINITE 0 /**< depth, velocity or force NaN or infinite */
@@ -220,6 +230,8 @@ typedef struct nte_counters_t {
     uint32_t gated;                        /**< filter updates skipped by the innovation gate */
     uint32_t filter_resets;                /**< filter resets (covariance lost definiteness) */
     uint32_t gaps;                         /**< samples after a gap longer than dt_max_s */
+    uint32_t diverged;                     /**< NTE_STATUS_DIVERGED events: filters and
+                                                    outputs reset out of their range */
 } nte_counters_t;
 
 /* ---------------------------------------------------------------------------------------- */
@@ -287,7 +299,8 @@ typedef struct nte_config_t {
     nte_real_t depth_min_mm;    /**< [-1] accepted depth range, mm, finite, min <= max */
     nte_real_t depth_max_mm;    /**< [500] > 0 */
     nte_real_t speed_max_mm_s;  /**< [500] accepted |velocity|, mm/s, > 0 */
-    nte_real_t force_max_n;     /**< [50] accepted |force|, N, > 0 */
+    nte_real_t force_max_n;     /**< [50] accepted |force| and the physical range of every
+                                     predicted and published force, N, > 0 */
     /** [preset paper-10mms] Nominal (starting) physical values, nte_param_id_t order,
      *  finite.  Model II keeps f2 and alpha fixed at theirs; Model I ignores nominal beta and
      *  uses beta0. */

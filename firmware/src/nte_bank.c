@@ -119,12 +119,14 @@ void nte_bank_start(nte_t* self)
     self->counters.gated = 0U;
     self->counters.filter_resets = 0U;
     self->counters.gaps = 0U;
+    self->counters.diverged = 0U;
 }
 
 /* Clip |u|, floor variances, reset the filter when its prior, P or x went bad (bank._guard):
  * P back to its initial value, the state back to the prior (0 where not finite). */
 static uint32_t guard(nte_t* self, const size_t n, nte_real_t* x, nte_mat3_t P,
-                      const nte_real_t* x_prior, const bool prior_ok)
+                      const nte_real_t* x_prior, const bool prior_ok, const bool diverged,
+                      const nte_real_t z_ss)
 {
     const nte_real_t umax = self->cfg.u_max;
     uint32_t status = 0U;
@@ -155,7 +157,22 @@ static uint32_t guard(nte_t* self, const size_t n, nte_real_t* x, nte_mat3_t P,
         status |= NTE_STATUS_FILTER_RESET;
         self->counters.filter_resets++;
     }
+    if (diverged) {
+        x[0] = z_ss;
+        status |= NTE_STATUS_DIVERGED;
+        self->counters.diverged++;
+    }
     return status;
+}
+
+/* bank._in_range: the physical range of a predicted force h = sigma0 z l + ... and of z: both
+ * |h| and the elastic part |sigma0 z l| within force_max_n (|z| <= force_max_n / (sigma0 l)).
+ * NaN is out of range. */
+static bool in_range(const nte_t* self, const nte_depth_terms_t* d, const nte_real_t z,
+                     const nte_real_t h)
+{
+    const nte_real_t fmax = self->cfg.force_max_n;
+    return (nte_abs(h) <= fmax) && (nte_abs((self->th.v[nte_param_sigma0] * z) * d->l) <= fmax);
 }
 
 /* One filter of the bank at a running sample (one pass of bank._advance's loop). */
@@ -188,6 +205,7 @@ typedef struct filter_work_t {
     nte_real_t h[NTE_EKF_N_MAX]; /* measurement Jacobian at the prior */
     nte_real_t innovation;
     nte_real_t r_eff;
+    bool in_range;              /* the prior z and its force within their range (in_range) */
 } filter_work_t;
 
 /* bank._predict: the prior state (z restarted at the surface or after a gap) and the predicted
@@ -245,13 +263,14 @@ static uint32_t measure(const nte_t* self, const step_ctx_t* c, const nte_depth_
         }
     }
     w->innovation = c->y - o.h;
+    w->in_range = in_range(self, d, w->x[0], o.h);
     return status;
 }
 
 /* bank._update_and_guard: the gated Joseph update (active filters only), the guard, and the
  * commit of the filter's covariance and parameters to the shared model. */
-static uint32_t update_and_guard(nte_t* self, const size_t i, filter_work_t* w,
-                                 filter_out_t* fo)
+static uint32_t update_and_guard(nte_t* self, const size_t i, const nte_depth_terms_t* d,
+                                 filter_work_t* w, filter_out_t* fo)
 {
     const size_t n = w->n;
     const size_t na = n - 1U;
@@ -276,13 +295,23 @@ static uint32_t update_and_guard(nte_t* self, const size_t i, filter_work_t* w,
             self->gated_run[i]++;
             self->counters.gated++;
         }
-        fo->innovation = w->innovation;
-        fo->nis = upd.nis;
+        /* a diverged prior's innovation is not published (it may not be finite) */
+        fo->innovation = w->in_range ? w->innovation : NTE_C(0.0);
+        /* an overflowed NIS (tiny R) is published saturated at COST_HUGE */
+        const nte_real_t nis = (upd.nis <= NTE_K_ROB_COST_HUGE) ? upd.nis : NTE_K_ROB_COST_HUGE;
+        fo->nis = w->in_range ? nis : NTE_C(0.0);
     }
     /* a prior that is not positive definite (or a non-positive innovation variance) can still
      * yield a plausible-looking posterior: judge the filter on both */
-    const bool prior_ok = nte_ekf_positive_definite(n, w->P) && (upd.s > NTE_C(0.0));
-    status |= guard(self, n, xn, Pn, w->x, prior_ok);
+    /* and a prior whose force left its physical range has diverged: z to its steady state */
+    const bool prior_ok =
+        nte_ekf_positive_definite(n, w->P) && (upd.s > NTE_C(0.0)) && w->in_range;
+    nte_real_t z_ss = NTE_C(0.0);
+    if (!w->in_range) {
+        z_ss = nte_model_steady_state_z(&self->th, d);
+        z_ss = nte_isfinite(z_ss) ? z_ss : NTE_C(0.0);
+    }
+    status |= guard(self, n, xn, Pn, w->x, prior_ok, !w->in_range, z_ss);
     for (size_t a = 0U; a < n; a++) {
         for (size_t b = 0U; b < n; b++) {
             self->P[i][a][b] = Pn[a][b];
@@ -322,7 +351,7 @@ static uint32_t run_filter(nte_t* self, const step_ctx_t* c, const size_t i,
     nte_model_depth_terms(&d, &self->th, c->l);
     predict(self, c, i, pred, &d, &w);
     uint32_t status = measure(self, c, &d, fo->active, &w);
-    status |= update_and_guard(self, i, &w, fo);
+    status |= update_and_guard(self, i, &d, &w, fo);
     return status;
 }
 
@@ -377,9 +406,24 @@ void nte_bank_advance(nte_t* self, const bool first, const nte_real_t dt, const 
     nte_output_terms_t o;
     nte_model_depth_terms(&d, &self->th, c.l);
     nte_model_output(&o, &self->th, &d, self->z, c.s);
-    out->force_hat_n = o.h;
+    nte_real_t force = o.h;
+    if (!in_range(self, &d, self->z, force)) {
+        /* never publish a force or z outside their range: z to its steady state, and if the
+         * parameters still put the force out of range, the force saturated (NaN: 0) */
+        const nte_real_t z_ss = nte_model_steady_state_z(&self->th, &d);
+        self->z = nte_isfinite(z_ss) ? z_ss : NTE_C(0.0);
+        nte_model_output(&o, &self->th, &d, self->z, c.s);
+        const nte_real_t fmax = self->cfg.force_max_n;
+        force = o.h;
+        if (!(nte_abs(force) <= fmax)) {
+            force = (force > fmax) ? fmax : ((force < -fmax) ? -fmax : NTE_C(0.0));
+        }
+        status |= NTE_STATUS_DIVERGED;
+        self->counters.diverged++;
+    }
+    out->force_hat_n = force;
     out->z = self->z;
-    out->innovation_n = first ? (y - o.h) : innovation0;
+    out->innovation_n = first ? (y - force) : innovation0;
     out->nis = first ? NTE_C(0.0) : nis0;
     out->status = status;
 }

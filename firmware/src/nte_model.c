@@ -162,6 +162,7 @@ void nte_model_rk3(nte_rk3_result_t* res, const nte_theta_t* th, nte_real_t z,
     const nte_real_t h6 = h / NTE_C(6.0);
     const nte_real_t twoh = h * NTE_C(2.0);
     const nte_real_t four = NTE_C(4.0);
+    const nte_real_t bound = NTE_K_EXP_STEP_BOUND;
     const nte_real_t dl = l_b - l_a;
     nte_real_t s_z = NTE_C(1.0);
     nte_real_t s_u[NTE_PARAM_COUNT] = {NTE_C(0.0)};
@@ -178,6 +179,30 @@ void nte_model_rk3(nte_rk3_result_t* res, const nte_theta_t* th, nte_real_t z,
         const nte_real_t fz0 = nte_model_rate_dz(&d0);
         const nte_real_t fzm = nte_model_rate_dz(&dm);
         const nte_real_t fz1 = nte_model_rate_dz(&d1);
+
+        /* the largest decay rate -fz of the sub-step chooses the step (NaN compares false) */
+        nte_real_t lo = (fzm < fz0) ? fzm : fz0;
+        lo = (fz1 < lo) ? fz1 : lo;
+        if ((h * (-lo)) > bound) {
+            /* exponential midpoint: z1 = zq + E (z0 - zq), exact for frozen mid-depth terms */
+            const nte_real_t lam = -fzm;
+            const nte_real_t E = nte_exp(-(h * lam));
+            const nte_real_t zq = th->v[nte_param_beta] / dm.b;
+            const nte_real_t dz0 = z - zq;
+            const nte_real_t one_e = NTE_C(1.0) - E;
+            s_z = E * s_z;
+            for (size_t p = 0U; (p < count) && (p < (size_t)NTE_PARAM_COUNT); p++) {
+                nte_real_t lam_u = NTE_C(0.0);
+                nte_real_t zq_u = NTE_C(0.0);
+                if (nte_model_decay_du(th, &dm, ids[p], &lam_u, &zq_u)) {
+                    s_u[p] = ((E * s_u[p]) - ((dz0 * E) * (h * lam_u))) + (one_e * zq_u);
+                } else {
+                    s_u[p] = E * s_u[p];
+                }
+            }
+            z = zq + (E * dz0);
+            continue;
+        }
 
         const nte_real_t k1 = nte_model_rate(th, &d0, z);
         const nte_real_t z2 = z + (h2 * k1);
@@ -218,4 +243,38 @@ void nte_model_rk3(nte_rk3_result_t* res, const nte_theta_t* th, nte_real_t z,
     for (size_t p = 0U; (p < count) && (p < (size_t)NTE_PARAM_COUNT); p++) {
         res->dz_du[ids[p]] = s_u[p];
     }
+}
+
+bool nte_model_decay_du(const nte_theta_t* th, const nte_depth_terms_t* d, const uint8_t id,
+                        nte_real_t* lam_u, nte_real_t* zq_u)
+{
+    const nte_real_t lam = d->l * d->b;
+    const nte_real_t zq = th->v[nte_param_beta] / d->b;
+    nte_real_t dg;
+    switch (id) {
+    case nte_param_sigma0:
+        *lam_u = lam;
+        *zq_u = -zq;
+        return true;
+    case nte_param_beta:
+        *lam_u = lam - lam;
+        *zq_u = zq;
+        return true;
+    case nte_param_f1:
+        dg = th->ex;
+        break;
+    case nte_param_f2:
+        dg = (d->e * th->v[nte_param_f2]) + th->mkf2;
+        break;
+    case nte_param_alpha:
+        dg = d->dg_dalpha * th->v[nte_param_alpha];
+        break;
+    default:
+        return false; /* sigma1, sigma2 */
+    }
+    /* every other parameter acts through g: d lambda = -lambda dg/g, d zq = zq dg/g */
+    const nte_real_t G = dg * d->inv_g;
+    *lam_u = -(lam * G);
+    *zq_u = zq * G;
+    return true;
 }

@@ -58,7 +58,13 @@ nte_real_t nte_model_output_du(const nte_theta_t* th, const nte_depth_terms_t* d
 nte_real_t nte_model_steady_state_z(const nte_theta_t* th, const nte_depth_terms_t* d);
 nte_real_t nte_model_smooth_sign(nte_real_t v, nte_real_t eps);
 
-/** One sample of Kutta's RK3 on `substeps` sub-steps from depth l_a to l_b over dt seconds,
+/** The exponential step's partials d lambda/du_id and d zq/du_id (decay rate lambda = l b,
+ *  quasi-steady state zq = beta / b; model.py decay_du); false for sigma1, sigma2. */
+bool nte_model_decay_du(const nte_theta_t* th, const nte_depth_terms_t* d, uint8_t id,
+                        nte_real_t* lam_u, nte_real_t* zq_u);
+
+/** One sample on `substeps` sub-steps, each Kutta's RK3 where h max(lambda) <= 1, else the
+ *  exponential midpoint step, from depth l_a to l_b over dt seconds,
  *  with dz/dz0 and dz/du_id for every id in ids[0..count) (rk3.py rk3_step). */
 void nte_model_rk3(nte_rk3_result_t* res, const nte_theta_t* th, nte_real_t z, nte_real_t l_a,
                    nte_real_t l_b, nte_real_t dt, int32_t substeps, const uint8_t* ids,

@@ -21,7 +21,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
-from reference_py import config, params, robust  # noqa: E402
+from reference_py import config, params, rk3, robust  # noqa: E402
 from reference_py.fmath import F32, F64  # noqa: E402
 
 LIB_HEADER = ROOT / "firmware" / "src" / "nte_constants.h"
@@ -78,6 +78,7 @@ def lib_header() -> str:
     for f in ("restart_p0_u", "lm_lambda0", "converged_confidence", "converged_change"):
         v = float(getattr(rc, f))
         rows.append(pair("NTE_K_ROB_" + f.upper(), v, v))
+    rows.append(pair("NTE_K_EXP_STEP_BOUND", rk3.EXP_BOUND, rk3.EXP_BOUND))
     rows.append(pair("NTE_K_ROB_COST_HUGE", robust.COST_HUGE, robust.COST_HUGE))
     rows.append(pair("NTE_K_ROB_SURE", 0.99, 0.99))
     rows.append(pair("NTE_K_ROB_LAMBDA_MIN", 1e-7, 1e-7))

@@ -114,8 +114,8 @@ class RecordingBank(FilterBank):
         self.ranges.setdefault(name, Range()).add(x[mask])
 
     def _predict(self, i: int, names: tuple[str, ...], pred: Rk3Result, d: DepthTerms,
-                 restart: Array, surface: Array) -> tuple[list[Array], Matrix]:
-        x, P_pred = super()._predict(i, names, pred, d, restart, surface)
+                 restart: Array, surface: Array) -> tuple[list[Array], Matrix, Array]:
+        x, P_pred, z_ss = super()._predict(i, names, pred, d, restart, surface)
         p = self._pending
         p.clear()
         p["rk3 dz/dz0"] = pred.dz_dz0
@@ -126,10 +126,10 @@ class RecordingBank(FilterBank):
         for a in range(len(labels)):
             for b in range(a, len(labels)):
                 p[f"P{i + 1} predicted [{labels[a]},{labels[b]}]"] = P_pred[a][b]
-        return x, P_pred
+        return x, P_pred, z_ss
 
     def _measure(self, names: tuple[str, ...], d: DepthTerms, zp: Array, s: Array, v: Array,
-                 y: Array, active: Array) -> tuple[Array, list[Array], Array, Array]:
+                 y: Array, active: Array) -> tuple[Array, list[Array], Array, Array, Array]:
         res = super()._measure(names, d, zp, s, v, y, active)
         o = output(self.th, d, zp, s)
         p = self._pending
@@ -143,13 +143,14 @@ class RecordingBank(FilterBank):
 
     def _update_and_guard(self, i: int, names: tuple[str, ...], x: list[Array], P_pred: Matrix,
                           hrow: list[Array], innovation: Array, r_eff: Array, active: Array,
-                          run: Array) -> tuple[Array, Array, Array]:
+                          run: Array, in_range: Array, z_ss: Array
+                          ) -> tuple[Array, Array, Array]:
         n = len(x)
         pht = [sum((P_pred[a][b] * hrow[b] for b in range(1, n)), P_pred[a][0] * hrow[0])
                for a in range(n)]
         s = sum((hrow[a] * pht[a] for a in range(1, n)), hrow[0] * pht[0]) + r_eff
         z_i, nis, st = super()._update_and_guard(i, names, x, P_pred, hrow, innovation, r_eff,
-                                                 active, run)
+                                                 active, run, in_range, z_ss)
         labels = ["z"] + list(names)
         for name, val in self._pending.items():
             self._put(name, val, active)

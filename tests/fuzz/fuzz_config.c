@@ -9,8 +9,11 @@
  * 8 bytes each: dt (uint8, x 100 us, 0 allowed), depth (int16 / 100 mm), velocity (int16 / 10
  * mm/s), force (int16 / 1000 N), NaN/inf injected by flags in dt's top bits.
  * Properties (abort() on violation): a refused configuration leaves the instance untouched; an
- * accepted one gives a finite initial state; every output of every step is finite; counters are
- * monotonic; the identified parameters and standard deviations are finite, sd >= 0.
+ * accepted one gives a finite initial state; every output of every step is finite and its
+ * force within +-force_max_n; the DIVERGED status bit is set exactly when the diverged counter
+ * moves; counters are monotonic; the identified parameters and standard deviations are finite,
+ * sd >= 0.  With NTE_FUZZ_REPORT set in the environment, each input ends with one line on
+ * stderr: "report: steps=N diverged=D max_force=F" (the regression tests read it).
  */
 #include <float.h>
 #include <math.h>
@@ -24,6 +27,11 @@
 static int finite_r(nte_real_t x)
 {
     return isfinite(x) ? 1 : 0;
+}
+
+static nte_real_t nte_abs_r(nte_real_t x)
+{
+    return (x < (nte_real_t)0) ? -x : x;
 }
 
 /* A violated property: say which one (file:line), then abort() so libFuzzer keeps the input. */
@@ -131,6 +139,13 @@ int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size)
     }
     check_state(&est);
 
+    static int report = -1;
+    if (report < 0) {
+        report = (getenv("NTE_FUZZ_REPORT") != NULL) ? 1 : 0;
+    }
+    unsigned steps = 0U;
+    unsigned diverged = 0U;
+    double max_force = 0.0;
     int64_t t_us = 0;
     nte_counters_t c0 = est.counters;
     for (; off + 8U <= size; off += 8U) {
@@ -148,6 +163,16 @@ int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size)
         need(nte_step(&est, &smp, &out) == nte_err_ok);
         need(finite_r(out.force_hat_n) && finite_r(out.z) && finite_r(out.innovation_n) &&
              finite_r(out.nis) && finite_r(out.confidence));
+        /* the published force never leaves its physical range */
+        need(nte_abs_r(out.force_hat_n) <= est.cfg.force_max_n);
+        /* the flag and the counter tell the same story */
+        const int flagged = (out.status & NTE_STATUS_DIVERGED) != 0U;
+        need(flagged == (est.counters.diverged != c0.diverged));
+        steps++;
+        diverged += (unsigned)flagged;
+        if ((double)nte_abs_r(out.force_hat_n) > max_force) {
+            max_force = (double)nte_abs_r(out.force_hat_n);
+        }
         check_state(&est);
         const uint32_t* a = (const uint32_t*)&c0;
         const uint32_t* b = (const uint32_t*)&est.counters;
@@ -161,6 +186,10 @@ int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size)
     need(np <= NTE_PARAM_COUNT);
     for (size_t i = 0U; i < np; i++) {
         need(finite_r(p[i].value) && finite_r(p[i].sd) && (p[i].sd >= (nte_real_t)0));
+    }
+    if (report == 1) {
+        fprintf(stderr, "report: steps=%u diverged=%u max_force=%.9g\n", steps, diverged,
+                max_force);
     }
     return 0;
 }

@@ -114,3 +114,58 @@ def test_transition_partials_over_many_substeps():
         up[j] += 1e-5
         um[j] -= 1e-5
         _check(res.dz_du[name][0], run(up, z).z[0], run(um, z).z[0], 1e-5, name)
+
+
+# --- the exponential step (h lambda > EXP_BOUND; JACOBIANS.md §5b) ------------------------
+STIFF = range(0, N_POINTS, 4)
+
+
+def _stiff_dt(nominal, u, l_a, l_b, factor):
+    """dt such that h lambda at the larger depth is `factor` (lambda = l sigma0 / g)."""
+    th, d, _, _ = _model(nominal, u, 0.0, max(l_a, l_b), 0.0)
+    return factor / float((d.l * d.b)[0])
+
+
+@pytest.mark.parametrize("idx", STIFF)
+def test_exponential_step_partials(idx):
+    nominal, u, z, l_a, l_b, _ = POINTS[idx]
+    l_a, l_b = l_a + 1.0, l_b + 1.0   # in tissue at both ends
+    factor = 1.5 + 40.0 * ((idx * 0.37) % 1.0)
+    dt = _stiff_dt(nominal, u, l_a, l_b, factor)
+    sp = ScaledParams(F64, nominal, 1)
+
+    def run(uu, zz, names=()):
+        th = sp.theta([F64.arr([x]) for x in uu])
+        return rk3_step(F64, th, F64.arr([zz]), F64.arr([l_a]), F64.arr([l_b]), F64.arr([dt]),
+                        1, names)
+
+    res = run(u, z, IDENTIFIABLE)
+    # the exponential step ran: z lies between z0 and the quasi-steady state (no overshoot)
+    th, dm, _, _ = _model(nominal, u, 0.0, 0.5 * (l_a + l_b), 0.0)
+    zq = float((th.beta / dm.b)[0])
+    assert min(z, zq) - 1e-12 <= res.z[0] <= max(z, zq) + 1e-12
+    assert 0.0 < res.dz_dz0[0] < 1.0
+    # z1 is affine in z0: a wide difference is exact but for rounding
+    _check(res.dz_dz0[0], run(u, z + 1e-2).z[0], run(u, z - 1e-2).z[0], 1e-2, "dz+/dz")
+    for j, name in enumerate(IDENTIFIABLE):
+        up, um = u.copy(), u.copy()
+        up[j] += 1e-5
+        um[j] -= 1e-5
+        _check(res.dz_du[name][0], run(up, z).z[0], run(um, z).z[0], 1e-5, f"dz+/du_{name}")
+
+
+def test_step_is_stable_at_any_rate():
+    """|z - zq| never grows, however large h lambda (Kutta's RK3 alone grows past 2.51)."""
+    nominal, u, _, _, _, _ = POINTS[1]
+    sp = ScaledParams(F64, nominal, 1)
+    th = sp.theta([F64.arr([x]) for x in u])
+    l = 60.0
+    _, d, _, _ = _model(nominal, u, 0.0, l, 0.0)
+    lam = float((d.l * d.b)[0])
+    zq = float((th.beta / d.b)[0])
+    for factor in (0.5, 1.0, 2.0, 2.6, 3.0, 10.0, 1e3, 1e6):
+        z0 = zq + 1.0
+        res = rk3_step(F64, th, F64.arr([z0]), F64.arr([l]), F64.arr([l]),
+                       F64.arr([factor / lam]), 1, ())
+        assert abs(res.z[0] - zq) <= 1.0, factor
+        assert abs(res.z[0] - zq) <= np.exp(-min(factor, 1.0)) * 1.01, factor

@@ -1,0 +1,80 @@
+"""Stable numerics on plausible input: the 25 Hz insertion that once diverged, reference and C.
+
+* The reproducer (nte-ref simulate --preset needleB-tissueB-10mms --depth 120 --dwell 1
+  --speed 40 --rate 25 --accel 10000 --seed 12, then estimate --model 1): every output finite,
+  |force_hat| within 10x the input's largest force (it once reached 6.6e4 N), reference and C
+  at 0 ULP in float and double.
+* The range bound on the same input with the exponential step switched off (Kutta's RK3 on every
+  sub-step, the integrator that diverged): the divergence is caught, flagged DIVERGED, and
+  nothing out of +-force_max_n is published.
+"""
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent.parent
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from c_twin import EXE, ulp_distance  # noqa: E402
+
+from reference_py import rk3  # noqa: E402
+from reference_py.bank import STATUS_DIVERGED  # noqa: E402
+from reference_py.config import default_config  # noqa: E402
+from reference_py.params import get_preset  # noqa: E402
+from reference_py.tools.csvio import read_trial  # noqa: E402
+from reference_py.tools.estimate import estimate_csv_lines, run_estimate  # noqa: E402
+
+REPRO = ["--preset", "needleB-tissueB-10mms", "--depth", "120", "--dwell", "1", "--speed", "40",
+         "--rate", "25", "--accel", "10000", "--seed", "12"]
+FORCE_MAX_N = default_config(1).force_max_n
+
+
+@pytest.fixture(scope="module")
+def repro_csv(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("repro") / "x.csv"
+    subprocess.run([sys.executable, "-m", "reference_py", "simulate", *REPRO, "--out", str(out)],
+                   check=True, capture_output=True, cwd=ROOT)
+    return out
+
+
+@pytest.mark.parametrize("precision", ["float64", "float32"])
+def test_reproducer_finite_in_range_and_c_identical(repro_csv: Path, tmp_path: Path,
+                                                    precision: str) -> None:
+    trial = read_trial(repro_csv)
+    peak_in = float(np.max(np.abs(trial.force_n)))
+    run = run_estimate(trial, get_preset("paper-10mms"), 1, precision=precision)
+    f = np.asarray(run.force_hat_n, dtype=np.float64)
+    assert np.all(np.isfinite(f)) and np.all(np.isfinite(np.asarray(run.z, dtype=np.float64)))
+    assert np.all(np.isfinite(np.asarray(run.innovation_n, dtype=np.float64)))
+    # the input peaks at 0.24 N; the estimate once reached 6.6e4 N
+    assert float(np.max(np.abs(f))) <= 10.0 * peak_in
+    assert float(np.max(np.abs(f))) <= 2.0 * peak_in
+    if not EXE[precision].exists():
+        pytest.skip(f"{EXE[precision]} not built (make build)")
+    out = tmp_path / "c.csv"
+    subprocess.run([str(EXE[precision]), str(repro_csv), "--model", "1", "--out", str(out)],
+                   check=True, capture_output=True)
+    c_lines = out.read_text().split("\n")[:-1]
+    assert ulp_distance(estimate_csv_lines(run), c_lines, precision) == 0
+
+
+@pytest.mark.parametrize("precision", ["float64", "float32"])
+def test_range_bound_catches_the_rk3_divergence(repro_csv: Path, precision: str,
+                                                monkeypatch: pytest.MonkeyPatch) -> None:
+    """With Kutta's RK3 on every sub-step (the integrator that diverged) the bound resets the
+    filters, flags DIVERGED, and publishes nothing outside +-force_max_n."""
+    monkeypatch.setattr(rk3, "EXP_BOUND", math.inf)
+    run = run_estimate(read_trial(repro_csv), get_preset("paper-10mms"), 1, precision=precision)
+    f = np.asarray(run.force_hat_n, dtype=np.float64)
+    flagged = (np.asarray(run.status) & np.uint32(STATUS_DIVERGED)) != 0
+    assert np.all(np.isfinite(f)) and np.all(np.isfinite(np.asarray(run.z, dtype=np.float64)))
+    assert np.all(np.abs(f) <= FORCE_MAX_N)
+    assert int(flagged.sum()) >= 1
+    # without the bound this run's force leaves the range (6.6e4 N once): the flags mark it
+    assert float(np.max(np.abs(f[~flagged]))) <= FORCE_MAX_N
