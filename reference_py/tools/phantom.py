@@ -29,6 +29,11 @@ Everything is physical state driven by the stage motion (no curve patches):
              w = min(d, ell_tip) + sum_j r_j L_j (mm) grows with depth.  In steady sliding it is a
              velocity-dependent friction beta_k phi(v) w; in a dwell it decays with tau_1 (fast)
              and tau_2 (slow).
+* elastic    the tent, cutting and grip forces relax with the same time constants (quasi-linear
+             viscoelastic: int G(t - s) dE(s), G = g_inf + sum_k g_k exp(-t/tau_k)); a torn
+             membrane releases its relaxed force and keeps no memory, the cutting force stays
+             >= 0 when the tip backs away, and the grip relaxes per engaged piece of shaft (a
+             withdrawn piece takes its own grip away).
 * sensor     force_n = +-(F + offset + drift(t) + noise): tare residue, linear drift plus a
              random walk, white noise; optional timestamp jitter, gaps and sign conventions.
 
