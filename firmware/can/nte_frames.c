@@ -20,7 +20,7 @@ static const uint16_t nte_frames_data_ids[nte_frames_kind_count] = {
 
 static bool nte_frames_kind_ok(nte_frames_kind_t kind)
 {
-    return ((int)kind >= 0) && ((int)kind < (int)nte_frames_kind_count);
+    return (unsigned)kind < (unsigned)nte_frames_kind_count;
 }
 
 /* True if lo - tol <= x <= hi + tol and x is finite (tol: half a resolution step, so that a

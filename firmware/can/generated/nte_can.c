@@ -130,13 +130,13 @@ static inline uint32_t unpack_right_shift_u32(
     return (uint32_t)((uint32_t)(value & mask) >> shift);
 }
 
-static uint64_t cantools_unsigned_from_double(double value)
+static uint32_t cantools_unsigned_from_double(float value)
 {
     if (value < 0) {
         return 0;
     }
 
-    return (uint64_t)value;
+    return (uint32_t)value;
 }
 
 int nte_can_depth_pack(
