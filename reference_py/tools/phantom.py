@@ -191,6 +191,16 @@ class PhantomSpec:
         if s.force_sign not in (1, -1) or s.depth_sign not in (1, -1):
             raise ValueError("force_sign and depth_sign (--force-sign, --depth-sign) must be "
                              "+1 or -1")
+        # bounded like nte-ref simulate: a record of at most 10 M samples
+        for nm, v, hi in (("stroke_mm (--stroke)", m.stroke_mm, 500.0),
+                          ("dwell_s (--dwell)", m.dwell_s, 3600.0), ("rest_s", m.rest_s, 3600.0),
+                          ("gaps (--gaps)", s.gaps, 1000)):
+            if v > hi:
+                raise ValueError(f"{nm} must be <= {hi:g} (got {v!r})")
+        n = s.rate_hz * sum(2.0 * m.stroke_mm / v + m.dwell_s + m.rest_s for v in m.speeds_mm_s)
+        if n > 10_000_000:
+            raise ValueError(f"the record would hold {n:.3g} samples, more than 10,000,000: "
+                             f"lower --rate, --stroke or --dwell")
         if not (math.isfinite(self.surface_mm) and 0.0 <= self.surface_mm < m.stroke_mm):
             raise ValueError(f"surface_mm (--surface) must be in [0, stroke) mm "
                              f"(got {self.surface_mm!r})")

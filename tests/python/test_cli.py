@@ -237,3 +237,16 @@ def test_c_bench_help_and_refusal(prog):
     assert r.returncode == 2 and r.stdout == ""
     assert r.stderr.splitlines() == [f"{prog}: error: unrecognized arguments: --samples "
                                      f"(see {prog} --help)"]
+
+
+@pytest.mark.parametrize("flags,message", [
+    (["--stroke", "1e9"], "stroke_mm (--stroke) must be <= 500 (got 1000000000.0)"),
+    (["--dwell", "1e9"], "dwell_s (--dwell) must be <= 3600 (got 1000000000.0)"),
+    (["--gaps", "100000000"], "gaps (--gaps) must be <= 1000 (got 100000000)"),
+    (["--rate", "5000", "--dwell", "3000"], "the record would hold 1.51e+07 samples, more than "
+                                            "10,000,000: lower --rate, --stroke or --dwell")])
+def test_phantom_sizes_are_bounded(tmp_path, capsys, flags, message):
+    out = tmp_path / "p.csv"
+    assert main(["phantom", "--out", str(out), *flags]) == 2
+    assert capsys.readouterr().err.strip().splitlines() == [f"nte-ref: error: {message}"]
+    assert list(tmp_path.iterdir()) == []
