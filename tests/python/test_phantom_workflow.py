@@ -6,8 +6,9 @@ the RMSE to the noise-free record shrinks >= 50 % from the base fit to the final
 the final residual is <= 3x the sensor noise (median).  Where the workflow falls short, the test is
 a strict xfail whose reason carries the measured figure.
 
-Trials: lab tissues of seeds 2001-2008 (drawn from the measured statistics; not used to tune the
-phantom) and two presets with other seeds and noise levels; all have a 5.26 s dwell.
+Trials: lab tissues of five seeds in 2001-2007 (drawn from the measured statistics; not used to
+tune the phantom) and the four-layer preset at 30 mN; all have a 5.26 s dwell.  Six trials keep
+the run within the CI budget.
 """
 from __future__ import annotations
 
@@ -18,9 +19,9 @@ from reference_py.discrepancy import workflow
 from reference_py.discrepancy.io import Trial
 from reference_py.tools.phantom import LAB, simulate_phantom
 
-CASES = [(LAB, s, {}) for s in range(2001, 2009)] + [
-    ("skin-on-muscle", 3, {"noise_n": 0.008}),
-    ("artery-filled", 4, {"noise_n": 0.05}),
+# lab seeds: noise 18, 19, 53, 15 and 8 mN; 2, 1, 1, 3 and 0 ruptures; 1-3 mm/s
+CASES = [(LAB, s, {}) for s in (2001, 2002, 2004, 2006, 2007)] + [
+    ("artery-filled", 4, {"noise_n": 0.03}),
 ]
 
 
@@ -71,14 +72,14 @@ def test_every_trial_ran_and_the_figures_are_finite(rows):
 
 
 @pytest.mark.xfail(strict=True,
-                   reason="measured: relaxation named in 1/10 trials (target >= 95 %)")
+                   reason="measured: relaxation named in 0/6 trials (target >= 95 %)")
 def test_relaxation_is_named_in_trials_with_a_dwell(rows):
     share = np.mean([r["relaxation"] for r in rows])
     assert share >= 0.95, f"relaxation named in {share:.0%}"
 
 
 @pytest.mark.xfail(strict=True,
-                   reason="measured: layer count right in 2/10 trials (target >= 90 %)")
+                   reason="measured: layer count right in 1/6 trials (target >= 90 %)")
 def test_layer_count_is_right(rows):
     share = np.mean([r["layers_found"] == r["layers_true"] for r in rows])
     found = ", ".join(f"{r['case']}: {r['layers_found']:.0f}/{r['layers_true']:.0f}" for r in rows)
@@ -87,14 +88,14 @@ def test_layer_count_is_right(rows):
 
 @pytest.mark.xfail(strict=True,
                    reason="measured: median shrink of the RMSE to the noise-free record 0 % "
-                          "(0 % in 9 of 10 trials; target >= 50 %)")
+                          "(0 % in all 6 trials; target >= 50 %)")
 def test_rmse_to_the_noise_free_record_shrinks_by_half(rows):
     med = float(np.median([r["shrink"] for r in rows]))
     assert med >= 0.5, f"median shrink {med:.0%}: " + _summary(rows, "shrink")
 
 
 @pytest.mark.xfail(strict=True,
-                   reason="measured: median final residual 25x the noise (target <= 3x)")
+                   reason="measured: median final residual 31x the noise (target <= 3x)")
 def test_final_residual_is_within_three_times_the_noise(rows):
     med = float(np.median([r["resid_x_noise"] for r in rows]))
     assert med <= 3.0, f"median final residual {med:.1f}x noise: " + _summary(rows, "resid_x_noise")
