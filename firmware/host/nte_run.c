@@ -20,6 +20,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #if NTE_DOUBLE
@@ -226,25 +227,114 @@ static int bad(const char* msg)
     return EXIT_BAD_INPUT;
 }
 
-/* Write every row to a temporary file beside `path`, then rename it into place. */
-static int run(const args_t* a, const nte_trial_t* tr, nte_t* est)
+/* The output by the Python tools' writer rules (reference_py/tools/safe_write.py): a regular
+ * file only (a directory, device or FIFO is refused, never replaced), a symbolic link written
+ * through to its target, the mode of a replaced file kept, else 0666 minus the umask, no
+ * parent directory created.  Fills target (the file to replace or create) and mode. */
+typedef struct out_t {
+    char target[4096];
+    mode_t mode;
+} out_t;
+
+static int check_out(const char* path, out_t* o, char* msg, size_t cap)
 {
-    char tmp[4096];
-    const char* slash = strrchr(a->out, '/');
-    const int dir_len = (slash != NULL) ? (int)(slash - a->out + 1) : 0;
-    (void)snprintf(tmp, sizeof tmp, "%.*s.%s.XXXXXX", dir_len, a->out,
-                   (slash != NULL) ? (slash + 1) : a->out);
+    struct stat st;
+    (void)snprintf(o->target, sizeof o->target, "%s", path);
+    /* follow symbolic links to the file they name (relative to the link's directory) */
+    for (int depth = 0; (lstat(o->target, &st) == 0) && S_ISLNK(st.st_mode); depth++) {
+        char link[sizeof o->target];
+        const ssize_t n = readlink(o->target, link, sizeof link - 1U);
+        if ((n < 0) || (depth >= 40)) {
+            (void)snprintf(msg, cap, "--out %s: cannot follow the symbolic link: %s", path,
+                           (n < 0) ? strerror(errno) : "too many levels");
+            return -1;
+        }
+        link[n] = '\0';
+        const char* slash = strrchr(o->target, '/');
+        if ((link[0] == '/') || (slash == NULL)) {
+            (void)snprintf(o->target, sizeof o->target, "%s", link);
+        } else {
+            char joined[(2U * sizeof o->target) + 2U];
+            (void)snprintf(joined, sizeof joined, "%.*s/%s", (int)(slash - o->target),
+                           o->target, link);
+            const size_t len = strlen(joined);
+            if (len >= sizeof o->target) {
+                (void)snprintf(msg, cap, "--out %s: the symbolic link's target path is too "
+                                         "long", path);
+                return -1;
+            }
+            (void)memcpy(o->target, joined, len + 1U);
+        }
+    }
+    if (stat(o->target, &st) == 0) {
+        const char* kind = S_ISDIR(st.st_mode)   ? "a directory"
+                           : S_ISCHR(st.st_mode)  ? "a character device"
+                           : S_ISBLK(st.st_mode)  ? "a block device"
+                           : S_ISFIFO(st.st_mode) ? "a FIFO"
+                           : S_ISSOCK(st.st_mode) ? "a socket"
+                                                  : NULL;
+        if (kind != NULL) {
+            (void)snprintf(msg, cap, "--out %s: is %s, not a regular file; refusing to "
+                                     "replace it", path, kind);
+            return -1;
+        }
+        o->mode = st.st_mode & 07777U;
+        return 0;
+    }
+    const mode_t mask = umask(022);
+    (void)umask(mask);
+    o->mode = 0666U & ~mask;
+    char dir[4096];
+    const char* slash = strrchr(o->target, '/');
+    if (slash == NULL) {
+        return 0;
+    }
+    (void)snprintf(dir, sizeof dir, "%.*s", (slash == o->target) ? 1 : (int)(slash - o->target),
+                   o->target);
+    if (stat(dir, &st) != 0) {
+        (void)snprintf(msg, cap, "--out %s: directory %s does not exist (it is not created)",
+                       path, dir);
+        return -1;
+    }
+    if (!S_ISDIR(st.st_mode)) {
+        (void)snprintf(msg, cap, "--out %s: %s is not a directory", path, dir);
+        return -1;
+    }
+    return 0;
+}
+
+typedef struct counts_t {
+    size_t rejected;
+    size_t gated;
+    size_t clipped;
+} counts_t;
+
+/* Write every row to a temporary file beside the target, then rename it into place.
+ * Returns 0, EXIT_BAD_INPUT (the place cannot be written) or 1 (a write failed). */
+static int run(const args_t* a, const out_t* out, const nte_trial_t* tr, nte_t* est,
+               counts_t* counts)
+{
+    char tmp[sizeof out->target + 16U];
+    const char* slash = strrchr(out->target, '/');
+    const int dir_len = (slash != NULL) ? (int)(slash - out->target + 1) : 0;
+    (void)snprintf(tmp, sizeof tmp, "%.*s.%s.XXXXXX", dir_len, out->target,
+                   (slash != NULL) ? (slash + 1) : out->target);
     const int fd = mkstemp(tmp);
     if (fd < 0) {
-        fprintf(stderr, PROG ": error: %s: cannot write: %s\n", a->out, strerror(errno));
-        return 1;
+        fprintf(stderr, PROG ": error: --out %s: cannot write in its directory: %s\n", a->out,
+                strerror(errno));
+        return EXIT_BAD_INPUT;
     }
-    FILE* fh = fdopen(fd, "w");
+    FILE* fh = (fchmod(fd, out->mode) == 0) ? fdopen(fd, "w") : NULL;
     if (fh == NULL) {
+        fprintf(stderr, PROG ": error: --out %s: cannot write: %s\n", a->out, strerror(errno));
         (void)close(fd);
         (void)unlink(tmp);
         return 1;
     }
+    counts->rejected = 0U;
+    counts->gated = 0U;
+    counts->clipped = 0U;
     nte_param_estimate_t pe[NTE_IDENTIFIED_MAX];
     const size_t np = nte_get_params(est, pe, NTE_IDENTIFIED_MAX);
     fprintf(fh, "t_s,force_hat_n,z,innovation_n,status");
@@ -260,6 +350,9 @@ static int run(const args_t* a, const nte_trial_t* tr, nte_t* est)
         s.velocity_mm_s = (nte_real_t)tr->velocity_mm_s[k];
         s.force_n = (nte_real_t)tr->force_n[k];
         (void)nte_step(est, &s, &o);
+        counts->rejected += ((o.status & NTE_STATUS_REJECTED) != 0U) ? 1U : 0U;
+        counts->gated += ((o.status & NTE_STATUS_GATED) != 0U) ? 1U : 0U;
+        counts->clipped += ((o.status & NTE_STATUS_CLIPPED) != 0U) ? 1U : 0U;
         (void)nte_get_params(est, pe, NTE_IDENTIFIED_MAX);
         fprintf(fh, "%.17g," REAL_FMT "," REAL_FMT "," REAL_FMT ",%u", tr->t_s[k],
                 (double)o.force_hat_n, (double)o.z, (double)o.innovation_n, (unsigned)o.status);
@@ -271,8 +364,8 @@ static int run(const args_t* a, const nte_trial_t* tr, nte_t* est)
         }
         fprintf(fh, "\n");
     }
-    if ((fclose(fh) != 0) || (rename(tmp, a->out) != 0)) {
-        fprintf(stderr, PROG ": error: %s: cannot write: %s\n", a->out, strerror(errno));
+    if ((fclose(fh) != 0) || (rename(tmp, out->target) != 0)) {
+        fprintf(stderr, PROG ": error: --out %s: cannot write: %s\n", a->out, strerror(errno));
         (void)unlink(tmp);
         return 1;
     }
@@ -297,6 +390,11 @@ int main(int argc, char** argv)
         if (o < sizeof msg) {
             (void)snprintf(msg + o, sizeof msg - o, ")");
         }
+        return bad(msg);
+    }
+    out_t out;
+    (void)memset(&out, 0, sizeof out);
+    if (check_out(a.out, &out, msg, sizeof msg) != 0) {
         return bad(msg);
     }
     nte_trial_t tr;
@@ -338,10 +436,13 @@ int main(int argc, char** argv)
         (void)snprintf(msg, sizeof msg, "invalid estimator configuration (nte_err %d)", (int)err);
         return bad(msg);
     }
-    const int rc = run(&a, &tr, &est);
+    counts_t counts;
+    const int rc = run(&a, &out, &tr, &est, &counts);
     if (rc == 0) {
         printf("%zu samples, Model %s, " PRECISION "; wrote %s\n", tr.n,
                (a.model == 1) ? "I" : "II", a.out);
+        printf("samples: %zu; rejected %zu, gated %zu, clipped %zu\n", tr.n, counts.rejected,
+               counts.gated, counts.clipped);
     }
     nte_trial_free(&tr);
     return rc;

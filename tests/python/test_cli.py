@@ -1,5 +1,7 @@
 """nte-ref from the outside: simulate, estimate, plots, and every bad-input message."""
 import csv
+import os
+import stat
 import subprocess
 import sys
 from pathlib import Path
@@ -250,3 +252,31 @@ def test_phantom_sizes_are_bounded(tmp_path, capsys, flags, message):
     assert main(["phantom", "--out", str(out), *flags]) == 2
     assert capsys.readouterr().err.strip().splitlines() == [f"nte-ref: error: {message}"]
     assert list(tmp_path.iterdir()) == []
+
+
+def test_c_run_writes_by_the_safe_writer_rules(sim_csv, tmp_path):
+    """nte-run refuses what nte-ref refuses (device, directory, missing parent, under a file),
+    writes through a symlink, keeps a replaced file's mode, and ends with the counts line."""
+    sub = tmp_path / "sub"
+    sub.mkdir()
+    cases = [("/dev/null", "--out /dev/null: is a character device, not a regular file; "
+                           "refusing to replace it"),
+             (str(sub), f"--out {sub}: is a directory, not a regular file; refusing to "
+                        f"replace it"),
+             ("/nonexistent/x.csv", "--out /nonexistent/x.csv: directory /nonexistent does "
+                                    "not exist (it is not created)"),
+             (f"{sim_csv}/x.csv", f"--out {sim_csv}/x.csv: {sim_csv} is not a directory")]
+    for out, message in cases:
+        r = _c("nte-run", str(sim_csv), "--model", "2", "--out", out)
+        assert r.returncode == 2 and r.stderr.splitlines() == [f"nte-run: error: {message}"]
+    assert os.path.exists("/dev/null") and list(sub.iterdir()) == []
+    real, link = tmp_path / "real.csv", tmp_path / "link.csv"
+    real.write_text("old\n")
+    os.chmod(real, 0o640)
+    link.symlink_to("real.csv")                    # relative to the link's directory
+    r = _c("nte-run", str(sim_csv), "--model", "2", "--out", str(link))
+    assert r.returncode == 0, r.stderr
+    assert link.is_symlink() and real.read_text().startswith("t_s,force_hat_n")
+    assert stat.S_IMODE(os.stat(real).st_mode) == 0o640
+    n = len(real.read_text().splitlines()) - 1
+    assert r.stdout.splitlines()[-1] == f"samples: {n}; rejected 0, gated 0, clipped 0"
