@@ -12,6 +12,7 @@
     nte-ref phantom [NAME|lab] --out FILE.csv [--seed K] [--rate HZ] [--speed MM_S,...] [...]
     nte-ref phantom --stats [--trials N] [--first-seed K]
     nte-ref fixedpoint [--model 1|2] [--seeds N] [--random N] [--sig-bits B]
+    nte-ref plausible [--scenarios N] [--first-seed K] [--jobs J] [--engine c|reference] [...]
 
 Exit status: 0 on success, 2 on bad input (the message on stderr names the file, line and column).
 """
@@ -24,7 +25,7 @@ from typing import TYPE_CHECKING, Callable, Sequence
 
 import numpy as np
 
-from . import fixedpoint, phantom
+from . import fixedpoint, phantom, plausible
 from .csvio import CsvError, read_trial, write_atomic
 from .safe_write import Outputs
 from ..params import PRESETS, get_preset
@@ -221,6 +222,13 @@ def build_parser() -> argparse.ArgumentParser:
                         epilog=fixedpoint.__doc__.split("\n\n", 1)[1],
                         formatter_class=argparse.RawDescriptionHelpFormatter)
     fixedpoint.add_arguments(fx)
+
+    pl = sub.add_parser("plausible", help="random plausible scenarios: outputs finite and "
+                        "within 10x the input's force",
+                        description=plausible.__doc__.split("\n\n")[0],
+                        epilog=plausible.__doc__.split("\n\n", 1)[1],
+                        formatter_class=argparse.RawDescriptionHelpFormatter)
+    plausible.add_arguments(pl)
     return p
 
 
@@ -316,7 +324,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     handlers = {"simulate": _simulate, "estimate": _estimate, "evaluate": _evaluate,
                 "bench": _bench, "phantom": phantom.run,
-                "fixedpoint": fixedpoint.run}
+                "fixedpoint": fixedpoint.run, "plausible": plausible.main_run}
     try:
         return handlers[args.command](args)
     except (CsvError, ValueError) as exc:

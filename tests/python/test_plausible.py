@@ -78,3 +78,74 @@ def test_range_bound_catches_the_rk3_divergence(repro_csv: Path, precision: str,
     assert int(flagged.sum()) >= 1
     # without the bound this run's force leaves the range (6.6e4 N once): the flags mark it
     assert float(np.max(np.abs(f[~flagged]))) <= FORCE_MAX_N
+
+
+# --- the property on a fixed subset of random plausible scenarios, reference and C ---------
+from reference_py.tools.estimate import EstimateRun  # noqa: E402
+from reference_py.tools.plausible import BOUND, csv_lines, draw, outcome  # noqa: E402
+
+#: seeds of nte-ref plausible's scenarios, drawn with at most CI_CAP samples (the long run
+#: allows 6 000); together they cover both models, precisions and estimators, 20 Hz and
+#: > 500 Hz, irregular time, a depth jump, saturation and an inverted force sign
+SUBSET = (65, 1, 70, 112, 2, 3)
+CI_CAP = 400
+
+
+def _features(seed: int) -> set[str]:
+    sc = draw(seed, CI_CAP)
+    out = {f"model {sc.model}", sc.precision, sc.estimator}
+    for name, present in (("irregular", sc.irregular), ("jump", sc.jump_mm != 0.0),
+                          ("saturated", sc.saturation > 0.0), ("inverted", sc.inverted),
+                          ("20 Hz", sc.rate_hz < 21.0), ("> 500 Hz", sc.rate_hz > 500.0)):
+        if present:
+            out.add(name)
+    return out
+
+
+def test_subset_covers_every_kind() -> None:
+    seen = set().union(*(_features(s) for s in SUBSET))
+    assert seen >= {"model 1", "model 2", "float32", "float64", "bank", "robust", "irregular",
+                    "jump", "saturated", "inverted", "20 Hz", "> 500 Hz"}, seen
+
+
+def _check(sc, force_in: np.ndarray, run: EstimateRun) -> None:
+    o = outcome(sc, force_in, np.asarray(run.force_hat_n, np.float64),
+                np.asarray(run.z, np.float64), np.asarray(run.innovation_n, np.float64),
+                np.asarray(run.status))
+    assert o.finite and o.ratio <= BOUND, (sc, o)
+
+
+@pytest.mark.parametrize("seed", SUBSET)
+def test_plausible_scenario_reference_and_c(seed: int, tmp_path: Path) -> None:
+    sc = draw(seed, CI_CAP)
+    src = tmp_path / "in.csv"
+    src.write_text("\n".join(csv_lines(sc)) + "\n")
+    trial = read_trial(src)
+    assert len(trial.t_s) <= 2 * CI_CAP  # the cap leaves out the rests at the surface
+    force_in = np.asarray(trial.force_n, dtype=np.float64)
+    run = run_estimate(trial, get_preset(sc.preset), sc.model, estimator=sc.estimator,
+                       precision=sc.precision, init_seed=sc.init_seed,
+                       init_factor=sc.init_factor)
+    _check(sc, force_in, run)
+    exe = EXE[sc.precision]
+    if not exe.exists():
+        pytest.skip(f"{exe} not built (make build)")
+    out = tmp_path / "c.csv"
+    subprocess.run([str(exe), str(src), *sc.estimator_args(), "--out", str(out)], check=True,
+                   capture_output=True)
+    assert ulp_distance(estimate_csv_lines(run), out.read_text().split("\n")[:-1],
+                        sc.precision) == 0
+
+
+def test_command_runs_and_refuses_bad_counts() -> None:
+    ok = subprocess.run([sys.executable, "-m", "reference_py", "plausible", "--scenarios", "3",
+                         "--first-seed", "112"], capture_output=True, text=True, cwd=ROOT)
+    if ok.returncode == 2 and "--c-bin" in ok.stderr:
+        pytest.skip("C host programs not built (make build)")
+    assert ok.returncode == 0, ok.stderr
+    assert "scenarios 3 (seeds 112..114)" in ok.stdout
+    assert "violations 0 (non-finite 0" in ok.stdout
+    bad = subprocess.run([sys.executable, "-m", "reference_py", "plausible", "--scenarios", "0"],
+                         capture_output=True, text=True, cwd=ROOT)
+    assert bad.returncode == 2
+    assert bad.stderr.strip() == "nte-ref: error: --scenarios must be in 1..1000000 (got 0)"
