@@ -112,12 +112,17 @@ def log_frames(path: str) -> list[tuple[float, can.Message]]:
 
 def write_candump(path: Path, frames: list[tuple[float, can.Message]], channel: str,
                   speed: float, start: float = 1_000_000.0) -> None:
-    """candump -l format, times scaled by 1/speed (canplayer replays them in real time)."""
-    with open(path, "w") as f:
+    """candump -l format (python-can's CanutilsLogWriter, frames marked T for sent), times
+    scaled by 1/speed (canplayer replays them in real time)."""
+    writer = can.CanutilsLogWriter(str(path), channel=channel)
+    try:
         for t, m in frames:
-            ts = start + t / speed
-            ident = f"{m.arbitration_id:08X}" if m.is_extended_id else f"{m.arbitration_id:03X}"
-            f.write(f"({ts:.6f}) {channel} {ident}#{bytes(m.data).hex().upper()}\n")
+            writer.on_message_received(can.Message(
+                timestamp=start + t / speed, arbitration_id=m.arbitration_id,
+                is_extended_id=m.is_extended_id, data=bytes(m.data), is_rx=False,
+                channel=channel))
+    finally:
+        writer.stop()
 
 
 def _send_python(bus: can.BusABC, frames, speed: float, progress: bool) -> float:

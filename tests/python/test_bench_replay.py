@@ -290,3 +290,22 @@ def test_bench_refuses_implausible_units_naming_the_option(tmp_path, capsys):
     forces = {round(rx.decode(m.arbitration_id, m.data)[1]["Force"], 4) for _, m in frames
               if m.arbitration_id == NteDatabase().frame_id("Force")}
     assert forces == {0.4}
+
+
+def test_candump_input_log_written_by_python_can(tmp_path):
+    """The canplayer input (write_candump) is python-can's candump -l format: every frame read
+    back by can.LogReader with its id and data, at start + t / speed, marked sent (T)."""
+    from host_bench.cli import scenario_frames, write_candump
+    p = tmp_path / "s.csv"
+    write_scenario(p)
+    frames = scenario_frames(str(p), NteDatabase(), 1000.0)
+    log = tmp_path / "in.log"
+    write_candump(log, frames, "vcan0", 0.5)
+    lines = log.read_text().splitlines()
+    assert len(lines) == len(frames) == 1200
+    assert lines[0] == f"(1000012.800000) vcan0 200#{bytes(frames[0][1].data).hex().upper()} T"
+    back = list(can.LogReader(str(log)))
+    for (t, m), b in zip(frames, back):
+        assert (b.arbitration_id, bytes(b.data), b.channel) == (m.arbitration_id, bytes(m.data),
+                                                                "vcan0")
+        assert abs(b.timestamp - (1_000_000.0 + t / 0.5)) < 1e-6 and not b.is_rx
