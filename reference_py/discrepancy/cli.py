@@ -16,21 +16,20 @@ import os
 # the fits solve thousands of small problems: BLAS threads only add overhead
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import argparse  # noqa: E402
 import sys  # noqa: E402
 from pathlib import Path  # noqa: E402
 
-from ..tools.cli import add_unit_arguments, units_from  # noqa: E402
+from ..tools.cli import OneLineParser, add_unit_arguments, units_from  # noqa: E402
 from ..tools.safe_write import check_directory  # noqa: E402
 from .io import InputError, read_trial  # noqa: E402
 from .prep import TooShort  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="nte-discrepancy", description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("files", nargs="+", metavar="FILE")
-    ap.add_argument("--out", required=True, metavar="DIR")
+    ap = OneLineParser(prog="nte-discrepancy", description=__doc__)  # one-line refusals
+    ap.add_argument("files", nargs="+", metavar="FILE", help="measured trials (CSV)")
+    ap.add_argument("--out", required=True, metavar="DIR",
+                    help="report directory (created if absent; its parent must exist)")
     ap.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     add_unit_arguments(ap)
     args = ap.parse_args(argv)

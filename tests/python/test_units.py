@@ -139,3 +139,13 @@ def test_discrepancy_refuses_an_implausible_force(tmp_path, capsys):
     assert err == [f"nte-discrepancy: {p}:32: column 'force_n': 1e+300 N is not a plausible "
                    f"force (the configured range is ±50 N)"]
     assert not (tmp_path / "rep").exists()
+
+
+def test_discrepancy_flags_refused_in_one_line(tmp_path, capsys):
+    from reference_py.discrepancy.cli import main as discrepancy
+    with pytest.raises(SystemExit) as e:
+        discrepancy(["a.csv", "--out", str(tmp_path / "r"), "--time-unit", "min"])
+    assert e.value.code == 2
+    assert capsys.readouterr().err.strip().splitlines() == [
+        "nte-discrepancy: error: argument --time-unit: invalid choice: 'min' (choose from 's', "
+        "'ms') (see nte-discrepancy --help)"]
