@@ -42,8 +42,8 @@ COST_HUGE = 1.0e30           # cost of a diverged trial (finite in float32 too)
 @dataclass(frozen=True)
 class RobustConfig:
     buffer_len: int = 96          # decimated samples kept per insertion (4 reals each)
-    fit_substeps: int = 4         # RK3 sub-steps between buffer entries
-    fit_iterations: int = 20      # LM iterations per start
+    fit_substeps: int = 2         # RK3 sub-steps between buffer entries
+    fit_iterations: int = 8       # LM iterations per start
     min_entries: int = 24         # a shorter insertion is not refined
     restart_p0_u: float = 0.01    # bank covariance of u after a restart, log^2
     lm_lambda0: float = 1e-2      # initial LM damping

@@ -95,9 +95,9 @@
  *     and 2 div of depth terms + 6 + ~8 n_p flops), plus per entry 1 exp (depth terms), 1
  *     tanh, the output and its n_p derivatives and the n_p (n_p + 3) / 2 products of J^T J and
  *     J^T r; plus per LM iteration one n_p x n_p LDL^T solve (n_p divisions, ~n_p^3/3 flops).
- *     Defaults (96 entries, 4 sub-steps, 20 iterations, Model II, n_p = 5): 42 simulations
- *     x 95 entries x 4 sub-steps = 15960 RK3 sub-steps with 5 sensitivities and 42 x 95 =
- *     3990 output evaluations.  The refinement runs inside the nte_step call of the sample
+ *     Defaults (96 entries, 2 sub-steps, 8 iterations, Model II, n_p = 5): 18 simulations
+ *     x 95 entries x 2 sub-steps = 3420 RK3 sub-steps with 5 sensitivities and 18 x 95 =
+ *     1710 output evaluations.  The refinement runs inside the nte_step call of the sample
  *     that leaves the tissue: call nte_step from a context that tolerates that latency once
  *     per insertion (measure it on the target).
  */
@@ -254,8 +254,8 @@ typedef enum nte_estimator_t {
 typedef struct nte_robust_config_t {
     int32_t buffer_len;     /**< [96] decimated samples kept per insertion, even,
                                  4..min(4096, NTE_ROBUST_BUFFER_LEN) */
-    int32_t fit_substeps;   /**< [4] RK3 sub-steps between buffer entries, 1..16 */
-    int32_t fit_iterations; /**< [20] LM iterations per start, 1..200 */
+    int32_t fit_substeps;   /**< [2] RK3 sub-steps between buffer entries, 1..16 */
+    int32_t fit_iterations; /**< [8] LM iterations per start, 1..200 */
     int32_t min_entries;    /**< [24] a shorter insertion is not refined, 2..buffer_len */
     nte_real_t restart_p0_u;         /**< [0.01] var(u) of the bank after a restart, log^2, > 0 */
     nte_real_t lm_lambda0;           /**< [0.01] initial LM damping, > 0 */

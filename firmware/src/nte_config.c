@@ -42,8 +42,8 @@ static void set_common(nte_config_t* cfg, const int32_t model, const nte_schedul
     cfg->f1_excess = NTE_K_NOMINAL_F1_EXCESS;
     cfg->estimator = nte_estimator_bank;
     cfg->robust.buffer_len = 96;
-    cfg->robust.fit_substeps = 4;
-    cfg->robust.fit_iterations = 20;
+    cfg->robust.fit_substeps = 2;
+    cfg->robust.fit_iterations = 8;
     cfg->robust.min_entries = 24;
     cfg->robust.restart_p0_u = NTE_K_ROB_RESTART_P0_U;
     cfg->robust.lm_lambda0 = NTE_K_ROB_LM_LAMBDA0;
