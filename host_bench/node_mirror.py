@@ -80,6 +80,7 @@ class NodeMirror:
     base_id: int | None = None
     depth_timeout_us: int = 50000
     resync_gap_us: int = 20000
+    command_interval_us: int = 100000
     params_per_step: int = 1
     db: NteDatabase = field(init=False)
     estimates: list[EstimateOut] = field(default_factory=list)
@@ -100,6 +101,8 @@ class NodeMirror:
         #: per stream, a sample held for a time jump (nte_node_pending_t)
         self.pending: dict[str, dict | None] = {"Depth": None, "Force": None}
         self.param_next = 0
+        self.last_command_us: int | None = None
+        self._last_cmd_status = "ok"
         self._start(self.model)
 
     # ------------------------------------------------------------------ estimator
@@ -107,12 +110,17 @@ class NodeMirror:
         p = PRESETS[self.preset]
         return make_config(p, model, "default", "all"), p.params.as_list()
 
-    def _start(self, model: int) -> None:
+    def _start(self, model: int, estimator: str = "bank") -> None:
         cfg, nominal = self._cfg(model)
         self.model = model
+        self.estimator = estimator
         self.cfg = cfg
         self.nominal = nominal
-        self.bank = FilterBank(self.R, cfg, [nominal])
+        if estimator == "robust":
+            from reference_py.robust import RobustEstimator
+            self.bank = RobustEstimator(self.R, cfg, [nominal])
+        else:
+            self.bank = FilterBank(self.R, cfg, [nominal])
         self.stepped = False
         self.last = EstimateOut(0, 0, 0, 0, 1, 0, 0, 0)
         self.last_vals = (0.0, 0.0, 0.0)
@@ -357,6 +365,7 @@ class NodeMirror:
     def _e2e(self, name: str, data: bytes) -> dict | None:
         """E2E check of a Command frame (counted as the node counts it), then its raw signals."""
         status, _ = self.rx.check(name, data)
+        self._last_cmd_status = status
         if status == "skipped":
             self._count("counter_skipped")
         if status not in ("ok", "skipped"):
@@ -365,8 +374,10 @@ class NodeMirror:
         return self.db.db.get_message_by_name(name).decode(bytes(data), scaling=False,
                                                             decode_choices=False)
 
-    def feed(self, can_id: int, data: bytes, extended: bool = False, remote: bool = False) -> None:
-        """One frame as the node receives it."""
+    def feed(self, can_id: int, data: bytes, extended: bool = False, remote: bool = False,
+             t_us: int | None = None) -> None:
+        """One frame as the node receives it; t_us = the node's port clock at reception (the
+        command rate limit; the timestamps of nte-node's --received / --replay logs)."""
         name = None if (extended or remote) else self.db.name_of(can_id)
         if name not in ("Depth", "Force", "Command"):
             self._count("unknown_id")
@@ -380,28 +391,42 @@ class NodeMirror:
         sig = self._e2e(name, bytes(data))
         if sig is None:
             return
-        if name == "Command":
-            if not all(0 <= int(sig[k]) <= 2 for k in ("ModelSel", "EstimatorSel", "AdaptCmd")):
-                self._count("out_of_range")
-                return
-            refused = False
-            m = int(sig["ModelSel"])
-            if m in (1, 2) and m != self.model:
-                self._start(m)
-            if int(sig["EstimatorSel"]) == 2 or int(sig["AdaptCmd"]) == 1:
-                refused = True
-            if int(sig["Reset"]):
-                self.bank.reset()
-                self.stepped = False
-                self.last = EstimateOut(0, 0, 0, 0, 1, 0, 0, 0)
-                self.last_vals = (0.0, 0.0, 0.0)
-            if refused:
-                self._count("command_refused")
+        self._on_command(sig, t_us)
+
+    def _on_command(self, sig: dict, t_us: int | None) -> None:
+        """The node's command rules (nte_node.h, COMMANDS): applied entirely or not at all."""
+        if not all(0 <= int(sig[k]) <= 2 for k in ("ModelSel", "EstimatorSel", "AdaptCmd")):
+            self._count("out_of_range")
             return
+        if self._last_cmd_status == "skipped":
+            self._count("command_stale")
+            return
+        now = 0 if t_us is None else t_us
+        if self.last_command_us is not None and now - self.last_command_us < self.command_interval_us:
+            self._count("command_rate_limited")
+            return
+        model, estimator = self.model, self.estimator
+        if int(sig["ModelSel"]):
+            model = int(sig["ModelSel"])
+        if int(sig["EstimatorSel"]):
+            estimator = "robust" if int(sig["EstimatorSel"]) == 2 else "bank"
+        restart = (model, estimator) != (self.model, self.estimator)
+        if int(sig["AdaptCmd"]) == 1 or ((restart or int(sig["Reset"])) and self.last.in_tissue):
+            self._count("command_refused")
+            return
+        if restart:
+            self._start(model, estimator)
+        if int(sig["Reset"]):
+            self.bank.reset()
+            self.stepped = False
+            self.last = EstimateOut(0, 0, 0, 0, 1, 0, 0, 0)
+            self.last_vals = (0.0, 0.0, 0.0)
+        self.last_command_us = now
 
     def feed_all(self, frames: Iterable) -> "NodeMirror":
         for m in frames:
-            self.feed(m.arbitration_id, bytes(m.data), m.is_extended_id, m.is_remote_frame)
+            self.feed(m.arbitration_id, bytes(m.data), m.is_extended_id, m.is_remote_frame,
+                      int(round(m.timestamp * 1e6)))
         return self
 
 

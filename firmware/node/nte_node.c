@@ -17,7 +17,7 @@ static const char* const nte_node_event_names[NTE_NODE_EVENT_COUNT] = {
     "wrong_dlc",      "unknown_id",    "bad_crc",        "counter_invalid", "counter_repeated",
     "counter_skipped", "out_of_range", "time_backwards", "queue_overflow",  "send_failed",
     "command_refused", "stale",        "receive_error",  "encode_error",    "time_jump_dropped",
-    "time_resync"};
+    "time_resync",     "command_stale", "command_rate_limited"};
 
 /* Signed difference a - b of two unwrapped tick counts (they wrap modulo 2^32). */
 static int32_t nte_node_tdiff(uint32_t a, uint32_t b)
@@ -46,6 +46,7 @@ void nte_node_config_default(nte_node_config_t* cfg, int32_t model)
     cfg->params_per_step = 1u;
     cfg->rx_budget = 64u;
     cfg->resync_gap_us = 20000u;
+    cfg->command_interval_us = 100000u;
 }
 
 static nte_node_err_t nte_node_check(const nte_node_config_t* cfg, const nte_node_port_t* port)
@@ -60,7 +61,7 @@ static nte_node_err_t nte_node_check(const nte_node_config_t* cfg, const nte_nod
         (cfg->heartbeat_period_us > 10000000u) || (cfg->params_per_step < 1u) ||
         (cfg->params_per_step > (uint32_t)NTE_FRAMES_PARAM_COUNT) || (cfg->rx_budget < 1u) ||
         (cfg->rx_budget > 65535u) || (cfg->resync_gap_us < 1000u) ||
-        (cfg->resync_gap_us > 3000000u)) {
+        (cfg->resync_gap_us > 3000000u) || (cfg->command_interval_us > 10000000u)) {
         return nte_node_err_bad_config;
     }
     if ((cfg->estimator[0].model != 1) || (cfg->estimator[1].model != 2) ||
@@ -71,13 +72,16 @@ static nte_node_err_t nte_node_check(const nte_node_config_t* cfg, const nte_nod
     return nte_node_ok;
 }
 
-/* (Re)start the estimator with `model`; on failure the previous one is kept. */
-static bool nte_node_start_model(nte_node_t* self, int32_t model)
+/* (Re)start the estimator with `model` and `estimator`; on failure the previous one is kept. */
+static bool nte_node_start_model(nte_node_t* self, int32_t model, nte_estimator_t estimator)
 {
-    if (nte_init(&self->est, &self->cfg.estimator[model - 1]) != nte_err_ok) {
+    nte_config_t c = self->cfg.estimator[model - 1];
+    c.estimator = estimator;
+    if (nte_init(&self->est, &c) != nte_err_ok) {
         return false;
     }
     self->model = model;
+    self->estimator = estimator;
     self->state = nte_node_state_init;
     (void)memset(&self->last, 0, sizeof self->last);
     self->last.adapting = true;
@@ -106,7 +110,7 @@ nte_node_err_t nte_node_init(nte_node_t* self, const nte_node_config_t* cfg,
         (void)nte_frames_tx_init(&self->tx[i], out_kinds[i]);
     }
     nte_frames_clock_reset(&self->clock);
-    if (!nte_node_start_model(self, cfg->model)) {
+    if (!nte_node_start_model(self, cfg->model, cfg->estimator[cfg->model - 1].estimator)) {
         return nte_node_err_estimator;
     }
     self->t_start_us = port->now_us(port->ctx);
@@ -233,7 +237,7 @@ static void nte_node_heartbeat(nte_node_t* self, uint64_t now)
     const uint64_t up_us = now - self->t_start_us;
     hb.node_state = (uint8_t)self->state;
     hb.active_model = (uint8_t)(self->model - 1);
-    hb.active_estimator = 0u;
+    hb.active_estimator = (self->estimator == nte_estimator_robust) ? 1u : 0u;
     /* 0.1 s steps, reduced modulo the frame's wrap (1048576 steps) before the float */
     hb.uptime_s = (float)(uint32_t)((up_us / 100000u) % 1048576u) * 0.1f;
     hb.e2e_errors = ev[nte_node_ev_wrong_dlc] + ev[nte_node_ev_bad_crc] +
@@ -583,30 +587,46 @@ static void nte_node_on_sample(nte_node_t* self, uint32_t stream, const nte_node
     p->b = in.b;
 }
 
+/* A Command (rules in nte_node.h, "COMMANDS"): applied entirely or not at all. */
 static void nte_node_on_command(nte_node_t* self, const nte_node_frame_t* fr)
 {
     nte_frames_command_t c;
     nte_e2e_result_t e2e = nte_e2e_ok;
     uint8_t lost = 0u;
-    bool refused = false;
     const nte_frames_err_t err = nte_frames_decode_command(
         &self->rx[NTE_NODE_IN_COMMAND], fr->data, fr->len, &c, &e2e, &lost);
     if (!nte_node_decoded(self, err, e2e, lost)) {
         return;
     }
     self->counters.rx_accepted[NTE_NODE_IN_COMMAND]++;
-    if ((c.model_sel == NTE_FRAMES_MODEL_I) || (c.model_sel == NTE_FRAMES_MODEL_II)) {
-        const int32_t m = (c.model_sel == NTE_FRAMES_MODEL_I) ? 1 : 2;
-        if ((m != self->model) && !nte_node_start_model(self, m)) {
-            refused = true;
-        }
+    if (e2e == nte_e2e_skipped) {
+        /* not the successor of the last command: a replayed (stale) frame, or one after a
+         * lost command -- the sender repeats it with the next counter */
+        nte_node_count(self, nte_node_ev_command_stale);
+        return;
     }
-    /* the library has no robust estimator and no way to freeze adaptation: refused */
-    if (c.estimator_sel == NTE_FRAMES_ESTIMATOR_ROBUST) {
-        refused = true;
+    const uint64_t now = self->port.now_us(self->port.ctx);
+    if (self->have_command && ((now - self->last_command_us) < self->cfg.command_interval_us)) {
+        nte_node_count(self, nte_node_ev_command_rate_limited);
+        return;
     }
-    if (c.adapt_cmd == NTE_FRAMES_ADAPT_FREEZE) {
-        refused = true;
+    int32_t model = self->model;
+    nte_estimator_t estimator = self->estimator;
+    if (c.model_sel != NTE_FRAMES_MODEL_KEEP) {
+        model = (c.model_sel == NTE_FRAMES_MODEL_I) ? 1 : 2;
+    }
+    if (c.estimator_sel != NTE_FRAMES_ESTIMATOR_KEEP) {
+        estimator = (c.estimator_sel == NTE_FRAMES_ESTIMATOR_ROBUST) ? nte_estimator_robust
+                                                                    : nte_estimator_bank;
+    }
+    const bool restart = (model != self->model) || (estimator != self->estimator);
+    /* freeze: the library has no way to hold the parameters; a restart or reset needs the
+     * needle out of tissue (the last estimate's InTissue clear) */
+    if ((c.adapt_cmd == NTE_FRAMES_ADAPT_FREEZE) ||
+        ((restart || c.reset) && self->last.in_tissue) ||
+        (restart && !nte_node_start_model(self, model, estimator))) {
+        nte_node_count(self, nte_node_ev_command_refused);
+        return;
     }
     if (c.reset) {
         (void)nte_reset(&self->est);
@@ -614,11 +634,9 @@ static void nte_node_on_command(nte_node_t* self, const nte_node_frame_t* fr)
         (void)memset(&self->last, 0, sizeof self->last);
         self->last.adapting = true;
     }
-    if (refused) {
-        nte_node_count(self, nte_node_ev_command_refused);
-    } else {
-        self->counters.commands_applied++;
-    }
+    self->have_command = true;
+    self->last_command_us = now;
+    self->counters.commands_applied++;
 }
 
 static void nte_node_on_frame(nte_node_t* self, const nte_node_frame_t* fr)

@@ -38,6 +38,21 @@
  *   samples of the next `resync_gap_us`.  A last sample after a jump with nothing behind it
  *   stays held.
  *
+ * COMMANDS (the Command frame)
+ *   A command is applied entirely or not at all.  ModelSel I/II and EstimatorSel bank/robust
+ *   re-initialise the estimator with that model and estimator (the configured nominal values;
+ *   the robust estimator refines after each insertion: nte.h); Reset restarts the running one.
+ *   Rules: (1) the E2E counter must be the successor of the last command's: a replayed frame
+ *   (stale counter) or one after a lost command is ignored (command_stale; the sender repeats
+ *   with its next counter); a repeated counter fails E2E already.  (2) At most one command per
+ *   `command_interval_us` of the port clock (command_rate_limited).  (3) A model or estimator
+ *   change and a reset take effect only while the needle is out of tissue (the last estimate's
+ *   InTissue bit clear, or no estimate yet): during an insertion they would throw away the
+ *   identification in progress; refused (command_refused).  (4) AdaptCmd freeze is refused
+ *   (the library cannot hold its parameters); resume is accepted and changes nothing.  E2E
+ *   protects integrity (corruption, loss, repetition), not authenticity: any sender on the bus
+ *   can compute the CRC and follow the counter.  Protect the bus, or add a MAC, if that matters.
+ *
  * THE PORT INTERFACE (bring the node to a board by writing these three functions)
  *   nte_node_port_t holds three function pointers and a context pointer passed back to each:
  *     receive(ctx, frame)  NON-BLOCKING: 1 = *frame filled with one received frame, 0 = nothing
@@ -135,17 +150,21 @@ typedef enum nte_node_event_t {
     nte_node_ev_time_backwards = 7,   /**< sample not later than the previous one of its stream */
     nte_node_ev_queue_overflow = 8,   /**< force frame dropped: force queue full */
     nte_node_ev_send_failed = 9,      /**< port send() refused an output frame: dropped */
-    nte_node_ev_command_refused = 10, /**< valid command the node cannot carry out (robust
-                                           estimator, freeze adaptation): ignored */
+    nte_node_ev_command_refused = 10, /**< valid command the node may not carry out (model,
+                                           estimator or reset while in tissue; freeze): ignored */
     nte_node_ev_stale = 11,           /**< force sample without recent depth: estimate held */
     nte_node_ev_receive_error = 12,   /**< port receive() reported an error */
     nte_node_ev_encode_error = 13,    /**< an output could not be encoded (non-finite): the
                                            Estimate is sent with Fault set instead */
     nte_node_ev_time_jump_dropped = 14, /**< sample held for a time jump and not confirmed by
                                            the next sample of its stream: dropped */
-    nte_node_ev_time_resync = 15      /**< time jump confirmed: the stream resynchronised */
+    nte_node_ev_time_resync = 15,     /**< time jump confirmed: the stream resynchronised */
+    nte_node_ev_command_stale = 16,   /**< command whose counter is not the successor of the
+                                           last command's (replayed or after a loss): ignored */
+    nte_node_ev_command_rate_limited = 17 /**< command within command_interval_us of the last
+                                           applied one: ignored */
 } nte_node_event_t;
-#define NTE_NODE_EVENT_COUNT 16
+#define NTE_NODE_EVENT_COUNT 18
 
 /** Counters (monotonic, wrap modulo 2^32); public, the application may clear them. */
 typedef struct nte_node_counters_t {
@@ -170,6 +189,8 @@ typedef struct nte_node_config_t {
     uint32_t resync_gap_us;       /**< a sample further than this (sensor time) from its stream's
                                        newest is a time jump, held until confirmed (see TIME),
                                        1000..3000000 us (default 20000) */
+    uint32_t command_interval_us; /**< port clock: a command within this of the last applied
+                                       one is ignored, 0..10000000 us (default 100000) */
 } nte_node_config_t;
 
 /** Result of the node functions: 0 success, negative error. */
@@ -216,6 +237,9 @@ typedef struct nte_node_t {
     nte_node_port_t port;
     nte_t est;
     int32_t model;
+    nte_estimator_t estimator;
+    bool have_command;
+    uint64_t last_command_us;     /* port clock of the last applied command */
     nte_e2e_rx_t rx[3];           /* depth, force, command */
     nte_e2e_tx_t tx[3];           /* estimate, params, heartbeat */
     nte_frames_clock_t clock;
@@ -237,8 +261,9 @@ typedef struct nte_node_t {
     nte_node_counters_t counters;
 } nte_node_t;
 
-/** Defaults: base 0x200, the given model, nte_config_default for both models (schedule all),
- *  50 ms depth timeout, 100 ms heartbeat, one Params frame per step, 64 frames per poll. */
+/** Defaults: base 0x200, the given model, nte_config_default for both models (schedule all,
+ *  bank estimator), 50 ms depth timeout, 100 ms heartbeat, one Params frame per step, 64 frames
+ *  per poll, 20 ms resync gap, 100 ms between commands. */
 void nte_node_config_default(nte_node_config_t* cfg, int32_t model);
 
 /** Validate cfg and the port, initialise the estimator and every queue; the first heartbeat is

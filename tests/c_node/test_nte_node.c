@@ -650,7 +650,36 @@ static void test_send_failure(void** state)
     assert_int_equal(g_node_a.counters.steps, 15u);
 }
 
-/* Commands: bad CRC ignored and counted; reset restarts the estimator; model select; refusals. */
+/* Retraction: depth 0 from t to t + 50 ticks and a force sample at t + 50 (out of tissue). */
+static void retract(fake_port_t* p, bench_t* b, uint32_t t)
+{
+    for (uint32_t k = 0u; k <= 50u; k += 10u) {
+        push(p, depth_frame(b, t + k, 0.0f, -10.0f));
+    }
+    push(p, force_frame(b, t + 50u, 0.0f));
+}
+
+/* Heartbeat ActiveEstimator of the last heartbeat sent. */
+static int last_heartbeat_estimator(const fake_port_t* p)
+{
+    nte_e2e_rx_t rx;
+    int est = -1;
+    (void)nte_frames_rx_init(&rx, nte_frames_kind_heartbeat);
+    for (size_t i = 0u; i < p->tx_n; i++) {
+        if (p->tx[i].id == BASE + NTE_FRAMES_OFFSET_HEARTBEAT) {
+            nte_frames_heartbeat_t hb;
+            assert_int_equal(nte_frames_decode_heartbeat(&rx, p->tx[i].data, 8u, &hb, NULL,
+                                                         NULL),
+                             nte_frames_ok);
+            est = (int)hb.active_estimator;
+        }
+    }
+    return est;
+}
+
+/* Commands: bad CRC ignored; reset, model and estimator changes only out of tissue; a replayed
+ * (stale-counter) command has no effect; at most one command per command_interval_us; freeze
+ * refused; the robust estimator selected (heartbeat says so). */
 static void test_commands(void** state)
 {
     nte_node_config_t cfg;
@@ -658,7 +687,7 @@ static void test_commands(void** state)
     bench_t b2;
     (void)state;
     nte_node_config_default(&cfg, 2);
-    /* reference: a fresh node given only the second half */
+    /* reference: a fresh node given only the part after the reset */
     start(&g_node_b, &g_port_b, &cfg);
     bench_init(&b2);
     scenario(&g_port_b, &b2, 3000u, 10u, 20u, 0);
@@ -674,8 +703,22 @@ static void test_commands(void** state)
     assert_int_equal(g_node_a.counters.events[nte_node_ev_bad_crc], 1u);
     assert_int_equal(g_node_a.counters.commands_applied, 0u);
     assert_int_equal(nte_node_state(&g_node_a), nte_node_state_running);
-    /* a valid reset */
-    push(&g_port_a, command_frame(&b, true, 0u, 0u, 0u));
+    /* in tissue: a reset and a model change are refused */
+    const nte_node_frame_t early_reset = command_frame(&b, true, 0u, 0u, 0u);
+    push(&g_port_a, early_reset);
+    g_port_a.now += 200000u;
+    run_all(&g_node_a, &g_port_a);
+    push(&g_port_a, command_frame(&b, false, NTE_FRAMES_MODEL_I, 0u, 0u));
+    g_port_a.now += 200000u;
+    run_all(&g_node_a, &g_port_a);
+    assert_int_equal(g_node_a.counters.events[nte_node_ev_command_refused], 2u);
+    assert_int_equal(g_node_a.counters.commands_applied, 0u);
+    assert_int_equal(nte_node_state(&g_node_a), nte_node_state_running);
+    assert_int_equal(nte_node_model(&g_node_a), 2);
+    /* out of tissue: a valid reset */
+    retract(&g_port_a, &b, 2000u);
+    const nte_node_frame_t reset = command_frame(&b, true, 0u, 0u, 0u);
+    push(&g_port_a, reset);
     run_all(&g_node_a, &g_port_a);
     assert_int_equal(g_node_a.counters.commands_applied, 1u);
     assert_int_equal(nte_node_state(&g_node_a), nte_node_state_init);
@@ -684,20 +727,15 @@ static void test_commands(void** state)
     run_all(&g_node_a, &g_port_a);
     /* the estimates after the reset equal the fresh node's */
     {
-        static fake_port_t tail;
-        memset(&tail, 0, sizeof tail);
-        for (size_t i = before; i < g_port_a.tx_n; i++) {
-            tail.tx[tail.tx_n++] = g_port_a.tx[i];
-        }
-        /* counters of the fresh node's frames start at 0; re-sync by decoding both */
         static nte_frames_estimate_t ea[64];
         static nte_frames_estimate_t eb[64];
         nte_e2e_rx_t rx;
         size_t na = 0u;
         (void)nte_frames_rx_init(&rx, nte_frames_kind_estimate);
-        for (size_t i = 0u; i < tail.tx_n; i++) {
-            if (tail.tx[i].id == BASE + NTE_FRAMES_OFFSET_ESTIMATE) {
-                assert_true(nte_frames_decode_estimate(&rx, tail.tx[i].data, 8u, &ea[na++],
+        for (size_t i = before; i < g_port_a.tx_n; i++) {
+            if (g_port_a.tx[i].id == BASE + NTE_FRAMES_OFFSET_ESTIMATE) {
+                assert_true(na < 64u);
+                assert_true(nte_frames_decode_estimate(&rx, g_port_a.tx[i].data, 8u, &ea[na++],
                                                        NULL, NULL) == nte_frames_ok);
             }
         }
@@ -705,20 +743,52 @@ static void test_commands(void** state)
         assert_int_equal(na, nb);
         assert_memory_equal(ea, eb, na * sizeof ea[0]);
     }
-    /* model I selected: the node restarts with Model I (heartbeat says so) */
+    retract(&g_port_a, &b, 4000u);
+    run_all(&g_node_a, &g_port_a);
+    /* the last command again fails E2E (repeated counter); an older one replayed (a stale
+     * counter): no effect */
+    g_port_a.now += 200000u;
+    push(&g_port_a, reset);
+    push(&g_port_a, early_reset);
+    run_all(&g_node_a, &g_port_a);
+    assert_int_equal(g_node_a.counters.events[nte_node_ev_counter_repeated], 1u);
+    assert_int_equal(g_node_a.counters.events[nte_node_ev_command_stale], 1u);
+    assert_int_equal(g_node_a.counters.commands_applied, 1u);
+    assert_int_equal(nte_node_state(&g_node_a), nte_node_state_running);
+    /* the sender's next command follows the replayed counter: stale too, then accepted */
+    push(&g_port_a, command_frame(&b, false, NTE_FRAMES_MODEL_I, 0u, 0u));
     push(&g_port_a, command_frame(&b, false, NTE_FRAMES_MODEL_I, 0u, 0u));
     run_all(&g_node_a, &g_port_a);
+    assert_int_equal(g_node_a.counters.events[nte_node_ev_command_stale], 2u);
     assert_int_equal(nte_node_model(&g_node_a), 1);
     assert_int_equal(g_node_a.counters.commands_applied, 2u);
-    /* robust and freeze are refused (the library has neither), counted */
-    push(&g_port_a, command_frame(&b, false, 0u, NTE_FRAMES_ESTIMATOR_ROBUST, 0u));
-    push(&g_port_a, command_frame(&b, false, 0u, 0u, NTE_FRAMES_ADAPT_FREEZE));
-    push(&g_port_a, command_frame(&b, false, 0u, NTE_FRAMES_ESTIMATOR_BANK,
+    /* rate limit: a second command 50 ms later is ignored, one 150 ms later applied */
+    g_port_a.now += 50000u;
+    push(&g_port_a, command_frame(&b, false, NTE_FRAMES_MODEL_II, 0u, 0u));
+    run_all(&g_node_a, &g_port_a);
+    assert_int_equal(g_node_a.counters.events[nte_node_ev_command_rate_limited], 1u);
+    assert_int_equal(nte_node_model(&g_node_a), 1);
+    g_port_a.now += 100000u;
+    /* freeze refused (the whole command: the model stays), robust selected */
+    push(&g_port_a, command_frame(&b, false, NTE_FRAMES_MODEL_II, 0u, NTE_FRAMES_ADAPT_FREEZE));
+    run_all(&g_node_a, &g_port_a);
+    assert_int_equal(g_node_a.counters.events[nte_node_ev_command_refused], 3u);
+    assert_int_equal(nte_node_model(&g_node_a), 1);
+    g_port_a.now += 200000u;
+    push(&g_port_a, command_frame(&b, false, NTE_FRAMES_MODEL_II, NTE_FRAMES_ESTIMATOR_ROBUST,
                                   NTE_FRAMES_ADAPT_RESUME));
     run_all(&g_node_a, &g_port_a);
-    assert_int_equal(g_node_a.counters.events[nte_node_ev_command_refused], 2u);
     assert_int_equal(g_node_a.counters.commands_applied, 3u);
-    assert_int_equal(nte_node_model(&g_node_a), 1);
+    assert_int_equal(nte_node_model(&g_node_a), 2);
+    assert_int_equal(g_node_a.estimator, nte_estimator_robust);
+    assert_int_equal(g_node_a.est.cfg.estimator, nte_estimator_robust);
+    g_port_a.now += 200000u; /* a heartbeat falls due */
+    run_all(&g_node_a, &g_port_a);
+    assert_int_equal(last_heartbeat_estimator(&g_port_a), 1);
+    const uint32_t steps = g_node_a.counters.steps;
+    scenario(&g_port_a, &b, 5000u, 10u, 20u, 0);
+    run_all(&g_node_a, &g_port_a);
+    assert_int_equal(g_node_a.counters.steps, steps + 20u);
 }
 
 /* Params rotate through all seven indices; fixed ones carry std 0; Heartbeat on the clock. */

@@ -174,7 +174,9 @@ def _bad_traffic_frames() -> tuple[list, dict]:
 
     for k in range(0, 30000, 10):                      # ticks of 100 us: 3 s, depth 1 kHz
         t = k * TICK_S
-        depth = max(0.0, 10.0 * (t - 0.1))
+        # insertion, out of tissue 2.4 .. 2.55 s (the valid reset at 2.5 s needs it), again
+        depth = (max(0.0, 10.0 * (t - 0.1)) if k < 24000 else
+                 0.0 if k < 25500 else 10.0 * (t - 2.55))
         st = (k % 65536) * TICK_S
         if not (12000 <= k < 14000):                    # depth missing 1.2 .. 1.4 s
             add(t, tx.message("Depth", {"Depth": depth, "Velocity": 10.0, "SensorTime": st}))

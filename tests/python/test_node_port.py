@@ -152,3 +152,54 @@ def test_replay_real_clock_jump_recovers(tmp_path: Path, paper_frames: list,
     late = [e for t, e in zip(t_force, est) if t >= 2.05]
     assert late and not any(e.stale for e in late)
     assert ev["stale"] <= 10
+
+
+def test_replay_commands_rules_and_robust_estimator(tmp_path: Path) -> None:
+    """Two paper insertions; commands on the bus: robust during the first insertion (refused:
+    in tissue), robust between the insertions (applied: the second runs the robust estimator,
+    bit-identical to the mirror's reference_py RobustEstimator), Model I 50 ms later (rate
+    limited), the first command replayed (stale counter: no effect; the sender's next command
+    follows the replayed counter and is ignored too), freeze (refused)."""
+    csv = tmp_path / "paper2.csv"
+    subprocess.run([sys.executable, "-m", "reference_py", "simulate", "--preset", "paper-10mms",
+                    "--depth", "20", "--dwell", "0.5", "--seed", "1", "--cycles", "2",
+                    "--out", str(csv)], check=True, cwd=ROOT, stdout=subprocess.DEVNULL)
+    frames = scenario_frames(str(csv), DB, 1000.0)
+    depth_id = DB.frame_id("Depth")
+    t_end = frames[-1][0]
+    # out of tissue between the insertions: a depth-0 stretch after the first one
+    t_out = next(t for t, m in frames if m.arbitration_id == depth_id and 1.0 < t < t_end - 1.0
+                 and DB.decode_unchecked("Depth", bytes(m.data))["Depth"] == 0.0)
+    tx = DB.sender()
+
+    def cmd(**kw):
+        sig = {"Reset": 0, "ModelSel": 0, "EstimatorSel": 0, "AdaptCmd": 0, **kw}
+        return tx.message("Command", sig)
+
+    first = cmd(EstimatorSel=2)
+    plan = [(1.0, first), (t_out + 0.1, cmd(EstimatorSel=2)), (t_out + 0.15, cmd(ModelSel=1)),
+            (t_out + 0.3, first), (t_out + 0.45, cmd(AdaptCmd=1)), (t_out + 0.6, cmd(AdaptCmd=1))]
+    merged = sorted(frames + plan, key=lambda e: e[0])
+    log = tmp_path / "cmd.in.log"
+    write_candump(log, merged, "vcan0", 1.0)
+    rec, stats = tmp_path / "cmd.out.log", tmp_path / "cmd.stats.json"
+    r = subprocess.run([str(node_binary()), "--replay", str(log), "--record", str(rec),
+                        "--stats", str(stats), "--model", "2", "--preset", "paper-10mms"],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    import json
+    st = json.loads(stats.read_text())
+    sent = list(can.CanutilsLogReader(str(rec)))
+    mirror = NodeMirror().feed_all(can.CanutilsLogReader(str(log)))   # with the port clock
+    assert mirror.estimator == "robust"
+    assert_node_equals_mirror(sent, mirror)
+    ev = st["events"]
+    assert st["commands_applied"] == 1
+    assert ev["command_refused"] == 2          # in tissue; freeze
+    assert ev["command_rate_limited"] == 1
+    assert ev["command_stale"] == 2            # the replay; the next one (follows the replay)
+    assert ev == {**ev, **{k: v for k, v in mirror.events.items() if k in ev}}
+    rx = DB.receiver()
+    hb = [rx.decode(m.arbitration_id, bytes(m.data))[1] for m in sent
+          if m.arbitration_id == DB.frame_id("Heartbeat")]
+    assert hb[0]["ActiveEstimator"] == 0 and hb[-1]["ActiveEstimator"] == 1
