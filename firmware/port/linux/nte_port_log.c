@@ -77,7 +77,8 @@ static int parse_line(const char* s, uint64_t* t_us, nte_node_frame_t* f)
         f->data[f->len++] = (uint8_t)((hexval(s[0]) << 4) | hexval(s[1]));
         s += 2;
     }
-    if ((*s != '\0') && (*s != '\n') && (*s != '\r')) {
+    /* the end of the line, or a direction flag after a space (" T" / " R", python-can) */
+    if ((*s != '\0') && (*s != '\n') && (*s != '\r') && (*s != ' ')) {
         return 0;
     }
     *t_us = (sec * 1000000u) + usec;
