@@ -3,8 +3,9 @@
 A 1 s scenario (1 kHz depth, 200 Hz force, starting at t = 6.4 s so that the 16-bit sensor
 clock wraps in the middle) is replayed at half speed; candump captures the bus. The capture is
 decoded with host_bench.dbc and must hold every sample, in order, E2E-valid with continuous
-counters, values within half a resolution step, sensor times equal to the scenario's, and
-spacing that follows the scenario's timestamps. The replay's own records (CSV and candump-format
+counters, values within half a resolution step, sensor times equal to the scenario's; its
+timing is printed. The pacing rule (never early, catch up after a stall, worst lateness
+reported) is asserted on a virtual clock, where load cannot move it. The replay's own records (CSV and candump-format
 log) must hold what it sent (T) and what the stand-in node sent (R).
 Plus offline tests of the scenario reader and the scheduler.
 """
@@ -74,6 +75,74 @@ def test_schedule_counts_and_force_every(tmp_path: Path) -> None:
     assert all(a.t_s <= b.t_s for a, b in zip(frames, frames[1:]))
 
 
+class _VirtualClock:
+    """Stands in for the replay's time module: sleep advances the clock, nothing waits."""
+
+    def __init__(self) -> None:
+        self.now = 1000.0
+        self.sleeps = 0
+
+    def perf_counter(self) -> float:
+        return self.now
+
+    def time(self) -> float:
+        return self.now
+
+    def sleep(self, s: float) -> None:
+        self.sleeps += 1
+        self.now += max(s, 1e-5)    # sleep(0) still lets a little time pass, as a real one
+
+
+class _StampingBus(can.BusABC):
+    """A bus that records the virtual time of every send and can stall once."""
+
+    def __init__(self, clock: _VirtualClock, stall_at: int = -1, stall_s: float = 0.0) -> None:
+        self.clock, self.stall_at, self.stall_s = clock, stall_at, stall_s
+        self.sent: list[float] = []
+        super().__init__(channel="virtual-clock")
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        self.sent.append(self.clock.now)
+        if len(self.sent) - 1 == self.stall_at:
+            self.clock.now += self.stall_s     # the host stalls right after this send
+
+    def _recv_internal(self, timeout: float | None):  # type: ignore[no-untyped-def]
+        return None, False
+
+
+@pytest.mark.parametrize("speed", [0.5, 1.0, 4.0])
+def test_replay_paces_by_schedule(monkeypatch: pytest.MonkeyPatch, tmp_path: Path,
+                                  speed: float) -> None:
+    """Each frame leaves at start + (t - t0) / speed, never earlier; after a stall the
+    replay catches up (no frame delayed past the stall) and reports its worst lateness."""
+    import host_bench.replay as rp
+    rows = read_scenario(str(write_scenario_path(tmp_path)))
+    frames = schedule(rows, NteDatabase())
+    clock = _VirtualClock()
+    monkeypatch.setattr(rp, "time", clock)
+    stall_at, stall_s = 300, 0.25
+    bus = _StampingBus(clock, stall_at, stall_s)
+    res = rp.replay(bus, frames, speed=speed, tail_s=0.0)
+    bus.shutdown()
+    start = bus.sent[0]
+    assert res.sent == len(frames) == len(bus.sent) == N + 200
+    targets = [start + (f.t_s - frames[0].t_s) / speed for f in frames]
+    assert all(ts >= tg - 1e-9 for ts, tg in zip(bus.sent, targets))       # never early
+    stall_end = bus.sent[stall_at] + stall_s
+    for k, (ts, tg) in enumerate(zip(bus.sent, targets)):
+        if k <= stall_at:
+            assert ts - tg <= 0.0005 + 1e-9, k    # on time, within the sleep's resolution
+        else:
+            assert ts <= max(tg, stall_end) + 0.0005 + 1e-9, k   # caught up after the stall
+    assert res.max_late_s == pytest.approx(stall_end - targets[stall_at + 1], abs=0.0006)
+
+
+def write_scenario_path(tmp_path: Path) -> Path:
+    scen = tmp_path / "scenario.csv"
+    write_scenario(scen)
+    return scen
+
+
 def test_replay_on_vcan(tmp_path: Path) -> None:
     from test_with_vcan import _available  # same availability rule
     if not _available():
@@ -112,22 +181,19 @@ def test_replay_on_vcan(tmp_path: Path) -> None:
     # the sensor clock wrapped inside the scenario (6.5536 s)
     ticks = [round(s["SensorTime"] / TICK_S) for _, s in depth]
     assert sum(1 for a, b in zip(ticks, ticks[1:]) if b < a) == 1
-    # timing at speed 0.5 (depth every 2 ms). Inside the user-mode kernel (one CPU, shared with
-    # candump and the stand-in node) on a loaded 2-core host, single stalls of up to 0.6 s were
-    # seen, after which the replay catches up; so the bounds are on medians: the median interval
-    # between depth frames is 2 ms (back-to-back sending would give <= 1 ms, real time 1 ms),
-    # and the median deviation from the schedule (after removing the common offset) is < 5 ms.
+    # timing at speed 0.5 (depth every 2 ms) on the real bus is a figure, not a gate: inside the
+    # user-mode kernel (one CPU, shared with candump and the stand-in node) on a loaded host,
+    # stalls of up to 0.6 s were seen and a median bound failed on a correct build.  The pacing
+    # rule itself is asserted on a virtual clock (test_replay_paces_by_schedule).
     caps = [ts for ts, _ in depth]
     intervals = sorted(b - a for a, b in zip(caps, caps[1:]))
     med_interval = intervals[len(intervals) // 2]
-    assert 0.0017 <= med_interval <= 0.0023, med_interval
     late = [(ts - caps[0]) - (t - T0) / 0.5 for ts, (t, *_r) in zip(caps, rows)]
     offset = statistics.median(late)
     dev = sorted(abs(x - offset) for x in late)
-    assert dev[len(dev) // 2] < 0.005, dev[len(dev) // 2]
-    print(f"depth interval median {med_interval * 1e3:.3f} ms, schedule deviation median "
-          f"{dev[len(dev) // 2] * 1e3:.3f} ms, p95 {dev[int(0.95 * len(dev))] * 1e3:.2f} ms, "
-          f"max {dev[-1] * 1e3:.1f} ms")
+    print(f"depth interval median {med_interval * 1e3:.3f} ms (schedule 2 ms), schedule "
+          f"deviation median {dev[len(dev) // 2] * 1e3:.3f} ms, p95 "
+          f"{dev[int(0.95 * len(dev))] * 1e3:.2f} ms, max {dev[-1] * 1e3:.1f} ms")
 
     # the replay's own records: its frames as T, the heartbeats as R, in both formats
     log = list(can.CanutilsLogReader(str(tmp_path / "record.log")))
