@@ -114,3 +114,169 @@ def clock_jump(frames: list[tuple[float, can.Message]], db: NteDatabase, at_s: f
         out.append((t, can.Message(arbitration_id=m.arbitration_id, data=data,
                                    is_extended_id=False, timestamp=t)))
     return out
+
+
+# ---------------------------------------------------------------------------------- fault table
+def _reencode(db: NteDatabase, name: str, m: can.Message, **changes) -> can.Message:
+    sig = db.decode_unchecked(name, bytes(m.data))
+    sig.pop("Crc", None)
+    sig.pop("Counter", None)
+    sig.update(changes)
+    return can.Message(arbitration_id=m.arbitration_id, data=db.encode(name, sig, m.data[1] & 0x0F),
+                       is_extended_id=False, timestamp=m.timestamp)
+
+
+def fault_rows(frames: list[tuple[float, can.Message]], db: NteDatabase, seed: int = 7):
+    """(name, frames with the fault, fault start s, fault end s) for every row of the table."""
+    rng = np.random.default_rng(seed)
+    dep, frc = db.frame_id("Depth"), db.frame_id("Force")
+    t_end = frames[-1][0]
+    rows = []
+    for p in (0.01, 0.05, 0.20):
+        keep = rng.random(len(frames)) >= p
+        rows.append((f"loss {p:.0%}", [f for f, k in zip(frames, keep) if k], 0.0, t_end))
+    dup = []
+    for f in frames:
+        dup.append(f)
+        if rng.random() < 0.05:
+            dup.append(f)
+    rows.append(("duplicates 5 %", dup, 0.0, t_end))
+    reo = list(frames)
+    i = 0
+    while i + 1 < len(reo):
+        if rng.random() < 0.05 and reo[i][1].arbitration_id != reo[i + 1][1].arbitration_id:
+            reo[i], reo[i + 1] = reo[i + 1], reo[i]
+            i += 1
+        i += 1
+    rows.append(("reorder 5 %", reo, 0.0, t_end))
+    rows.append(("burst (seeded, 2/s)", burst(frames, db, seed=seed)[0], 0.0, t_end))
+    for gap in (1.0, 10.0):
+        rows.append((f"depth dropout {gap:.0f} s",
+                     [f for f in frames if not (f[1].arbitration_id == dep and 5.0 <= f[0] < 5.0 + gap)],
+                     5.0, 5.0 + gap))
+    stuck = None
+    out = []
+    for t, m in frames:
+        if m.arbitration_id == frc and 5.0 <= t < 6.0:
+            sig = db.decode_unchecked("Force", bytes(m.data))
+            stuck = sig["Force"] if stuck is None else stuck
+            m = _reencode(db, "Force", m, Force=stuck)
+        out.append((t, m))
+    rows.append(("stuck force 1 s", out, 5.0, 6.0))
+    rows.append(("saturated force 1 s",
+                 [(t, _reencode(db, "Force", m, Force=50.0)) if m.arbitration_id == frc and
+                  5.0 <= t < 6.0 else (t, m) for t, m in frames], 5.0, 6.0))
+    rows.append(("clock jump +2 s", clock_jump(frames, db, 5.0, 2.0), 5.0, 5.0))
+    rows.append(("clock jump -1 s", clock_jump(frames, db, 5.0, -1.0), 5.0, 5.0))
+    return rows
+
+
+def run_replay(node: str, frames: list[tuple[float, can.Message]], work: "Path", tag: str,
+               preset: str = "paper-10mms", model: int = 2):
+    """nte-node --replay on frames: (t_s, force_est_n, stale or fault) per Estimate, counters."""
+    import json
+    import subprocess
+
+    from .cli import write_candump
+    log, rec, st = work / f"{tag}.in.log", work / f"{tag}.out.log", work / f"{tag}.stats.json"
+    write_candump(log, frames, "vcan0", 1.0, start=1000.0)
+    subprocess.run([node, "--replay", str(log), "--record", str(rec), "--stats", str(st),
+                    "--model", str(model), "--preset", preset], check=True,
+                   capture_output=True, timeout=600)
+    db = NteDatabase()
+    rx = db.receiver()
+    out = []
+    for m in can.CanutilsLogReader(str(rec)):
+        name, sig, _ = rx.decode(m.arbitration_id, bytes(m.data))
+        if name == "Estimate" and sig is not None:
+            out.append((m.timestamp - 1000.0, float(sig["ForceEst"]),
+                        bool(sig["Stale"]) or bool(sig["Fault"])))
+    return np.array(out, dtype=float).reshape(-1, 3), json.loads(st.read_text())
+
+
+def table(node: str, csv: str, work: "Path", rows: list[str] | None = None) -> list[dict]:
+    """Every fault row (or those named in rows): recovery time after the fault (first estimate
+    after which none is stale or faulted; None for a fault that spans the run), RMS error of the
+    fresh estimates against the true force after recovery (the whole run for a fault that spans
+    it), as a ratio to the fault-free run's over the same span, and the counters that moved."""
+    from .cli import scenario_frames
+    from .replay import read_scenario
+    db = NteDatabase()
+    frames = scenario_frames(csv, db, 1000.0)
+    sc = read_scenario(csv)
+    import csv as _csv
+    with open(csv) as f:
+        rd = list(_csv.DictReader(f))
+    t_true = np.array([float(r["t_s"]) for r in rd])
+    f_true = np.array([float(r["force_true_n"]) for r in rd])
+    del sc
+    clean, st0 = run_replay(node, frames, work, "clean")
+    t0 = 0.0  # Estimate times are scenario times (log time - 1000 s)
+
+    def rms(est: np.ndarray, t_from: float) -> float:
+        sel = (est[:, 0] + t0 >= t_from) & (est[:, 2] == 0)
+        e = est[sel, 1] - np.interp(est[sel, 0] + t0, t_true, f_true)
+        return float(np.sqrt(np.mean(e * e))) if e.size else float("nan")
+
+    out = []
+    for k, (name, fr, a, b) in enumerate(fault_rows(frames, db)):
+        if rows is not None and name not in rows:
+            continue
+        est, st = run_replay(node, fr, work, f"row{k}")
+        t = est[:, 0] + t0
+        bad = np.nonzero((est[:, 2] != 0) & (t >= a))[0]
+        t_rec = t[bad[-1] + 1] if bad.size and bad[-1] + 1 < len(t) else (b if not bad.size else np.inf)
+        whole = a <= frames[0][0] and b >= frames[-1][0]        # the fault spans the run
+        rec = None if whole else max(0.0, float(t_rec) - b)
+        start = 0.0 if whole else max(b, float(t_rec))
+        e_f, e_c = rms(est, start), rms(clean, start)
+        moved = {key: v - st0["events"].get(key, 0) for key, v in st["events"].items()
+                 if v != st0["events"].get(key, 0)}
+        if st["frames_lost"] != st0["frames_lost"]:
+            moved["frames_lost"] = st["frames_lost"] - st0["frames_lost"]
+        out.append({"fault": name, "recovery_s": rec, "rms_mN": 1e3 * e_f,
+                    "clean_rms_mN": 1e3 * e_c, "error_pct": 100.0 * e_f / e_c, "counters": moved})
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    """python -m host_bench.faults [--node PATH] [--csv FILE]: the fault table (markdown)."""
+    import argparse
+    import subprocess
+    import sys
+    import tempfile
+    from pathlib import Path
+    ap = argparse.ArgumentParser(prog="python -m host_bench.faults",
+                                 description="The node's fault table, replayed through nte-node "
+                                 "--replay (deterministic; no CAN needed).")
+    root = Path(__file__).resolve().parents[1]
+    ap.add_argument("--node", default=str(root / "build/host/bin/nte-node"),
+                    help="nte-node binary (default build/host/bin/nte-node)")
+    ap.add_argument("--csv", default=None, help="scenario CSV with force_true_n (default: two "
+                    "paper insertions, 50 mm at 10 mm/s, 1 s dwell, seed 1)")
+    a = ap.parse_args(argv)
+    if not Path(a.node).is_file():
+        print(f"python -m host_bench.faults: error: --node: no such file {a.node} (make build)",
+              file=sys.stderr)
+        return 2
+    with tempfile.TemporaryDirectory() as d:
+        work = Path(d)
+        csv = a.csv
+        if csv is None:
+            csv = str(work / "paper.csv")
+            subprocess.run([sys.executable, "-m", "reference_py", "simulate", "--preset",
+                            "paper-10mms", "--depth", "50", "--dwell", "1", "--seed", "1",
+                            "--cycles", "2", "--out", csv], check=True, stdout=subprocess.DEVNULL)
+        rows = table(a.node, csv, work)
+    print("| fault | recovery (s) | RMS error (mN) | fault-free (mN) | error % | counters moved |")
+    print("|---|---|---|---|---|---|")
+    for r in rows:
+        c = ", ".join(f"{k} {v:+d}" for k, v in r["counters"].items())
+        rec = "whole run" if r["recovery_s"] is None else f"{r['recovery_s']:.3f}"
+        print(f"| {r['fault']} | {rec} | {r['rms_mN']:.2f} | "
+              f"{r['clean_rms_mN']:.2f} | {r['error_pct']:.0f} | {c} |")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -203,3 +203,36 @@ def test_replay_commands_rules_and_robust_estimator(tmp_path: Path) -> None:
     hb = [rx.decode(m.arbitration_id, bytes(m.data))[1] for m in sent
           if m.arbitration_id == DB.frame_id("Heartbeat")]
     assert hb[0]["ActiveEstimator"] == 0 and hb[-1]["ActiveEstimator"] == 1
+
+
+# ------------------------------------------------------------------------------------------
+# The fault table (python -m host_bench.faults), replayed through nte-node --replay.
+@pytest.fixture(scope="module")
+def fault_table(tmp_path_factory: pytest.TempPathFactory) -> dict:
+    from host_bench.faults import table
+    work = tmp_path_factory.mktemp("faults")
+    csv = work / "paper2.csv"
+    subprocess.run([sys.executable, "-m", "reference_py", "simulate", "--preset", "paper-10mms",
+                    "--depth", "50", "--dwell", "1", "--seed", "1", "--cycles", "2",
+                    "--out", str(csv)], check=True, cwd=ROOT, stdout=subprocess.DEVNULL)
+    return {r["fault"]: r for r in table(str(node_binary()), str(csv), work)}
+
+
+@pytest.mark.parametrize("fault", ["loss 1%", "loss 5%", "loss 20%", "duplicates 5 %",
+                                   "reorder 5 %", "burst (seeded, 2/s)", "depth dropout 1 s",
+                                   "depth dropout 10 s", "clock jump +2 s", "clock jump -1 s"])
+def test_fault_recovers_within_bounds(fault_table: dict, fault: str) -> None:
+    """Recovery within 2 s of the fault's end, error after it at most 110 % of fault-free."""
+    r = fault_table[fault]
+    assert r["recovery_s"] is None or r["recovery_s"] <= 2.0, r
+    assert r["error_pct"] <= 110.0, r
+
+
+@pytest.mark.xfail(strict=True, reason="measured: stuck force 1 s -> 1646 % and saturated force "
+                   "1 s -> 1.3e6 % of the fault-free error after it: the node steps the estimator "
+                   "on a stuck or saturated force and the parameters adapt to it; no input "
+                   "plausibility check yet")
+@pytest.mark.parametrize("fault", ["stuck force 1 s", "saturated force 1 s"])
+def test_force_sensor_faults_recover(fault_table: dict, fault: str) -> None:
+    r = fault_table[fault]
+    assert r["recovery_s"] <= 2.0 and r["error_pct"] <= 110.0, r
