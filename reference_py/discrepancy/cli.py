@@ -1,13 +1,26 @@
 """nte-discrepancy: find where the force model and measured insertions disagree, name the missing
 physical effect, add it and show the gap shrink.
 
-usage: python -m reference_py.discrepancy.cli FILE [FILE ...] --out DIR [--no-figures]
+usage: nte-discrepancy FILE [FILE ...] --out DIR [--no-figures] [--each] [--jobs N]
+                       [--force-unit U] [--time-unit U] [--depth-unit U]
+                       [--force-sign +1|-1] [--depth-sign +1|-1] [--no-units-check]
 
-FILE    measured trials: CSV with t_s, depth_mm, force_n (optional velocity_mm_s).  Several
-        files are trials of the same needle and tissue: one base parameter set is fitted to all.
---out   report directory: report.md, report.json and PNG figures.
+FILE    measured trials: CSV with t_s, depth_mm, force_n (optional velocity_mm_s; a spreadsheet
+        export with a byte-order mark and quoted cells is fine), or a candump log (.log) of the
+        bench's Depth and Force frames, decoded with the project's DBC.  Several files are
+        trials of the same needle and tissue: one base parameter set is fitted to all.
+--out   report directory: report.md, report.json, estimator_config.json and PNG figures
+        (all written together or none; the directory is checked before the run).
+--each  run every FILE as its own condition, into DIR/<file stem>/ (with --jobs N in parallel).
+--jobs  worker processes for --each (default 1).
+--force-unit, --time-unit, --depth-unit, --force-sign, --depth-sign, --no-units-check
+        how the CSV was recorded (converted by the tools' CSV reader, which refuses implausible
+        units or signs naming the likely option).  A record that still reads negative on
+        insertion (a candump log, or --no-units-check) is detected per trial, flipped, and the
+        report says so.
 
-Exit status: 0 success, 2 bad input (message on stderr naming file, line and column).
+Exit status: 0 success, 2 bad input or options (one line on stderr naming file, line and column
+or the option).
 """
 from __future__ import annotations
 
@@ -21,40 +34,74 @@ from pathlib import Path  # noqa: E402
 
 from ..tools.cli import OneLineParser, add_unit_arguments, units_from  # noqa: E402
 from ..tools.safe_write import check_directory  # noqa: E402
-from .io import InputError, read_trial  # noqa: E402
+from .io import InputError, Trial, read_trial  # noqa: E402
 from .prep import TooShort  # noqa: E402
+
+def _one(job: tuple[list[Trial], list[str], str, bool]) -> tuple[str, str, list]:
+    trials, names, out, figs = job
+    from .report import write
+    from .workflow import run
+    try:
+        res = run(trials)
+    except TooShort as exc:
+        return out, f"error: {exc}", []
+    try:
+        rep = write(res, names, Path(out), figs)
+    except ValueError as exc:       # an output the safe writer refuses
+        return out, f"error: {exc}", res.skipped
+    return out, f"named: {', '.join(rep['named'])}; {rep['verdict']['text']}", res.skipped
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = OneLineParser(prog="nte-discrepancy", description=__doc__)  # one-line refusals
-    ap.add_argument("files", nargs="+", metavar="FILE", help="measured trials (CSV)")
+    ap.add_argument("files", nargs="+", metavar="FILE", help="measured trials (CSV, or candump .log)")
     ap.add_argument("--out", required=True, metavar="DIR",
                     help="report directory (created if absent; its parent must exist)")
     ap.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     add_unit_arguments(ap)
+    ap.add_argument("--each", action="store_true",
+                    help="run every FILE as its own condition, into DIR/<file stem>/")
+    ap.add_argument("--jobs", type=int, default=1, metavar="N",
+                    help="worker processes for --each")
     args = ap.parse_args(argv)
+    if args.jobs < 1:
+        print(f"nte-discrepancy: --jobs {args.jobs}: must be >= 1", file=sys.stderr)
+        return 2
+    out = Path(args.out)
     try:
         check_directory(args.out, "--out")
         trials = [read_trial(f, units_from(args)) for f in args.files]
     except (InputError, ValueError) as exc:
         print(f"nte-discrepancy: {exc}", file=sys.stderr)
         return 2
-    from .report import write
-    from .workflow import run
-    try:
-        res = run(trials)
-    except TooShort as exc:
-        print(f"nte-discrepancy: {exc}", file=sys.stderr)
-        return 2
-    for name, why in res.skipped:
-        print(f"nte-discrepancy: skipped {name}: {why}", file=sys.stderr)
-    try:
-        rep = write(res, [str(f) for f in args.files], Path(args.out), not args.no_figures)
-    except ValueError as exc:       # an output the safe writer refuses
-        print(f"nte-discrepancy: {exc}", file=sys.stderr)
-        return 2
-    print(f"named: {', '.join(rep['named'])}; report in {args.out}")
-    return 0
+    figs = not args.no_figures
+    if args.each:
+        stems = [Path(f).stem for f in args.files]
+        if len(set(stems)) < len(stems):
+            print("nte-discrepancy: --each: two FILEs share a name (their reports would collide)",
+                  file=sys.stderr)
+            return 2
+        out.mkdir(exist_ok=True)
+        jobs = [([t], [f], str(out / Path(f).stem), figs)
+                for t, f in zip(trials, args.files)]
+    else:
+        jobs = [(trials, list(args.files), str(out), figs)]
+    if args.jobs > 1 and len(jobs) > 1:
+        from concurrent.futures import ProcessPoolExecutor
+        with ProcessPoolExecutor(max_workers=args.jobs) as pool:
+            results = list(pool.map(_one, jobs))
+    else:
+        results = [_one(j) for j in jobs]
+    status = 0
+    for where, line, skipped in results:
+        for name, why in skipped:
+            print(f"nte-discrepancy: skipped {name}: {why}", file=sys.stderr)
+        if line.startswith("error: "):
+            print(f"nte-discrepancy: {where}: {line[7:]}", file=sys.stderr)
+            status = 2
+        else:
+            print(f"{line}; report in {where}")
+    return status
 
 
 if __name__ == "__main__":

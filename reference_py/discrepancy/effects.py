@@ -22,8 +22,11 @@ parameters):
     relaxes depends on the dwell depth).
     Reported drop fraction = force lost by the end of the dwell / force at its start.
 ``reversal_presliding`` (friction needs travel to build up after a reversal: Dahl-like pre-sliding)
-    s -> s (1 - exp(-d/delta)), d = tissue depth travelled (mm) since the direction last changed.
-    Parameter: presliding_mm = delta in [0.05, 10] mm.  Zero-crossing distance is reported too.
+    s -> s (1 - exp(-d/delta)), d = tissue depth travelled (mm) since the direction last changed,
+    plus the force carried over from before the reversal, fading over the same travel:
+    f += K_i exp(-d/delta) on each retraction (a Dahl bristle turning over from the old
+    direction: the measured force is continuous through the reversal).  Parameters:
+    presliding_mm = delta in [0.05, 10] mm; presliding_carry K_i >= 0 N per trial.
 ``velocity_friction`` (viscous shaft friction, b v l)
     f += b_visc v l.  Parameter: b_visc in N s / mm^2 (bovine liver ~ 2e-4).  Needs >= 2 speeds.
 ``direction_asymmetry`` (friction differs between insertion and retraction)
@@ -134,6 +137,11 @@ class TrialGrid:
     v_mm_s: Array
     surface_mm: float
     dwells: list[tuple[int, int]] = field(default_factory=list)
+    #: tissue depths (mm below the detected surface) of the ruptures seen in this trial: the
+    #: multi-layer base model switches to the next layer's parameters at each
+    ruptures: list[float] = field(default_factory=list)
+    #: time (s) the tare refers to (middle of the samples before contact): drift is 0 there
+    t_ref: float | None = None
 
     @property
     def t_mid(self) -> float:
@@ -251,7 +259,11 @@ def design(trials: list[TrialGrid], effects: tuple[str, ...], nl: dict[str, Arra
     force = design @ coefficients; the coefficients are the linear parameters named by the labels.
     """
     n_tr = len(trials)
-    labels = ["A", "C", "sigma2"] + [f"offset[{i}]" for i in range(n_tr)]
+    labels = ["A", "C", "sigma2"]
+    for i, tr in enumerate(trials):
+        for j in range(len(tr.ruptures)):
+            labels += [f"layer{j + 1}_load1[{i}]", f"layer{j + 1}_load2[{i}]",
+                       f"layer{j + 1}_cut[{i}]", f"layer{j + 1}_fric[{i}]"]
     if "velocity_friction" in effects:
         labels.append("b_visc")
     if "direction_asymmetry" in effects:
@@ -260,6 +272,8 @@ def design(trials: list[TrialGrid], effects: tuple[str, ...], nl: dict[str, Arra
         labels.append("layer_drop")
     if "sensor_drift" in effects:
         labels.append("drift")
+    if "reversal_presliding" in effects:
+        labels += [f"presliding_carry[{i}]" for i in range(n_tr)]
     if "dwell_relaxation" in effects:
         labels += [f"relax_hold[{i}]" for i in range(n_tr)] + \
                   [f"relax_fast[{i}]" for i in range(n_tr)] + \
@@ -273,12 +287,17 @@ def design(trials: list[TrialGrid], effects: tuple[str, ...], nl: dict[str, Arra
         e = np.exp(-float(nl["alpha"]) * l)
         if "reversal_presliding" in effects:
             d = travel_since_reversal(l, s)
-            s = s * (1.0 - np.exp(-d / float(nl["presliding_mm"])))
+            fade = np.exp(-d / float(nl["presliding_mm"]))
+            s = s * (1.0 - fade)
+            m[:, col[f"presliding_carry[{i}]"]] = np.where((tr.v_mm_s < -V_REST_MM_S) & (l > 0),
+                                                           fade, 0.0)
         fric_c = s * l * e * (1.0 - bl * zh)
         m[:, col["A"]] = zh * l
         m[:, col["C"]] = fric_c
         m[:, col["sigma2"]] = s * l
-        m[:, col[f"offset[{i}]"]] = 1.0
+        if tr.ruptures:
+            corr = float(np.atleast_1d(nl["surface"])[i])
+            _layer_columns(m, col, i, [r - corr for r in tr.ruptures], tr.v_mm_s, l, s)
         if "velocity_friction" in effects:
             m[:, col["b_visc"]] = tr.v_mm_s * l
         if "direction_asymmetry" in effects:
@@ -292,7 +311,7 @@ def design(trials: list[TrialGrid], effects: tuple[str, ...], nl: dict[str, Arra
             m[:, col["layer_drop"]] = np.where(intact & (tr.v_mm_s > V_REST_MM_S) & (l > 0),
                                                ramp, 0.0)
         if "sensor_drift" in effects:
-            m[:, col["drift"]] = tr.t_s - tr.t_mid
+            m[:, col["drift"]] = tr.t_s - (tr.t_ref if tr.t_ref is not None else tr.t_mid)
         if "dwell_relaxation" in effects:
             hold = np.zeros(n)
             for i0, i1 in tr.dwells:
@@ -306,6 +325,49 @@ def design(trials: list[TrialGrid], effects: tuple[str, ...], nl: dict[str, Arra
                 m[:, col[f"relax_{k}[{i}]"]] = c
         blocks.append(m)
     return np.vstack(blocks), labels
+
+
+def _layer_columns(m: Array, col: dict[str, int], i: int, rs: list[float], v: Array, l: Array,
+                   s: Array) -> None:
+    """The multi-layer base model's columns for trial i (ruptures at tissue depths r_1 < r_2 ...).
+
+    Layer j (between r_{j-1}, r_0 = 0, and its rupture r_j) loads as k1 u + k2 u^2, u = (l -
+    r_{j-1}) / (r_j - r_{j-1}), while the needle advances (or rests) and the layer is intact (the
+    deepest point reached is short of r_j): membrane tenting up to its rupture force k1 + k2, then
+    nothing (the drop).  After r_j the tip cuts the next tissue (cut_j while inserting with the tip
+    between r_j and r_{j+1}), and the shaft length in that band, clip(l - r_j, 0, r_{j+1} - r_j),
+    carries its own friction density fric_j (N/mm, signed by the pre-sliding-aware direction s).
+    """
+    deepest = np.maximum.accumulate(l)
+    for j, r in enumerate(rs):
+        r0 = rs[j - 1] if j else 0.0
+        r1 = rs[j + 1] if j + 1 < len(rs) else np.inf
+        u = np.clip((l - r0) / max(r - r0, 1e-6), 0.0, 1.0)
+        load = (deepest < r) & (l > r0) & (v >= -V_REST_MM_S)
+        m[:, col[f"layer{j + 1}_load1[{i}]"]] = np.where(load, u, 0.0)
+        m[:, col[f"layer{j + 1}_load2[{i}]"]] = np.where(load, u * u, 0.0)
+        m[:, col[f"layer{j + 1}_cut[{i}]"]] = np.where((v > V_REST_MM_S) & (l >= r) & (l < r1)
+                                                       & (deepest <= l + 1e-9), 1.0, 0.0)
+        m[:, col[f"layer{j + 1}_fric[{i}]"]] = s * np.clip(l - r, 0.0, r1 - r)
+
+
+#: bounds of the linear coefficients (by label prefix), enforced by a bounded least-squares solve
+#: whenever the free solution leaves them: stiffness, friction and drops are not negative;
+#: sigma0 and sigma1 (A = sigma0 beta, C = sigma1 beta) stay positive, so g(l) > 0 at every depth
+LIN_BOUNDS: dict[str, tuple[float, float]] = {
+    "A": (1e-9, np.inf), "C": (1e-9, np.inf), "sigma2": (0.0, np.inf),
+    "layer_load1": (0.0, np.inf), "layer_load2": (0.0, np.inf), "layer_cut": (0.0, np.inf),
+    "layer_fric": (0.0, np.inf), "b_visc": (0.0, np.inf), "layer_drop": (0.0, np.inf),
+    "relax_fast": (0.0, np.inf), "relax_slow": (0.0, np.inf), "presliding_carry": (0.0, np.inf),
+}
+
+
+def lin_bound(label: str) -> tuple[float, float]:
+    """Bounds of one linear coefficient (label as in :func:`design`)."""
+    key = label.split("[")[0]
+    if key.startswith("layer") and "_" in key and key != "layer_drop":
+        key = "layer_" + key.split("_", 1)[1]
+    return LIN_BOUNDS.get(key, (-np.inf, np.inf))
 
 
 # ------------------------------------------------------------------------------------------
@@ -331,7 +393,6 @@ def from_paramset(params: ParamSet, n_trials: int = 1) -> tuple[dict[str, Array]
           "alpha": np.array(params.alpha), "surface": np.zeros(n_trials)}
     coef = {"A": params.sigma0 * params.beta, "C": params.sigma1 * params.beta,
             "sigma2": params.sigma2}
-    coef.update({f"offset[{i}]": 0.0 for i in range(n_trials)})
     return nl, coef
 
 

@@ -5,7 +5,7 @@ p, g0, alpha, each trial's surface correction, and any effect's time constants, 
 frequencies) are fixed (effects.design).  The linear coefficients are therefore solved exactly by
 least squares inside every residual evaluation, and scipy's bounded least_squares searches only the
 few nonlinear ones (log-parameters where the sign is known).  One parameter set is shared by all
-trials: they are the same needle and tissue; only offsets, surfaces and per-trial effect terms
+trials: they are the same needle and tissue; only layers, surfaces and per-trial effect terms
 (relaxation amplitude, motion phase) belong to one trial.
 """
 from __future__ import annotations
@@ -15,7 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
-from .effects import NLParam, StateCache, TrialGrid, design, nl_specs
+from scipy.optimize import lsq_linear
+
+from .effects import NLParam, StateCache, TrialGrid, design, lin_bound, nl_specs
 from ..fmath import Array
 
 
@@ -30,6 +32,34 @@ class Fit:
     n: int
     k: int          # parameters: nonlinear scalars + linear columns that are not identically 0
     resid: Array
+    #: standard errors of the free nonlinear values (name -> value or per-trial array), from the
+    #: Jacobian of the variable-projection residual at the solution (white-noise approximation)
+    nl_se: dict[str, Array] | None = None
+
+
+def bounds_of(labels: list[str]) -> tuple[Array, Array]:
+    lo, hi = zip(*(lin_bound(lab) for lab in labels))
+    return np.array(lo, dtype=float), np.array(hi, dtype=float)
+
+
+def solve_bounded(m: Array, y: Array, labels: list[str], rcond: float = 1e-12) -> Array:
+    """Least squares with the documented coefficient bounds (effects.LIN_BOUNDS).
+
+    The free solution is used when it satisfies them (the common case, fast); otherwise a
+    bounded least-squares solve (scipy lsq_linear, BVLS) on the unit-scaled columns.
+    """
+    c = solve_linear(m, y, rcond)
+    lo, hi = bounds_of(labels)
+    if np.all((c >= lo - 1e-12) & (c <= hi + 1e-12)):
+        return c
+    norms = np.sqrt(np.einsum("ij,ij->j", m, m))
+    used = norms > 0
+    ms = m[:, used] / norms[used]
+    res = lsq_linear(ms, y, bounds=(lo[used] * norms[used], hi[used] * norms[used]),
+                     method="bvls", lsmr_tol=None)
+    out = np.zeros(m.shape[1])
+    out[used] = res.x / norms[used]
+    return out
 
 
 def solve_linear(m: Array, y: Array, rcond: float = 1e-12) -> Array:
@@ -89,7 +119,7 @@ def evaluate(trials: list[TrialGrid], y: Array, effects: tuple[str, ...], nl: di
     """Solve the linear coefficients for fixed nonlinear values (optionally on ``rows`` only)."""
     m, labels = design(trials, effects, nl, cache)
     mm, yy = (m, y) if rows is None else (m[rows], y[rows])
-    c = solve_linear(mm, yy)
+    c = solve_bounded(mm, yy, labels)
     resid = y - m @ c
     used = np.any(mm != 0, axis=0)
     n_nl = sum(len(trials) if p.per_trial else 1 for p in nl_specs(effects))
@@ -109,11 +139,34 @@ def fit(trials: list[TrialGrid], y: Array, effects: tuple[str, ...], nl0: dict[s
 
     def res(x: Array) -> Array:
         nl = _unpack(x, nl0, slots)
-        m, _ = design(trials, effects, nl, cache)
+        m, labels = design(trials, effects, nl, cache)
         if not np.all(np.isfinite(m)):
             return np.full_like(y, 10.0)     # a failed simulation is a very bad fit
-        return y - m @ solve_linear(m, y)
+        return y - m @ solve_bounded(m, y, labels)
 
     sol = least_squares(res, x0, bounds=(lo, hi), method="trf", x_scale=1.0, diff_step=1e-5,
                         max_nfev=max_nfev, xtol=1e-6, ftol=1e-8)
-    return evaluate(trials, y, effects, _unpack(sol.x, nl0, slots), cache)
+    out = evaluate(trials, y, effects, _unpack(sol.x, nl0, slots), cache)
+    out.nl_se = _nl_se(sol.jac, out, slots, len(trials))
+    return out
+
+
+def _nl_se(jac: Array, f: Fit, slots: list[tuple[NLParam, int | None]], n_tr: int
+           ) -> dict[str, Array]:
+    """Standard errors of the nonlinear values: s^2 (J^T J)^-1, mapped from log space."""
+    s2 = f.sse / max(f.n - f.k, 1)
+    jtj = jac.T @ jac
+    try:
+        cov = np.linalg.pinv(jtj, rcond=1e-10) * s2
+    except np.linalg.LinAlgError:
+        cov = np.full(jtj.shape, np.nan)
+    sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    out: dict[str, Array] = {}
+    for j, (par, i) in enumerate(slots):
+        val = float(f.nl[par.name]) if i is None else float(f.nl[par.name][i])
+        se = val * sd[j] if par.log else sd[j]
+        if i is None:
+            out[par.name] = np.array(se)
+        else:
+            out.setdefault(par.name, np.full(n_tr, np.nan))[i] = se
+    return out

@@ -43,6 +43,9 @@ class Prepared:
     phase: Array              # index into PHASES per sample
     speed_mm_s: float         # median insertion speed
     dwells: list[tuple[int, int]]
+    force_sign: float = 1.0   # the recorded force was multiplied by this (-1: pull recorded +)
+    depth_sign: float = 1.0   # the recorded depth was multiplied by this (-1: insertion negative)
+    note: str = ""
 
 
 def noise_level(f: Array) -> float:
@@ -150,10 +153,46 @@ def label_phases(l: Array, s: Array, puncture_mm: float | None) -> Array:
     return ph
 
 
-def prepare(tr: Trial) -> Prepared:
-    """Tare, surface, phases of one trial; raises TooShort when it cannot be split."""
+def detect_signs(tr: Trial) -> tuple[float, float]:
+    """Sign conventions of a record: (force sign, depth sign) that make insertion positive.
+
+    Depth: the stage's largest excursion from its start is the insertion.  Force: while the
+    needle first advances through the deeper half of its stroke the tissue pushes back, so the
+    force there (against the median before the stage moves) is positive.
+    """
+    d = tr.depth_mm - tr.depth_mm[0]
+    ds = -1.0 if abs(float(np.min(d))) > abs(float(np.max(d))) else 1.0
+    x = ds * tr.depth_mm
+    k_max = int(np.argmax(x))
+    lo, hi = float(x[0]), float(x[k_max])
+    deep = np.zeros(len(x), dtype=bool)
+    deep[:k_max + 1] = x[:k_max + 1] > lo + 0.5 * (hi - lo)
+    n0 = max(5, int(np.argmax(np.abs(d) > 0.05 * max(abs(hi - lo), 1e-9))))
+    base = float(np.median(tr.force_n[:n0]))
+    if not deep.any():
+        return 1.0, ds
+    fs = -1.0 if float(np.median(tr.force_n[deep])) - base < 0 else 1.0
+    return fs, ds
+
+
+def prepare(tr: Trial, force_sign: float = 0.0, depth_sign: float = 0.0) -> Prepared:
+    """Tare, surface, phases of one trial; raises TooShort when it cannot be split.
+
+    ``force_sign`` / ``depth_sign``: +1 or -1 to state the record's convention, 0 to detect it
+    (:func:`detect_signs`); what was applied is kept in the result and its note."""
     if len(tr.t_s) < MIN_SAMPLES:
         raise TooShort(f"only {len(tr.t_s)} samples (need >= {MIN_SAMPLES})")
+    fs_auto, ds_auto = detect_signs(tr)
+    fs = force_sign if force_sign else fs_auto
+    ds = depth_sign if depth_sign else ds_auto
+    note = ""
+    if fs < 0 or ds < 0:
+        what = [n for n, sg in (("force", fs), ("depth", ds)) if sg < 0]
+        how = "as stated" if (force_sign or depth_sign) else "detected"
+        note = (f"{tr.name}: {' and '.join(what)} recorded negative on insertion ({how}); "
+                "multiplied by -1")
+    vel = tr.velocity_mm_s * ds if tr.velocity_mm_s is not None else None
+    tr = Trial(tr.name, tr.t_s, tr.depth_mm * ds, tr.force_n * fs, vel)
     v = velocity(tr)
     sigma = noise_level(tr.force_n)
     surface, tare = find_surface(tr.t_s, tr.depth_mm, v, tr.force_n, sigma)
@@ -169,4 +208,4 @@ def prepare(tr: Trial) -> Prepared:
     fwd = v[(s > 0)]
     speed = float(np.median(np.abs(fwd))) if len(fwd) else 0.0
     return Prepared(tr.name, tr.t_s, tr.depth_mm, v, f, surface, tare, sigma, punct, ph, speed,
-                    find_dwells(tr.t_s, l, v))
+                    find_dwells(tr.t_s, l, v), fs, ds, note)

@@ -43,6 +43,35 @@ def delta_bic(base: Fit, ext: Fit, bounds: list[tuple[int, int]]) -> float:
     return float(n_eff * np.log(base.sse / ext.sse) - (ext.k - base.k) * np.log(n_eff))
 
 
+def delta_bic_local(base: Fit, ext: Fit, bounds: list[tuple[int, int]], rows: Array,
+                    own_nl: tuple, n_trials: int) -> float:
+    """BIC difference judged in the effect's own phases, with a price that follows sharing.
+
+    The error reduction counts only on ``rows`` (the phases the effect acts on), with the
+    effective sample size from the lag-1 autocorrelation of the extended residual there.  A
+    parameter shared by the condition costs ln(n_eff); a per-trial parameter is informed by one
+    trial's share of the rows only and costs ln(n_eff / n_trials) (a relaxation amplitude per
+    trial is not priced as if the whole record had to pay for it).
+    """
+    r0, r1 = base.resid[rows], ext.resid[rows]
+    n = int(np.count_nonzero(rows))
+    if n < 5:
+        return -np.inf
+    sse0, sse1 = float(r0 @ r0), float(r1 @ r1)
+    rr = r1 - r1.mean()
+    rho = float(np.clip((rr[1:] @ rr[:-1]) / max(rr @ rr, 1e-30), 0.0, 0.95))
+    n_eff = max(n * (1.0 - rho) / (1.0 + rho), 2.0)
+    k_new = max(ext.k - base.k, 0)
+    per_trial_nl = sum(n_trials for p in own_nl if p.per_trial)
+    shared_nl = sum(1 for p in own_nl if not p.per_trial)
+    lin = max(k_new - per_trial_nl - shared_nl, 0)
+    per_trial_lin = lin if lin >= n_trials and n_trials > 1 and lin % n_trials == 0 else 0
+    shared = k_new - per_trial_nl - per_trial_lin
+    pen = shared * np.log(n_eff) + (per_trial_nl + per_trial_lin) * \
+        np.log(max(n_eff / n_trials, 2.0))
+    return float(n_eff * np.log(max(sse0, 1e-30) / max(sse1, 1e-30)) - pen)
+
+
 def folds(grids: list[TrialGrid]) -> tuple[str, list[Array]]:
     """The held-out scheme and, per fold, a boolean mask of held-out rows."""
     sizes = [len(g.t_s) for g in grids]
@@ -61,7 +90,8 @@ def folds(grids: list[TrialGrid]) -> tuple[str, list[Array]]:
 
 
 def heldout_sse(grids: list[TrialGrid], y: Array, f: Fit, masks: list[Array],
-                cache: StateCache | None = None) -> float:
+                cache: StateCache | None = None, where: Array | None = None) -> float:
+    """Held-out SSE of ``f`` (summed on the rows ``where`` only, when given)."""
     m, labels = design(grids, f.effects, f.nl, cache)
     own_cols = {i: [j for j, lab in enumerate(labels) if lab.endswith(f"[{i}]")]
                 for i in range(len(grids))}
@@ -79,11 +109,15 @@ def heldout_sse(grids: list[TrialGrid], y: Array, f: Fit, masks: list[Array],
             rows &= mask
             if not rows.any():
                 continue
+            keep = where[rows] if where is not None else np.ones(int(rows.sum()), dtype=bool)
+            if not keep.any():
+                continue
             if not (train[starts[i]:starts[i + 1]]).any():
                 cols = own_cols[i]
                 sub = m[np.ix_(rows, cols)]
                 r_i = r[rows] - sub @ solve_linear(sub, r[rows], HELDOUT_RCOND)
             else:
                 r_i = r[rows]
+            r_i = r_i[keep]
             total += float(r_i @ r_i)
     return total

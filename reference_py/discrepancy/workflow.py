@@ -7,17 +7,18 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .effects import (EFFECT_NL, NONE, VOCABULARY, StateCache, TrialGrid, design, find_dwells,
-                       nl_defaults, nl_specs, to_paramset)
+from . import evidence as evmod
+from .effects import (EFFECT_NL, EFFECT_PHASES, NONE, VOCABULARY, StateCache, TrialGrid, design,
+                      find_dwells, nl_defaults, nl_specs, to_paramset)
 from ..fmath import Array
 from .fit import Fit, evaluate, fit, solve_linear
 from .io import Trial
 from .prep import PHASES, Prepared, TooShort, prepare
-from .score import delta_bic, folds, heldout_sse, lag1
+from .score import delta_bic_local, folds, heldout_sse, lag1
 from .stats import phase_stats, speed_direction
 
 #: at most this many samples per trial enter the fits (evenly strided); reports use all samples
-FIT_ROWS = 600
+FIT_ROWS = 400
 #: candidates refitted jointly with the base model in each round
 REFINE_TOP = 2
 #: RK3 sub-steps in the fits
@@ -27,6 +28,12 @@ FIT_SUBSTEPS = 4
 SCREEN_STARTS = 6
 #: BIC difference that counts as strong evidence
 BIC_MIN = 10.0
+#: structure left in a phase counts as "unexplained" above this multiple of the noise (RMS of
+#: the residual smoothed over UNEXPLAINED_WINDOW_S, against the noise standard deviation)
+UNEXPLAINED_X = 3.0
+UNEXPLAINED_WINDOW_S = 0.5
+#: an effect must lower the error in its own phases by at least this fraction to be named
+OWN_PHASE_MIN_GAIN = 0.05
 #: base-model starting points (p, g0, alpha) from the paper's presets
 BASE_STARTS = ((7.08, 4.41, 0.0525), (8.31, 5.32, 0.0363), (27.0, 12.1, 0.0108))
 
@@ -34,10 +41,12 @@ BASE_STARTS = ((7.08, 4.41, 0.0525), (8.31, 5.32, 0.0363), (27.0, 12.1, 0.0108))
 @dataclass
 class Step:
     effect: str
-    delta_bic: float
+    delta_bic: float          # phase-local, sharing-aware (see score.delta_bic_local)
     heldout_gain: float       # 1 - held-out SSE(extended) / held-out SSE(current)
     fit: Fit
     candidates: list[dict[str, float | str]]
+    own_phase_gain: float = 0.0
+    local: str = ""           # the local evidence behind the decision
 
 
 @dataclass
@@ -55,15 +64,23 @@ class Result:
     speed_dir: dict[str, object]
     runtime_s: float
     notes: list[str] = field(default_factory=list)
+    evidence: dict[str, object] = field(default_factory=dict)
+    layers: list[int] = field(default_factory=list)      # layers (ruptures) per trial
+    unexplained: list[dict[str, float | str]] = field(default_factory=list)
+    validation: dict[str, object] = field(default_factory=dict)
 
     @property
     def named(self) -> list[str]:
-        return [s.effect for s in self.steps] or [NONE]
+        out = (["layer_puncture"] if any(self.layers) else []) + [s.effect for s in self.steps]
+        return out or [NONE]
 
 
-def _grid(p: Prepared, rows: Array) -> TrialGrid:
+def _grid(p: Prepared, rows: Array, ruptures: list[float] | None = None) -> TrialGrid:
     t, x, v = p.t_s[rows], p.stage_mm[rows], p.v_mm_s[rows]
-    return TrialGrid(t, x, v, p.surface_mm, find_dwells(t, x - p.surface_mm, v))
+    pre = p.phase == 0
+    t_ref = float(np.median(p.t_s[pre])) if pre.any() else float(p.t_s[0])
+    return TrialGrid(t, x, v, p.surface_mm, find_dwells(t, x - p.surface_mm, v),
+                     list(ruptures or []), t_ref)
 
 
 def _bounds(grids: list[TrialGrid]) -> list[tuple[int, int]]:
@@ -144,10 +161,112 @@ def _motion_inits(cur: Fit, grids: list[TrialGrid], y: Array, cache: StateCache,
     return out
 
 
-def _applicable(cand: str, grids: list[TrialGrid]) -> bool:
+def _applicable(cand: str, grids: list[TrialGrid], ev: dict[str, object]) -> bool:
     if cand == "dwell_relaxation":
         return any(g.dwells for g in grids)
+    if cand == "velocity_friction":
+        return int(ev["distinct_speeds"]) >= 2      # type: ignore[call-overload]
+    if cand == "layer_puncture":
+        return not any(g.ruptures for g in grids)   # detected layers are in the base already
     return True
+
+
+def _phase_rows(grids: list[TrialGrid], phases: list[Array], cand: str) -> Array:
+    from .prep import PHASES as _PH
+    want = [_PH.index(ph) for ph in EFFECT_PHASES[cand]]
+    return np.isin(np.concatenate(phases), want)
+
+
+#: a periodic line must carry this share of a trial's in-tissue residual variance (median over
+#: trials), at the same frequency (within MOTION_FREQ_TOL_HZ) in every trial
+MOTION_MIN_SHARE = 0.25
+MOTION_FREQ_TOL_HZ = 0.05
+
+
+def _motion_gate(cur: Fit, grids: list[TrialGrid], bnd: list[tuple[int, int]]
+                 ) -> tuple[bool, str]:
+    freqs, shares = [], []
+    for g, (a, b) in zip(grids, bnd):
+        inside = g.stage_mm - g.surface_mm > 0
+        fq, sh = evmod.period(g.t_s[inside], cur.resid[a:b][inside])
+        if np.isfinite(fq):
+            freqs.append(fq)
+            shares.append(sh)
+    if not freqs:
+        return False, "records too short for a periodicity test"
+    ok = float(np.median(shares)) >= MOTION_MIN_SHARE and np.ptp(freqs) <= 2 * MOTION_FREQ_TOL_HZ
+    return ok, (f"residual line at {np.median(freqs):.2f} Hz carries "
+                f"{100 * np.median(shares):.0f} % of the in-tissue residual")
+
+
+#: pre-sliding is seen locally when, on the first REVERSAL_WINDOW_MM of retraction, the current
+#: model's residual has a component fading with travel (a + b d + c e^{-d/delta} against a + b d)
+#: worth this chi-square and at least PRESLIDE_MIN_AMP noise standard deviations, in most trials
+PRESLIDE_MIN_CHI2 = 25.0
+PRESLIDE_MIN_AMP = 5.0
+
+
+def _presliding_gate(cur: Fit, grids: list[TrialGrid], bnd: list[tuple[int, int]],
+                     noise: list[float]) -> tuple[bool, str]:
+    from .effects import direction, travel_since_reversal
+    votes, amps = [], []
+    for g, (a, b), sig in zip(grids, bnd, noise):
+        l = np.maximum(g.stage_mm - g.surface_mm, 0.0)
+        s = direction(g.v_mm_s) * (l > 0)
+        d = travel_since_reversal(l, s)
+        back = np.flatnonzero(s < 0)
+        if len(back) < 8:
+            continue
+        first = np.zeros(len(l), dtype=bool)
+        first[back[0]:] = True
+        sel = first & (s < 0) & (d <= evmod.REVERSAL_WINDOW_MM)
+        if sel.sum() < 8:
+            continue
+        r, dd = cur.resid[a:b][sel], d[sel]
+        one = np.ones_like(dd)
+        c0, *_ = np.linalg.lstsq(np.column_stack([one, dd]), r, rcond=None)
+        sse_l = float(np.sum((r - np.column_stack([one, dd]) @ c0) ** 2))
+        best = (np.inf, 0.0)
+        for dl in evmod.DELTA_GRID:
+            mm = np.column_stack([one, dd, np.exp(-dd / dl)])
+            c, *_ = np.linalg.lstsq(mm, r, rcond=None)
+            sse = float(np.sum((r - mm @ c) ** 2))
+            if sse < best[0]:
+                best = (sse, float(c[2]))
+        chi2 = (sse_l - best[0]) / sig ** 2
+        votes.append(chi2 >= PRESLIDE_MIN_CHI2 and abs(best[1]) >= PRESLIDE_MIN_AMP * sig)
+        amps.append(abs(best[1]))
+    if not votes:
+        return False, "no retraction to judge"
+    ok = sum(votes) * 2 > len(votes)
+    return ok, (f"residual fading with travel after the reversal in {sum(votes)}/{len(votes)} "
+                f"trials (median amplitude {np.median(amps):.3g} N)")
+
+
+def _inconsistent(cand: str, f: Fit, grids: list[TrialGrid], y: Array) -> str:
+    """Why a fitted candidate is physically impossible ('' when it is not)."""
+    if cand == "layer_puncture":
+        deepest = max(float(np.max(g.stage_mm - g.surface_mm)) for g in grids)
+        d = float(f.nl["layer_depth_mm"])
+        if d >= deepest:
+            return f"layer at {d:.1f} mm, beyond the deepest point reached ({deepest:.1f} mm)"
+        drop = f.coef.get("layer_drop", 0.0)
+        if not 0.0 < drop < float(np.max(y)):
+            return f"layer drop {drop:.3g} N not between 0 and the insertion peak"
+    return ""
+
+
+def _local_gate(cand: str, ev: dict[str, object]) -> tuple[bool | None, str]:
+    """Local verdict for effects that have one: True (seen), False (absent), None (no test)."""
+    if cand == "dwell_relaxation":
+        ok, rel = evmod.dwell_verdict(ev)
+        why = f"dwell force falls by {100 * rel:.0f} % (median)"
+        return ok, why + (", an exponential beats a line" if ok else
+                          ": no exponential decay in most dwells")
+    if cand == "velocity_friction":
+        n = int(ev["distinct_speeds"])              # type: ignore[call-overload]
+        return (None if n >= 2 else False), f"{n} distinct insertion speed(s)"
+    return None, ""
 
 
 def _screen(cand: str, cur: Fit, grids: list[TrialGrid], y: Array, cache: StateCache) -> Fit:
@@ -191,12 +310,12 @@ def _errors(preps: list[Prepared], pred: list[Array]) -> dict[str, dict[str, flo
     return out
 
 
-def _predict(preps: list[Prepared], f: Fit) -> list[Array]:
-    grids = [_grid(p, np.arange(len(p.t_s))) for p in preps]
+def _predict(preps: list[Prepared], f: Fit, rupt: list[list[float]]) -> list[Array]:
+    grids = [_grid(p, np.arange(len(p.t_s)), r) for p, r in zip(preps, rupt)]
     out = []
     for i, g in enumerate(grids):
         m, labels = design([g], f.effects, _one_trial(f.nl, i, len(grids)))
-        c = np.array([f.coef[_relabel(lab, i)] for lab in labels])
+        c = np.array([f.coef.get(_relabel(lab, i), 0.0) for lab in labels])
         out.append(m @ c + preps[i].tare_n)
     return out
 
@@ -209,64 +328,159 @@ def _relabel(label: str, i: int) -> str:
     return label.replace("[0]", f"[{i}]")
 
 
-def run(trials: list[Trial], max_effects: int = len(VOCABULARY)) -> Result:
-    """Run the whole workflow on trials of one needle and tissue (shared base parameters)."""
+def _unexplained(preps: list[Prepared], pred: list[Array]) -> list[dict[str, float | str]]:
+    """Stretches where the final residual, smoothed over UNEXPLAINED_WINDOW_S, stays above
+    UNEXPLAINED_X noise standard deviations: phase, time and depth span, size."""
+    out: list[dict[str, float | str]] = []
+    for p, pr in zip(preps, pred):
+        r = p.force_n + p.tare_n - pr
+        dt = float(np.median(np.diff(p.t_s)))
+        w = max(int(round(UNEXPLAINED_WINDOW_S / dt)), 1)
+        rs = evmod.smooth(r, w)
+        hot = np.abs(rs) > UNEXPLAINED_X * p.noise_n
+        if not hot.any():
+            continue
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], hot.astype(int), [0]])))
+        for a, b in zip(edges[::2], edges[1::2]):
+            if p.t_s[b - 1] - p.t_s[a] < UNEXPLAINED_WINDOW_S:
+                continue
+            ph = np.bincount(p.phase[a:b], minlength=len(PHASES))
+            l = p.stage_mm[a:b] - p.surface_mm
+            out.append({"trial": p.name, "phase": PHASES[int(np.argmax(ph))],
+                        "t_from_s": float(p.t_s[a]), "t_to_s": float(p.t_s[b - 1]),
+                        "depth_from_mm": float(np.min(l)), "depth_to_mm": float(np.max(l)),
+                        "peak_n": float(np.max(np.abs(rs[a:b]))),
+                        "rms_n": float(np.sqrt(np.mean(r[a:b] ** 2))),
+                        "over_noise": float(np.max(np.abs(rs[a:b])) / p.noise_n)})
+    out.sort(key=lambda d: -float(d["over_noise"]))
+    return out
+
+
+def _fit_base(grids: list[TrialGrid], y: Array, cache: StateCache, nfev: int = 60) -> Fit:
+    best: Fit | None = None
+    for p0, g0, a0 in BASE_STARTS:
+        nl0 = nl_defaults((), len(grids))
+        nl0.update(p=np.array(p0), g0=np.array(g0), alpha=np.array(a0))
+        f = fit(grids, y, (), nl0, {"p", "g0", "alpha", "surface"}, cache, max_nfev=nfev)
+        if best is None or f.sse < best.sse:
+            best = f
+    assert best is not None
+    return best
+
+
+def _validate(grids: list[TrialGrid], y: Array, bnd: list[tuple[int, int]], final: Fit,
+              base: Fit, truth_rows: list[Array] | None = None) -> dict[str, object]:
+    """Fit on the first half of the trials, report the error shrink on the others.
+
+    Both the base model and the final model are refitted (nonlinear values started from the
+    full-data fit) on the training trials; on a held-out trial the shared parameters are kept and
+    only its own terms (layers, relaxation amplitudes, surface) are solved on it."""
+    n = len(grids)
+    if n < 2:
+        return {"scheme": "needs >= 2 trials", "trials_fit": [], "trials_held_out": []}
+    k = (n + 1) // 2
+    tr_g, te_g = grids[:k], grids[k:]
+    y_tr = np.concatenate([y[a:b] for a, b in bnd[:k]])
+    out: dict[str, object] = {"scheme": "first half of the trials fitted, second half held out",
+                              "trials_fit": list(range(k)), "trials_held_out": list(range(k, n))}
+    for name, f0 in (("base", base), ("final", final)):
+        nl_tr = {kk: (v[:k] if np.ndim(v) == 1 else v) for kk, v in f0.nl.items()}
+        free = {p.name for p in nl_specs(f0.effects) if not p.per_trial}
+        ftr = fit(tr_g, y_tr, f0.effects, nl_tr, free, StateCache(FIT_SUBSTEPS), max_nfev=15)
+        sse = cnt = 0.0
+        for j, g in enumerate(te_g):
+            a, b = bnd[k + j]
+            nl_j = {kk: (np.array([v[k + j]]) if np.ndim(v) == 1 else v)
+                    for kk, v in f0.nl.items()}
+            for kk in free:
+                nl_j[kk] = ftr.nl[kk]
+            m, labels = design([g], f0.effects, nl_j)
+            shared = [ftr.coef.get(lab, np.nan) if not lab.endswith("]") else np.nan
+                      for lab in labels]
+            own = np.array([lab.endswith("]") for lab in labels])
+            c = np.nan_to_num(np.array(shared, dtype=float))
+            rr = y[a:b] - m @ c
+            if own.any():
+                sub = m[:, own]
+                rr = rr - sub @ solve_linear(sub, rr)
+            sse += float(rr @ rr)
+            cnt += len(rr)
+        out[f"rmse_{name}_n"] = float(np.sqrt(sse / max(cnt, 1)))
+    out["shrink"] = 1.0 - float(out["rmse_final_n"]) / max(float(out["rmse_base_n"]), 1e-30)
+    return out
+
+
+def run(trials: list[Trial], max_effects: int = len(VOCABULARY), force_sign: float = 0.0,
+        depth_sign: float = 0.0) -> Result:
+    """Run the whole workflow on trials of one needle and tissue (shared base parameters).
+
+    ``force_sign`` / ``depth_sign``: +1 or -1 to state the records' sign convention, 0 (default)
+    to detect it per trial (see prep.detect_signs)."""
     t_start = time.perf_counter()
     preps: list[Prepared] = []
     skipped: list[tuple[str, str]] = []
     for tr in trials:
         try:
-            preps.append(prepare(tr))
+            preps.append(prepare(tr, force_sign, depth_sign))
         except TooShort as exc:
             skipped.append((tr.name, str(exc)))
     if not preps:
         raise TooShort("no trial could be split into phases")
-    grids, ys = [], []
-    for p in preps:
+    # local evidence first: it does not depend on any fit
+    ev = evmod.collect(preps)
+    rupt = [[r["depth_mm"] for r in t["ruptures"]] for t in ev["per_trial"]]  # type: ignore
+    grids, ys, phs = [], [], []
+    for p, rp in zip(preps, rupt):
         stride = int(np.ceil(len(p.t_s) / FIT_ROWS))
         rows = np.arange(0, len(p.t_s), stride)
-        grids.append(_grid(p, rows))
+        grids.append(_grid(p, rows, rp))
         ys.append(p.force_n[rows])
+        phs.append(p.phase[rows])
     y = np.concatenate(ys)
     bnd = _bounds(grids)
     cache = StateCache(FIT_SUBSTEPS)
     scheme, masks = folds(grids)
-    # 1. base model
-    best: Fit | None = None
-    for p0, g0, a0 in BASE_STARTS:
-        nl0 = nl_defaults((), len(grids))
-        nl0.update(p=np.array(p0), g0=np.array(g0), alpha=np.array(a0))
-        f = fit(grids, y, (), nl0, {"p", "g0", "alpha", "surface"}, cache, max_nfev=60)
-        if best is None or f.sse < best.sse:
-            best = f
-    assert best is not None
-    cur = best
+    # 1. base model (multi-layer where ruptures were seen)
+    cur = _fit_base(grids, y, cache)
+    base_fit = cur
     fits, steps = [cur], []
     last_round: list[dict[str, float | str]] = []
-    # 3-4. candidates, best first, while significant on the fit and on held-out data
+    # 2-4. candidates: local evidence gates, own-phase gain, sharing-aware local BIC, held out
     while len(steps) < max_effects:
-        round_scores = []
+        round_scores: list[dict[str, float | str]] = []
         screened: list[tuple[float, str, Fit]] = []
+        gates: dict[str, tuple[bool | None, str]] = {}
         for cand in VOCABULARY:
-            if cand in cur.effects or not _applicable(cand, grids):
+            if cand in cur.effects or not _applicable(cand, grids, ev):
+                continue
+            gate, why = _local_gate(cand, ev)
+            if cand == "tissue_motion":
+                gate, why = _motion_gate(cur, grids, bnd)
+                gate = None if not gate else gate      # a poor base fit can hide the line
+            if cand == "reversal_presliding":
+                gate, why = _presliding_gate(cur, grids, bnd, [p.noise_n for p in preps])
+                gate = True if gate else None
+            gates[cand] = (gate, why)
+            if gate is False:
+                round_scores.append({"name": cand, "local": why, "rejected": "no local evidence"})
                 continue
             f = _screen(cand, cur, grids, y, cache)
-            dbic = delta_bic(cur, f, bnd)
-            screened.append((dbic, cand, f))
-            round_scores.append({"name": cand, "delta_bic": dbic,
+            rows = _phase_rows(grids, phs, cand)
+            dbic = delta_bic_local(cur, f, bnd, rows, EFFECT_NL[cand], len(grids))
+            screened.append((dbic + (1e6 if gate else 0.0), cand, f))
+            round_scores.append({"name": cand, "delta_bic": dbic, "local": why,
                                  "sse_gain": 1.0 - f.sse / cur.sse})
         screened.sort(key=lambda s: -s[0])
         accepted = None
-        cur_ho = heldout_sse(grids, y, cur, masks, cache)
-        # the screen holds the base model fixed, which favours additive terms that soak up a
-        # distorted base fit: refit the strongest few jointly and rank them again
         refined: list[tuple[float, str, Fit]] = []
-        for dbic, cand, f in screened[:REFINE_TOP]:
+        for rank, (dbic, cand, f) in enumerate(screened[:REFINE_TOP]):
             if dbic < BIC_MIN:
                 break
             f = _refine(f, grids, y, cache)
-            dbic = delta_bic(cur, f, bnd)
-            refined.append((dbic, cand, f))
+            rows = _phase_rows(grids, phs, cand)
+            dbic = delta_bic_local(cur, f, bnd, rows, EFFECT_NL[cand], len(grids))
+            gate = gates[cand][0] if cand != "tissue_motion" else None
+            refined.append((dbic + (1e6 if gate else 0.0), cand, f))
             for rs in round_scores:
                 if rs["name"] == cand:
                     rs.update(delta_bic=dbic, refined=1.0)
@@ -274,12 +488,31 @@ def run(trials: list[Trial], max_effects: int = len(VOCABULARY)) -> Result:
         for dbic, cand, f in refined:
             if dbic < BIC_MIN:
                 break
-            gain = 1.0 - heldout_sse(grids, y, f, masks, cache) / cur_ho
+            rows = _phase_rows(grids, phs, cand)
+            own = 1.0 - float(np.sum(f.resid[rows] ** 2)) / max(float(np.sum(cur.resid[rows] ** 2)),
+                                                               1e-30)
+            gain = 1.0 - heldout_sse(grids, y, f, masks, cache, rows) / \
+                max(heldout_sse(grids, y, cur, masks, cache, rows), 1e-30)
             for rs in round_scores:
                 if rs["name"] == cand:
-                    rs.update(heldout_gain=gain)
+                    rs.update(heldout_gain=gain, own_phase_gain=own)
+            if own < OWN_PHASE_MIN_GAIN:
+                for rs in round_scores:
+                    if rs["name"] == cand:
+                        rs["rejected"] = "does not improve its own phases"
+                continue
+            why_not = _inconsistent(cand, f, grids, y)
+            if why_not:
+                for rs in round_scores:
+                    if rs["name"] == cand:
+                        rs["rejected"] = why_not
+                continue
             if gain > 0.0:
-                accepted = Step(cand, dbic, gain, f, round_scores)
+                gate, why = gates[cand]
+                if cand == "tissue_motion":
+                    gate = None
+                accepted = Step(cand, dbic - (1e6 if gate else 0.0), gain, f, round_scores, own,
+                                why)
                 break
         last_round = round_scores
         if accepted is None:
@@ -287,19 +520,26 @@ def run(trials: list[Trial], max_effects: int = len(VOCABULARY)) -> Result:
         steps.append(accepted)
         cur = accepted.fit
         fits.append(cur)
-    preds = [_predict(preps, f) for f in fits]
+    preds = [_predict(preps, f, rupt) for f in fits]
     errors = [_errors(preps, pr) for pr in preds]
     res_before = [p.force_n + p.tare_n - pr for p, pr in zip(preps, preds[0])]
     res_after = [p.force_n + p.tare_n - pr for p, pr in zip(preps, preds[-1])]
     notes = [f"{len(preps)} trial(s) fitted together with one base parameter set (same needle "
              "and tissue): effects that depend on speed or direction can show up."]
-    if len({round(p.speed_mm_s, 1) for p in preps}) < 2:
+    if int(ev["distinct_speeds"]) < 2:  # type: ignore[call-overload]
         notes.append("Only one insertion speed: velocity-dependent friction cannot be told "
-                      "apart from the base model's friction.")
+                     "apart from the base model's friction (not a candidate).")
     notes.append(f"lag-1 autocorrelation of the final residual: {lag1(fits[-1].resid, bnd):.2f}")
+    notes += [p.note for p in preps if getattr(p, "note", "")]
+    unexpl = _unexplained(preps, preds[-1])
+    try:
+        val = _validate(grids, y, bnd, fits[-1], base_fit)
+    except (np.linalg.LinAlgError, ValueError) as exc:
+        val = {"scheme": f"failed: {exc}"}
     return Result(preps, skipped, scheme, fits, steps, last_round, preds, errors,
                   phase_stats(preps, res_before), phase_stats(preps, res_after),
-                  speed_direction(preps, res_before), time.perf_counter() - t_start, notes)
+                  speed_direction(preps, res_before), time.perf_counter() - t_start, notes,
+                  ev, [len(r) for r in rupt], unexpl, val)
 
 
 def base_paramset(f: Fit):  # type: ignore[no-untyped-def]

@@ -25,40 +25,39 @@ CI_CASES = 4
 
 #: measured shortfalls (CI subset); strict: the mark must go once the target is met
 NAMING_XFAIL: dict[str, str] = {
-    "dwell_relaxation": "named first 2/12 (maxwell_total 0/4, power_law 0/4: direction_asymmetry "
-                        "8x; prony_dwell 2/4), target >= 90 %",
-    "reversal_presliding": "named first 8/12 (dahl 2/4, lugre 2/4: direction_asymmetry 4x; "
-                           "elastoplastic 4/4), target >= 90 %",
-    "direction_asymmetry": "named first 6/8 (2 'none'), target >= 90 %",
-    "sensor_drift": "named first 6/12 (linear 3/4, random_walk 2/4, warmup 1/4; 'none' 4x), "
+    "direction_asymmetry": "named first 4/8 (constant 2/4, depth 2/4; 'none' 3x, layer_puncture "
+                           "1x), target >= 90 %",
+    "sensor_drift": "named first 8/12 (linear 4/4, random_walk 2/4, warmup 2/4; 'none' 4x), "
                     "target >= 90 %",
+    "tissue_motion": "named first 9/12 (irregular 2/4, sinusoid 3/4: reversal_presliding 2x, "
+                     "layer_puncture 1x), target >= 90 %",
 }
 HELD_OUT_XFAIL: dict[str, str] = {
-    "dwell_relaxation": "held-out forms named first 0/8 (direction_asymmetry 6, "
-                        "velocity_friction 1, layer_puncture 1), target >= 85 %",
-    "reversal_presliding": "held-out forms named first 8/12, target >= 85 %",
-    "direction_asymmetry": "held-out form (depth) named first 3/4, target >= 85 %",
-    "sensor_drift": "held-out forms named first 3/8 ('none' 4x), target >= 85 %",
+    "direction_asymmetry": "held-out form (depth) named first 2/4, target >= 85 %",
+    "sensor_drift": "held-out forms named first 4/8 ('none' 4x), target >= 85 %",
+    "tissue_motion": "held-out forms named first 6/8 (irregular 2/4), target >= 85 %",
 }
 _SHRINK = "cases named first with RMSE vs truth -50 % in its phases and -30 % overall: "
 SHRINK_XFAIL: dict[str, str] = {
-    "reversal_presliding": _SHRINK + "3/8 (lugre and elastoplastic: phases -19..-47 %), "
-                                     "target all",
-    "velocity_friction": _SHRINK + "11/12 (stribeck k=0: phases -36 %), target all",
-    "layer_puncture": _SHRINK + "4/12 (phases -1..-50 %; cubic_membrane k=0 -1 %), target all",
-    "sensor_drift": _SHRINK + "4/6 (random_walk k=0 -11 %, linear k=3 -45 %), target all",
-    "tissue_motion": _SHRINK + "5/12 (-12..-48 %), target all",
+    "dwell_relaxation": _SHRINK + "5/11 (prony_dwell 4/4; maxwell_total and power_law: -3..-30 %, "
+                                  "the library's dwell-only form on a relaxation acting all along)"
+                                  ", target all",
+    "velocity_friction": _SHRINK + "10/11 (stribeck k=0: phases -28 %), target all",
+    "layer_puncture": _SHRINK + "0/12 (ruptures are detected and fitted in the base model, so "
+                                "the effect step adds nothing: 0..-15 %), target all",
+    "sensor_drift": _SHRINK + "5/8 (linear k=0 -7 %, random_walk k=0 -21 %, warmup k=3 -23 %), "
+                              "target all",
+    "tissue_motion": _SHRINK + "5/9 (sinusoid k=0..2 -11..-50 %, respiratory k=1 -42 %), "
+                               "target all",
 }
-NONE_XFAIL = "'none' on 3/4 cases without a hidden effect (k=1: layer_puncture, " \
-             "velocity_friction), target >= 90 %"
-PAIR_XFAIL = "relaxation + pre-sliding both named in 0/4 (relaxation never named; " \
-             "direction_asymmetry instead), target >= 85 %"
-BOUNDS_XFAIL = "the workflow's report documents no parameter bounds (report.json has no " \
-               "'bounds' table): 92/92 cases unchecked"
-UNEXPLAINED_FIRES_XFAIL = "the workflow's report carries no verdict (report.json has no " \
-                          "'verdict'): stick-slip 0/4 flagged 'unexplained'"
-UNEXPLAINED_SILENT_XFAIL = "the workflow's report carries no verdict (report.json has no " \
-                           "'verdict'), so silence cannot be shown: 0/88"
+NONE_XFAIL = ""
+PAIR_XFAIL = "relaxation + pre-sliding both named in 2/4 (k=0: pre-sliding not named; k=3: " \
+             "'none'), target >= 85 %"
+BOUNDS_XFAIL = ""
+UNEXPLAINED_FIRES_XFAIL = "stick-slip flagged 'unexplained' in 2/4 (k=0, k=2 explained by a " \
+                          "detected layer), target >= 90 %"
+UNEXPLAINED_SILENT_XFAIL = "the verdict stays silent on 40/88 of the vocabulary's own cases " \
+                           "(residual above 3x the noise over 0.5 s elsewhere), target >= 90 %"
 
 
 def _params(xfails: dict[str, str]) -> list:

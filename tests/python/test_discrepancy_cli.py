@@ -140,3 +140,59 @@ def test_candump_without_force_frames_exit_2(tmp_path: Path, capsys: pytest.Capt
     assert main([str(log), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert "needs Depth and Force frames" in err and err.count("\n") == 1
+
+
+def test_bad_options_exit_2_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    files = _good(tmp_path)
+    blocker = tmp_path / "afile"
+    blocker.write_text("x")
+    for argv, why in (([*files, "--out", str(blocker)], "exists and is not a directory"),
+                      ([*files, "--out", str(blocker / "sub")], "is not a directory"),
+                      ([*files, "--out", str(tmp_path / "o"), "--jobs", "0"], "--jobs"),
+                      ([*files, "--out", str(tmp_path / "o"), "--force-sign", "2"],
+                       "--force-sign")):
+        try:
+            status = main(argv)
+        except SystemExit as exc:       # argparse's own refusals
+            status = int(exc.code or 0)
+        assert status == 2
+        err = capsys.readouterr().err
+        assert why in err and err.count("\n") == 1, err
+        assert not (tmp_path / "o").exists()
+
+
+def test_negative_sign_conventions_detected(tmp_path: Path) -> None:
+    """Force and depth recorded negative on insertion: detected, flipped, said in the notes; the
+    prepared trial equals the one recorded positive."""
+    from reference_py.discrepancy.prep import prepare
+    tr = make_case(("dwell_relaxation",), 5).trials[0]
+    neg = Trial(tr.name, tr.t_s, -tr.depth_mm, -tr.force_n, None)
+    p, q = prepare(neg), prepare(Trial(tr.name, tr.t_s, tr.depth_mm, tr.force_n, None))
+    assert (p.force_sign, p.depth_sign) == (-1.0, -1.0) and "negative" in p.note
+    assert (q.force_sign, q.depth_sign) == (1.0, 1.0) and q.note == ""
+    assert p.surface_mm == pytest.approx(q.surface_mm, abs=1e-9)
+    assert np.array_equal(p.force_n, q.force_n)
+
+
+def test_estimator_config_written(tmp_path: Path) -> None:
+    files = _good(tmp_path)
+    out = tmp_path / "rep"
+    assert main(files + ["--out", str(out), "--no-figures"]) == 0
+    cfg = json.loads((out / "estimator_config.json").read_text())
+    assert cfg["schema"] == "nte-estimator-config/1"
+    assert set(cfg["params"]) >= {"sigma0", "sigma1", "sigma2", "f1", "f2", "alpha", "beta"}
+    assert cfg["params"]["sigma1"] >= 0 and cfg["params"]["sigma0"] >= 0
+    assert len(cfg["surface_mm"]) == len(files) == len(cfg["tare_n"])
+    rep = json.loads((out / "report.json").read_text())
+    assert rep["estimator_config"] == "estimator_config.json"
+    for e in rep["named"]:
+        assert e in ("none", "layer_puncture") or e in cfg["effects"]
+
+
+def test_each_with_jobs_one_report_per_file(tmp_path: Path) -> None:
+    files = _good(tmp_path)[:2]
+    out = tmp_path / "each"
+    assert main(files + ["--out", str(out), "--no-figures", "--each", "--jobs", "2"]) == 0
+    for f in files:
+        rep = json.loads((out / Path(f).stem / "report.json").read_text())
+        assert rep["inputs"] == [f] and "verdict" in rep

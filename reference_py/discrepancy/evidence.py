@@ -1,0 +1,253 @@
+"""Local evidence: each effect judged where it lives, against a local baseline.
+
+A poor base fit elsewhere (a multi-layer insertion fitted with one hump, say) inflates the global
+residual and, with it, the price any information criterion puts on an extra parameter.  The
+signatures below are measured on the force itself, in the window where the effect acts, so a plain
+local signature stays visible however large the misfit elsewhere:
+
+- ``ruptures``: force drops larger than ``max(RUPTURE_MIN_FRAC * peak, RUPTURE_NOISE * noise)``
+  within ``RUPTURE_WINDOW_S`` during the first insertion (measured insertions: > 0.15 N within
+  0.1 s, 0-5 per insertion).  Their depths switch the multi-layer base model.
+- ``dwell``: per dwell, the force (air drift removed) fitted by a constant, a line, one and two
+  exponentials (time constants on a log grid in [0.05, 30] s).  Reported: relative decay, time
+  constants, amplitude / noise and the chi-square gain of the exponential over the line.
+- ``reversal``: travel from the reversal to the zero crossing of the smoothed force, and the
+  chi-square gain of ``a + b d + c exp(-d/delta)`` over ``a + b d`` on the first 6 mm of travel.
+- ``drift``: the force level in the air after exit against the level before contact (the tare is
+  the latter), and its slope, in noise units.
+- ``speeds``: distinct insertion speeds (velocity dependence needs two).
+- ``period``: the strongest 0.1-0.6 Hz line of a residual and its share of the residual power.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..fmath import Array
+from .prep import PHASES, Prepared, smooth
+
+#: a rupture is a drop of at least this fraction of the insertion peak ...
+RUPTURE_MIN_FRAC = 0.06
+#: ... and at least this many noise standard deviations (of one sample: the largest of ~10
+#: differences of 3-sample means over thousands of samples reaches ~4 sigma on noise alone) ...
+RUPTURE_NOISE = 8.0
+#: ... within this time (s)
+RUPTURE_WINDOW_S = 0.1
+#: ... while the stage moves at least this fraction of its median insertion speed
+RUPTURE_CRUISE = 0.7
+#: ... and not in the last millimetre before the stop
+RUPTURE_END_MM = 1.0
+#: four or more drops evenly spaced in time (interval spread below this fraction of the mean
+#: interval) are periodic: a motion or stick-slip line, not layers (random layer depths spread
+#: more: 0.25 seen on a 4-layer trial)
+RUPTURE_PERIODIC_CV = 0.1
+#: ruptures closer than this (mm) are one event
+RUPTURE_MERGE_MM = 0.5
+#: time-constant grid of the local dwell fits (s): the documented bounds of relaxation
+TAU_GRID = np.geomspace(0.05, 30.0, 40)
+#: presliding-length grid of the local reversal fit (mm)
+DELTA_GRID = np.geomspace(0.05, 5.0, 30)
+#: travel after a reversal in the local reversal window (mm)
+REVERSAL_WINDOW_MM = 6.0
+
+
+def ruptures(p: Prepared) -> list[dict[str, float]]:
+    """Sudden force drops during the first insertion: tissue depth (mm), time (s), drop (N)."""
+    l = p.stage_mm - p.surface_mm
+    s = np.sign(p.v_mm_s) * (np.abs(p.v_mm_s) > 0.02)
+    back = np.nonzero((s < 0) & (l > 0))[0]
+    end = int(back[0]) if len(back) else len(l)
+    ins = np.nonzero((l[:end] > 0) & (s[:end] > 0))[0]       # advancing (a dwell is no rupture)
+    if len(ins) < 8:
+        return []
+    # at cruise speed only: the force of a model whose friction follows sign(v) also falls when
+    # the stage slows into a stop, which is not a rupture
+    cruise = (p.v_mm_s[ins] >= RUPTURE_CRUISE * float(np.median(p.v_mm_s[ins]))) & \
+        (l[ins] < float(np.max(l[ins])) - RUPTURE_END_MM)
+    f = smooth(p.force_n[ins], 3)
+    t = p.t_s[ins]
+    peak = float(np.max(f))
+    thr = max(RUPTURE_MIN_FRAC * abs(peak), RUPTURE_NOISE * p.noise_n)
+    out: list[dict[str, float]] = []
+    j0 = 0
+    k = 0
+    n = len(f)
+    while k < n:
+        while t[j0] < t[k] - RUPTURE_WINDOW_S - 1e-9:
+            j0 += 1
+        j0k = min(j0, max(k - 2, 0))          # at least two samples back over gaps
+        win = f[j0k:k + 1]
+        jm = j0k + int(np.argmax(win))
+        if f[jm] - f[k] > thr and cruise[k] and cruise[jm]:
+            # the event: follow the fall to its bottom, record its top
+            kk = k
+            while kk + 1 < n and f[kk + 1] <= f[kk]:
+                kk += 1
+            depth = float(l[ins[jm]])
+            drop = float(f[jm] - f[kk])
+            if f[kk] <= 0.0:
+                # a tissue that tore still holds the tip (cutting, friction): a fall to or below
+                # zero is the needle pulled back by a moving tissue, not a rupture
+                k = kk + 1
+                continue
+            if out and depth - out[-1]["depth_mm"] < RUPTURE_MERGE_MM:
+                out[-1]["drop_n"] = max(out[-1]["drop_n"], float(out[-1]["peak_n"] - f[kk]))
+            else:
+                out.append({"depth_mm": depth, "t_s": float(t[jm]), "drop_n": drop,
+                            "peak_n": float(f[jm])})
+            k = kk + 1
+            continue
+        k += 1
+    if len(out) >= 4:
+        gaps = np.diff([r["t_s"] for r in out])
+        if float(np.std(gaps)) < RUPTURE_PERIODIC_CV * float(np.mean(gaps)):
+            return []        # evenly spaced drops: an oscillation (motion, stick-slip), not layers
+    return out
+
+
+def air_drift(p: Prepared) -> dict[str, float]:
+    """Level of the force in the air after exit relative to before contact (N, N/s, noise units)."""
+    pre = p.phase == PHASES.index("out_of_tissue")
+    post = p.phase == PHASES.index("after_exit")
+    if pre.sum() < 5 or post.sum() < 5:
+        return {"available": 0.0, "level_n": 0.0, "slope_n_per_s": 0.0, "z": 0.0}
+    a, b = float(np.median(p.force_n[pre])), float(np.median(p.force_n[post]))
+    dt = float(np.median(p.t_s[post]) - np.median(p.t_s[pre]))
+    se = p.noise_n * np.sqrt(np.pi / 2) * np.sqrt(1.0 / pre.sum() + 1.0 / post.sum())
+    return {"available": 1.0, "level_n": b - a, "slope_n_per_s": (b - a) / max(dt, 1e-6),
+            "z": abs(b - a) / se}
+
+
+def _lin_sse(cols: Array, y: Array) -> tuple[float, Array]:
+    c, *_ = np.linalg.lstsq(cols, y, rcond=None)
+    r = y - cols @ c
+    return float(r @ r), c
+
+
+def dwell_decay(p: Prepared, drift_n_per_s: float = 0.0) -> list[dict[str, float]]:
+    """Local fits of each dwell's force: constant, line, one and two exponentials."""
+    out = []
+    for i0, i1 in p.dwells:
+        t = p.t_s[i0:i1] - p.t_s[i0]
+        if len(t) < 12:
+            continue
+        y = p.force_n[i0:i1] - drift_n_per_s * t
+        one = np.ones_like(t)
+        sse_c = float(np.sum((y - y.mean()) ** 2))
+        sse_l, _ = _lin_sse(np.column_stack([one, t]), y)
+        best1 = (np.inf, 0.0, 0.0)
+        for tau in TAU_GRID:
+            e = np.exp(-t / tau)
+            sse, c = _lin_sse(np.column_stack([one, e]), y)
+            if sse < best1[0]:
+                best1 = (sse, float(tau), float(c[1]))
+        best2 = (np.inf, 0.0, 0.0)
+        for a, tf in enumerate(TAU_GRID[:-1]):
+            if tf > 1.5:
+                break
+            for ts in TAU_GRID[a + 4::2]:
+                sse, _ = _lin_sse(np.column_stack([one, np.exp(-t / tf), np.exp(-t / ts)]), y)
+                if sse < best2[0]:
+                    best2 = (sse, float(tf), float(ts))
+        n_head = max(3, len(y) // 20)
+        f0 = float(np.mean(p.force_n[i0:i0 + n_head]))
+        f1 = float(np.mean(y[-n_head:]))
+        rel = (f0 - f1) / abs(f0) if abs(f0) > 1e-12 else 0.0
+        s2 = p.noise_n ** 2
+        out.append({
+            "t0_s": float(p.t_s[i0]), "duration_s": float(t[-1]),
+            "depth_mm": float(p.stage_mm[i0] - p.surface_mm), "force_start_n": f0,
+            "relative_decay": rel, "amplitude_n": best1[2], "amplitude_over_noise":
+                abs(best1[2]) / p.noise_n, "tau_one_s": best1[1], "tau_fast_s": best2[1],
+            "tau_slow_s": best2[2],
+            "chi2_exp_vs_const": (sse_c - best1[0]) / s2,
+            "chi2_exp_vs_line": (sse_l - min(best1[0], best2[0])) / s2,
+            "resid_rms_over_noise": float(np.sqrt(min(best1[0], best2[0]) / len(y)) / p.noise_n),
+        })
+    return out
+
+
+def reversal_transition(p: Prepared) -> dict[str, float] | None:
+    """Travel to the zero crossing after the first reversal, and the curvature of the turn-over."""
+    l = p.stage_mm - p.surface_mm
+    s = np.sign(p.v_mm_s) * (np.abs(p.v_mm_s) > 0.02)
+    back = np.nonzero((s < 0) & (l > 0))[0]
+    if len(back) < 10:
+        return None
+    k0 = int(back[0])
+    idx = np.arange(k0, len(l))
+    idx = idx[(s[idx] < 0) & (l[idx] > 0)]
+    d = l[k0] - l[idx]
+    keep = d <= REVERSAL_WINDOW_MM
+    idx, d = idx[keep], d[keep]
+    if len(idx) < 10:
+        return None
+    y = p.force_n[idx]
+    ys = smooth(y, 5)
+    neg = np.nonzero(ys < 0)[0]
+    cross = float(d[neg[0]]) if len(neg) else float("nan")
+    one = np.ones_like(d)
+    sse_l, _ = _lin_sse(np.column_stack([one, d]), y)
+    best = (np.inf, 0.0)
+    for dl in DELTA_GRID:
+        sse, c = _lin_sse(np.column_stack([one, d, np.exp(-d / dl)]), y)
+        if sse < best[0]:
+            best = (sse, float(dl))
+    return {"zero_crossing_mm": cross, "delta_mm": best[1],
+            "chi2_curve_vs_line": (sse_l - best[0]) / p.noise_n ** 2,
+            "force_at_reversal_n": float(ys[0])}
+
+
+def distinct_speeds(preps: list[Prepared], rel_tol: float = 0.15) -> int:
+    """Number of insertion speeds differing by more than ``rel_tol`` relative."""
+    sp = sorted(p.speed_mm_s for p in preps if p.speed_mm_s > 0)
+    n, last = 0, -np.inf
+    for v in sp:
+        if v > last * (1.0 + rel_tol):
+            n += 1
+            last = v
+    return n
+
+
+def period(t: Array, r: Array, lo: float = 0.1, hi: float = 0.6) -> tuple[float, float]:
+    """Strongest frequency in [lo, hi] Hz of ``r`` and the share of its variance it carries."""
+    from scipy.signal import lombscargle
+    if len(t) < 20 or t[-1] - t[0] < 2.0 / hi:
+        return float("nan"), 0.0
+    freqs = np.linspace(lo, hi, 101)
+    rc = r - r.mean()
+    pw = lombscargle(t, rc, 2 * np.pi * freqs)
+    k = int(np.argmax(pw))
+    return float(freqs[k]), float(min(2.0 * pw[k] / (len(t) * np.var(rc) + 1e-30), 1.0))
+
+
+def collect(preps: list[Prepared]) -> dict[str, object]:
+    """All local evidence of a condition (JSON-ready)."""
+    per_trial = []
+    for p in preps:
+        dr = air_drift(p)
+        per_trial.append({"trial": p.name, "ruptures": ruptures(p), "air_drift": dr,
+                          "dwells": dwell_decay(p, dr["slope_n_per_s"] if dr["z"] > 4 else 0.0),
+                          "reversal": reversal_transition(p), "noise_n": p.noise_n})
+    return {"per_trial": per_trial, "distinct_speeds": distinct_speeds(preps)}
+
+
+#: a dwell shows relaxation when the force falls by at least this fraction ...
+DWELL_MIN_DECAY = 0.03
+#: ... by at least this many noise standard deviations (exponential amplitude) ...
+DWELL_MIN_AMP = 4.0
+#: ... and an exponential beats a straight line by this chi-square (curvature: not a drift)
+DWELL_MIN_CHI2 = 25.0
+
+
+def dwell_verdict(ev: dict[str, object]) -> tuple[bool, float]:
+    """Relaxation seen locally (majority of dwells) and the median relative decay."""
+    dw = [d for t in ev["per_trial"] for d in t["dwells"]]  # type: ignore[index,union-attr]
+    if not dw:
+        return False, 0.0
+    ok = [d["relative_decay"] >= DWELL_MIN_DECAY and d["amplitude_over_noise"] >= DWELL_MIN_AMP
+          and d["chi2_exp_vs_line"] >= DWELL_MIN_CHI2 for d in dw]
+    return (sum(ok) * 2 > len(ok)), float(np.median([d["relative_decay"] for d in dw]))
+
+
+def rupture_count(ev: dict[str, object]) -> list[int]:
+    return [len(t["ruptures"]) for t in ev["per_trial"]]  # type: ignore[index,union-attr]

@@ -1,0 +1,85 @@
+"""The workflow on measured-like insertions (model-notes §9 statistics, forms that are not the
+library's: power-law tenting, Dahl pre-sliding over travel, a Maxwell element on the whole tissue
+force; see discrepancy_measured_like.py): layers, relaxation, bounds, the base zero in the air,
+the "unexplained" verdict, held-out validation and the measured-data path."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from discrepancy_measured_like import make_case, make_trial
+from reference_py.discrepancy.evidence import collect, rupture_count
+from reference_py.discrepancy.prep import prepare
+from reference_py.discrepancy.report import bound_violations
+from reference_py.discrepancy.workflow import run
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_ruptures_counted_per_trial(seed: int) -> None:
+    tr, _, _, n_layers = make_trial(1000 + seed)
+    ev = collect([prepare(tr)])
+    assert rupture_count(ev) == [n_layers]
+
+
+@pytest.fixture(scope="module")
+def relaxing() -> tuple:
+    case = make_case(4, trials=3)
+    return case, run(case.trials)
+
+
+def test_measured_like_relaxation_and_layers_named(relaxing: tuple) -> None:
+    case, res = relaxing
+    assert res.layers == case.layers
+    assert "dwell_relaxation" in res.named and res.named[0] == "layer_puncture"
+    assert bound_violations(res) == []
+
+
+def test_base_is_zero_in_air_and_gap_shrinks(relaxing: tuple) -> None:
+    case, res = relaxing
+    for i, (p, pred) in enumerate(zip(res.preps, res.predictions[0])):
+        surface = p.surface_mm + float(res.fits[0].nl["surface"][i])
+        air = p.stage_mm <= surface
+        assert air.sum() > 20 and np.max(np.abs(pred[air] - p.tare_n)) <= 1e-12
+    base = np.sqrt(np.mean(np.concatenate([(a - b) ** 2 for a, b in
+                                           zip(res.predictions[0], case.truth)])))
+    final = np.sqrt(np.mean(np.concatenate([(a - b) ** 2 for a, b in
+                                            zip(res.predictions[-1], case.truth)])))
+    assert final <= 0.5 * base
+    assert res.validation["shrink"] > 0.2
+
+
+def test_local_dwell_evidence_survives_a_poor_base_fit() -> None:
+    tr, truth, sig, _ = make_trial(4000, n_layers=3)
+    ev = collect([prepare(tr)])
+    d = ev["per_trial"][0]["dwells"][0]
+    assert d["relative_decay"] > 0.05 and d["amplitude_over_noise"] > 4.0
+    assert 0.05 <= d["tau_fast_s"] <= 1.5 and d["tau_slow_s"] <= 30.0
+
+
+def test_unexplained_fires_on_stick_slip() -> None:
+    case = make_case(7, trials=2, stick_slip=True, noise=0.01)
+    res = run(case.trials, max_effects=2)
+    assert res.unexplained and res.unexplained[0]["over_noise"] > 3.0
+
+
+def test_velocity_friction_never_from_one_speed() -> None:
+    case = make_case(9, trials=2, speed=2.0)
+    res = run(case.trials, max_effects=2)
+    assert "velocity_friction" not in res.named
+    assert any(r.get("name") == "velocity_friction" for r in res.last_round) is False or all(
+        r.get("rejected") for r in res.last_round if r.get("name") == "velocity_friction")
+
+
+def test_realistic_phantom_layers_relaxation_and_shrink() -> None:
+    """A record of the realistic phantom (tools/phantom.py: exponential tenting, Maxwell element
+    on the engaged tissue, Dahl pre-sliding over stage travel): its two ruptures found, relaxation
+    named, no parameter outside its bounds, the RMSE to the noise-free force shrinks by >= 50 %."""
+    from discrepancy_measured_like import phantom_trial
+    tr, truth, sig, n_layers = phantom_trial("skin-on-muscle", 1)
+    res = run([tr])
+    assert res.layers == [n_layers] and n_layers >= 1
+    assert "dwell_relaxation" in res.named
+    assert bound_violations(res) == []
+    before = np.sqrt(np.mean((res.predictions[0][0] - truth) ** 2))
+    after = np.sqrt(np.mean((res.predictions[-1][0] - truth) ** 2))
+    assert after <= 0.5 * before and after <= 6.0 * sig
