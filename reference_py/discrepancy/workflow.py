@@ -256,6 +256,17 @@ def _inconsistent(cand: str, f: Fit, grids: list[TrialGrid], y: Array) -> str:
     return ""
 
 
+def _motion_over_presliding(scored: list[tuple[float, str, Fit]], raw: dict[str, float],
+                            gates: dict[str, tuple[bool | None, str]]
+                            ) -> list[tuple[float, str, Fit]]:
+    """A moving tissue also bends the force after the reversal, so the pre-sliding test can fire
+    on it: when tissue motion explains more than pre-sliding (raw scores), it ranks first."""
+    if not gates.get("reversal_presliding", (None, ""))[0] or "tissue_motion" not in raw or \
+            "reversal_presliding" not in raw or raw["tissue_motion"] <= raw["reversal_presliding"]:
+        return scored
+    return [(sc + 2e6 if cand == "tissue_motion" else sc, cand, f) for sc, cand, f in scored]
+
+
 def _local_gate(cand: str, ev: dict[str, object]) -> tuple[bool | None, str]:
     """Local verdict for effects that have one: True (seen), False (absent), None (no test)."""
     if cand == "dwell_relaxation":
@@ -450,6 +461,7 @@ def run(trials: list[Trial], max_effects: int = len(VOCABULARY), force_sign: flo
         round_scores: list[dict[str, float | str]] = []
         screened: list[tuple[float, str, Fit]] = []
         gates: dict[str, tuple[bool | None, str]] = {}
+        raw: dict[str, float] = {}
         for cand in VOCABULARY:
             if cand in cur.effects or not _applicable(cand, grids, ev):
                 continue
@@ -468,8 +480,10 @@ def run(trials: list[Trial], max_effects: int = len(VOCABULARY), force_sign: flo
             rows = _phase_rows(grids, phs, cand)
             dbic = delta_bic_local(cur, f, bnd, rows, EFFECT_NL[cand], len(grids))
             screened.append((dbic + (1e6 if gate else 0.0), cand, f))
+            raw[cand] = dbic
             round_scores.append({"name": cand, "delta_bic": dbic, "local": why,
                                  "sse_gain": 1.0 - f.sse / cur.sse})
+        screened = _motion_over_presliding(screened, raw, gates)
         screened.sort(key=lambda s: -s[0])
         accepted = None
         refined: list[tuple[float, str, Fit]] = []
@@ -481,9 +495,11 @@ def run(trials: list[Trial], max_effects: int = len(VOCABULARY), force_sign: flo
             dbic = delta_bic_local(cur, f, bnd, rows, EFFECT_NL[cand], len(grids))
             gate = gates[cand][0] if cand != "tissue_motion" else None
             refined.append((dbic + (1e6 if gate else 0.0), cand, f))
+            raw[cand] = dbic
             for rs in round_scores:
                 if rs["name"] == cand:
                     rs.update(delta_bic=dbic, refined=1.0)
+        refined = _motion_over_presliding(refined, raw, gates)
         refined.sort(key=lambda s: -s[0])
         for dbic, cand, f in refined:
             if dbic < BIC_MIN:
@@ -508,10 +524,8 @@ def run(trials: list[Trial], max_effects: int = len(VOCABULARY), force_sign: flo
                         rs["rejected"] = why_not
                 continue
             if gain > 0.0:
-                gate, why = gates[cand]
-                if cand == "tissue_motion":
-                    gate = None
-                accepted = Step(cand, dbic - (1e6 if gate else 0.0), gain, f, round_scores, own,
+                why = gates[cand][1]
+                accepted = Step(cand, raw.get(cand, dbic), gain, f, round_scores, own,
                                 why)
                 break
         last_round = round_scores
