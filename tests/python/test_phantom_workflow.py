@@ -4,7 +4,9 @@ pre-sliding, sensor noise 8-50 mN), each trial on its own, against the phantom's
 Targets: relaxation named in >= 95 % of the trials with a dwell; the layer count right in >= 90 %;
 the RMSE to the noise-free record shrinks >= 50 % from the base fit to the final model (median);
 the final residual is <= 3x the sensor noise (median).  Where the workflow falls short, the test is
-a strict xfail whose reason carries the measured figure.
+a strict xfail whose reason carries the measured figure.  Measured (this file, --runxfail):
+relaxation named in 6/6, median shrink 0.80 (0.04 to 0.90), layers right 5/6, median final
+residual 3.9x the noise.
 
 Trials: lab tissues of five seeds in 2001-2007 (drawn from the measured statistics; not used to
 tune the phantom) and the four-layer preset at 30 mN; all have a 5.26 s dwell.  Six trials keep
@@ -29,15 +31,6 @@ def _rms(x: np.ndarray) -> float:
     return float(np.sqrt(np.mean(x * x)))
 
 
-def _layers_found(res: workflow.Result, i: int) -> int:
-    """Layers the workflow found in trial i: its per-trial count where the base model is
-    multi-layer (Result.layers), otherwise one when it named a layer puncture."""
-    per_trial = getattr(res, "layers", None)
-    if per_trial:
-        return int(per_trial[i])
-    return int("layer_puncture" in res.named)
-
-
 @pytest.fixture(scope="module")
 def rows() -> list[dict[str, float]]:
     out = []
@@ -54,7 +47,7 @@ def rows() -> list[dict[str, float]]:
         base, final = res.predictions[0][0], res.predictions[-1][0]
         out.append({"case": f"{name}-{seed}",
                     "relaxation": float("dwell_relaxation" in res.named),
-                    "layers_found": float(_layers_found(res, 0)),
+                    "layers_found": float(res.layers[0]),     # ruptures the base switched at
                     "layers_true": float(rec.truth["ruptures_per_cycle"][0]),
                     "shrink": 1.0 - _rms(final - clean) / _rms(base - clean),
                     "resid_x_noise": _rms(rec.force_n - final) / rec.spec.sensor.noise_n})
@@ -71,31 +64,28 @@ def test_every_trial_ran_and_the_figures_are_finite(rows):
         assert all(np.isfinite(v) for k, v in r.items() if k != "case"), r
 
 
-@pytest.mark.xfail(strict=True,
-                   reason="measured: relaxation named in 0/6 trials (target >= 95 %)")
 def test_relaxation_is_named_in_trials_with_a_dwell(rows):
     share = np.mean([r["relaxation"] for r in rows])
     assert share >= 0.95, f"relaxation named in {share:.0%}"
 
 
 @pytest.mark.xfail(strict=True,
-                   reason="measured: layer count right in 1/6 trials (target >= 90 %)")
+                   reason="measured: layer count right in 5/6 trials (target >= 90 %; "
+                          "lab-2004 at 53 mN noise: 0 of 1 found)")
 def test_layer_count_is_right(rows):
     share = np.mean([r["layers_found"] == r["layers_true"] for r in rows])
     found = ", ".join(f"{r['case']}: {r['layers_found']:.0f}/{r['layers_true']:.0f}" for r in rows)
     assert share >= 0.90, f"layer count right in {share:.0%} (found/true): {found}"
 
 
-@pytest.mark.xfail(strict=True,
-                   reason="measured: median shrink of the RMSE to the noise-free record 0 % "
-                          "(0 % in all 6 trials; target >= 50 %)")
 def test_rmse_to_the_noise_free_record_shrinks_by_half(rows):
     med = float(np.median([r["shrink"] for r in rows]))
     assert med >= 0.5, f"median shrink {med:.0%}: " + _summary(rows, "shrink")
 
 
 @pytest.mark.xfail(strict=True,
-                   reason="measured: median final residual 31x the noise (target <= 3x)")
+                   reason="measured: median final residual 3.9x the noise (target <= 3x; "
+                          "lab-2006 29x, lab-2007 12x)")
 def test_final_residual_is_within_three_times_the_noise(rows):
     med = float(np.median([r["resid_x_noise"] for r in rows]))
     assert med <= 3.0, f"median final residual {med:.1f}x noise: " + _summary(rows, "resid_x_noise")
