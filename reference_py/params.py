@@ -1,6 +1,6 @@
 """Physical parameters, the paper's presets, and the scaled (log) form the filters identify.
 
-Units (model-notes §1): depth l in mm, time in s, force in N, z dimensionless.  The parameters
+Units (MODEL.md §1): depth l in mm, time in s, force in N, z dimensionless.  The parameters
 carry whatever units make f in N with l in mm; they are given here exactly as the paper reports them.
 
 Scaled form.  The filters never see a physical parameter directly.  Each identified parameter j is
@@ -35,7 +35,7 @@ FILTER_SUBSETS: dict[int, tuple[tuple[str, ...], ...]] = {
     2: (("sigma0",), ("f1", "sigma1"), ("beta", "sigma2")),
 }
 
-#: Model I's fixed normalising constant beta0 when no preset supplies one (model-notes §2)
+#: Model I's fixed normalising constant beta0 when no preset supplies one (MODEL.md §2)
 BETA0_DEFAULT = 2.55e-2
 
 

@@ -415,7 +415,7 @@ int main(int argc, char** argv)
     } else {
         nte_config_default(&cfg, a.model, sch);
     }
-    /* Model I's fixed beta0 is the preset's beta (model-notes §2) */
+    /* Model I's fixed beta0 is the preset's beta (reference_py/MODEL.md §2) */
     cfg.beta0 = (nte_real_t)preset->values[6];
     for (size_t j = 0U; j < NTE_PARAM_COUNT; j++) {
         cfg.nominal[j] = (nte_real_t)start[j];

@@ -1,4 +1,4 @@
-"""The effect library: extensions of the force model for effects it leaves out (model-notes §8).
+"""The effect library: extensions of the force model for effects it leaves out (MODEL.md §8).
 
 Every effect is a documented extension of the base model with its own parameters and units, and
 every extended model can be simulated (:func:`simulate_extended`).  Written in the normalised form

@@ -34,7 +34,7 @@ class EstimateRun:
 
 def make_config(preset: Preset, model: int, profile: str, schedule: str) -> EstimatorConfig:
     cfg = profile_config(profile, model, schedule)
-    # Model I's fixed beta0 is the preset's beta (model-notes §2)
+    # Model I's fixed beta0 is the preset's beta (MODEL.md §2)
     return replace(cfg, beta0=preset.params.beta)
 
 

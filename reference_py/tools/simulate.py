@@ -2,7 +2,7 @@
 
 The state equation is integrated with the same RK3 step the filters use (float64, 10 sub-steps by
 default, depth linear within a sample); the output uses the exact direction sign(v) unless told
-otherwise (model-notes §2, §4).  z is reset to 0 whenever the depth is back at 0.
+otherwise (MODEL.md §2, §4).  z is reset to 0 whenever the depth is back at 0.
 """
 from __future__ import annotations
 

@@ -280,7 +280,7 @@ static void test_estimate_clamp_and_flags(void** state)
 
 static void test_params(void** state)
 {
-    /* Model II nominal values (model-notes section 3) and a spread of standard deviations */
+    /* Model II nominal values (reference_py/MODEL.md §3) and a spread of standard deviations */
     static const float values[7] = {7.9e-3f, 2.46f, 4.14e-3f, 5.59e-2f, -2.11e-2f, 5.25e-2f,
                                     2.55e-2f};
     static const float stds[] = {0.0f, 1e-30f, 3.3e-7f, 1e-4f, 0.0123f, 1.0f, 517.0f, 1e30f};

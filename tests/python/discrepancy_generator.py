@@ -7,7 +7,7 @@ comes in two or three physically different *forms*, drawn at random.  Each form 
 multi-layer base) contains that exact functional form, and ``library=False`` ("held out") when it
 does not; the blind confusion is reported per form and restricted to held-out forms.
 
-Forms (magnitudes from shared model-notes §8-§9):
+Forms (magnitudes from reference_py/MODEL.md §8-§9):
 
 dwell_relaxation (the measured force falls by 28-49 % over a 5 s dwell)
   prony_dwell    library: the force held at the stop relaxes during the dwell only, two

@@ -1,5 +1,5 @@
 """Measured-like insertions for the discrepancy tests, built from the statistics of 331 public
-trials (model-notes §9), not from the library's effect forms.
+trials (reference_py/MODEL.md §9), not from the library's effect forms.
 
 Tissue: 1-4 layers, each a membrane that tents (force growing as a power of the travel since the
 previous rupture, exponent 1.3-2.5) up to its rupture force, then drops; after a rupture the tip

@@ -1,4 +1,4 @@
-"""The workflow on measured-like insertions (model-notes §9 statistics, forms that are not the
+"""The workflow on measured-like insertions (reference_py/MODEL.md §9 statistics, forms that are not the
 library's: power-law tenting, Dahl pre-sliding over travel, a Maxwell element on the whole tissue
 force; see discrepancy_measured_like.py): layers, relaxation, bounds, the base zero in the air,
 the "unexplained" verdict, held-out validation and the measured-data path."""

@@ -97,7 +97,7 @@ def _dwell_drop(case: g.Case) -> float:
 
 @pytest.mark.parametrize("form", ["prony_dwell", "maxwell_total", "power_law"])
 def test_relaxation_drop_in_the_measured_range(form: str) -> None:
-    """model-notes §9: the force falls by 28-49 % over the dwell."""
+    """reference_py/MODEL.md §9: the force falls by 28-49 % over the dwell."""
     drops = [_dwell_drop(g.make_case(f"dwell_relaxation/{form}", s)) for s in range(8)]
     inside = [0.25 <= d <= 0.52 for d in drops]
     assert sum(inside) >= 7, drops

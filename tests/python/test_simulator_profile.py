@@ -1,4 +1,4 @@
-"""The simulator reproduces the expected Model II force profile (model-notes §4)."""
+"""The simulator reproduces the expected Model II force profile (reference_py/MODEL.md §4)."""
 import numpy as np
 import pytest
 
