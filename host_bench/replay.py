@@ -12,13 +12,11 @@ python-can's writers (CSV and candump -L log); the frames sent are written too, 
     nte-bench send scenario.csv --interface socketcan --channel vcan0 \\
         --record-csv run.csv --record-log run.log
 
-(``python -m host_bench.replay ARGS`` runs ``nte-bench send ARGS``.)
 """
 
 from __future__ import annotations
 
 import math
-import sys
 import threading
 import time
 from dataclasses import dataclass, field
@@ -157,12 +155,3 @@ def replay(bus: can.BusABC, frames: Iterable[ScheduledFrame], *, speed: float = 
     res.received = counter.n
     return res
 
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m host_bench.replay ARGS`` is ``nte-bench send ARGS``."""
-    from .cli import main as bench_main
-    return bench_main(["send", *(sys.argv[1:] if argv is None else argv)])
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -3,7 +3,7 @@
     python tests/python/replay_probe.py SCENARIO.csv OUTDIR SPEED
 
 Starts candump -L vcan0 (capturing to OUTDIR/candump.log), runs the replay engine
-(python -m host_bench.replay) on the scenario with --record-csv/--record-log into OUTDIR, and
+(nte-bench send, as python -m host_bench.cli send) on the scenario with --record-csv/--record-log into OUTDIR, and
 meanwhile plays a stand-in for the node: five Heartbeat frames (E2E protected, from
 host_bench.dbc) sent 0.2 s apart, which the replay must record. Both child processes are
 stopped by their own PIDs.
@@ -28,7 +28,7 @@ def main() -> int:
     try:
         time.sleep(0.3)
         replay = subprocess.Popen(
-            [sys.executable, "-m", "host_bench.replay", scenario, "--interface", "socketcan",
+            [sys.executable, "-m", "host_bench.cli", "send", scenario, "--interface", "socketcan",
              "--channel", "vcan0", "--speed", speed, "--tail", "0.5",
              "--record-csv", str(outdir / "record.csv"), "--record-log", str(outdir / "record.log")],
             stdout=open(outdir / "replay.out", "w"), stderr=subprocess.STDOUT)

@@ -4,7 +4,7 @@
   the ``python -m reference_py`` entry point) imports only numpy, the standard library and other
   twin modules -- never the tools (``reference_py/tools``), the discrepancy workflow, scipy or
   matplotlib.
-- No import cycle anywhere inside ``reference_py`` (imports inside functions count too: a lazy
+- No import cycle anywhere inside ``reference_py`` or ``host_bench`` (imports inside functions count too: a lazy
   import hides a cycle, it does not remove it).
 - No ``#include "..."`` cycle in ``firmware/src`` (file by file, and module by module with a
   ``.c`` and its ``.h`` taken as one module).
@@ -36,8 +36,8 @@ def module_name(path: Path) -> str:
     return ".".join(parts)
 
 
-def python_modules() -> dict[str, Path]:
-    return {module_name(p): p for p in sorted(PKG.rglob("*.py"))}
+def python_modules(pkg: Path = PKG) -> dict[str, Path]:
+    return {module_name(p): p for p in sorted(pkg.rglob("*.py"))}
 
 
 def resolve(importer: str, is_package: bool, node: ast.ImportFrom | ast.Import,
@@ -58,9 +58,9 @@ def resolve(importer: str, is_package: bool, node: ast.ImportFrom | ast.Import,
     return out
 
 
-def import_graph() -> dict[str, set[str]]:
+def import_graph(pkg: Path = PKG) -> dict[str, set[str]]:
     """Every import of every module in the package, as absolute dotted names."""
-    modules = python_modules()
+    modules = python_modules(pkg)
     graph: dict[str, set[str]] = {}
     for name, path in modules.items():
         tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
@@ -174,6 +174,11 @@ def test_twin_imports_only_numpy_stdlib_and_itself():
 
 def test_no_import_cycle_in_reference_py():
     assert find_cycle(internal_graph(import_graph())) is None
+
+
+def test_no_import_cycle_in_host_bench():
+    """The bench: the CLI uses the engines (replay, node mirror, faults), never the reverse."""
+    assert find_cycle(internal_graph(import_graph(ROOT / "host_bench"))) is None
 
 
 def test_no_include_cycle_in_firmware_src():
