@@ -211,21 +211,15 @@ class Outputs:
                     os.fsync(fh.fileno())
                 os.replace(p.tmp, p.target)
                 done.append((p, backup))
-        except OSError as exc:
+        except BaseException as exc:     # put back what was replaced, then say why
             for p, backup in reversed(done):
                 if backup is not None:
                     os.replace(backup, p.target)
                 else:
                     os.unlink(p.target)
             self.abort()
-            raise OutputError(f"cannot commit the outputs: {exc.strerror or exc}") from None
-        except BaseException:
-            for p, backup in reversed(done):
-                if backup is not None:
-                    os.replace(backup, p.target)
-                else:
-                    os.unlink(p.target)
-            self.abort()
+            if isinstance(exc, OSError):
+                raise OutputError(f"cannot commit the outputs: {exc.strerror or exc}") from None
             raise
         for _, backup in done:
             if backup is not None:
