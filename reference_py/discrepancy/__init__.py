@@ -1,4 +1,4 @@
-"""Discrepancy workflow (issue 8): find where the force model and measured insertions disagree,
+"""Discrepancy workflow: find where the force model and measured insertions disagree,
 name the physical effect that is missing, add it to the model and show how much the gap shrinks.
 
 Entry points: :func:`reference_py.discrepancy.workflow.run` (library) and

@@ -1,4 +1,4 @@
-"""The board image (issue 7): the float library on the Cortex-M4F under QEMU (mps2-an386)
+"""The board image: the float library on the Cortex-M4F under QEMU (mps2-an386)
 prints the same bits as the host's float build, and the image holds no allocation and no
 double-precision routine.
 

@@ -1,4 +1,4 @@
-"""The C library equals the reference bit for bit (issue 4).
+"""The C library equals the reference bit for bit.
 
 Requires build/host/bin/nte-run and nte-run-double (``make build``; skipped with a reason when
 they are missing).  On the paper scenarios of c_twin.py — Model I and II, 10 mm/s to 50 and

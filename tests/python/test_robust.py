@@ -1,4 +1,4 @@
-"""The robust estimator: converges from the paper's ±500 % starts (issue "Beyond the paper").
+"""The robust estimator: converges from the paper's ±500 % starts (README, "Beyond the paper").
 
 Scenario: Model II, the preset's speed to 50 mm, 1 s dwell, back out — three identical insertion
 cycles; 2 mN noise; 100 seeds started log-uniformly within a factor 5.  By the end (the last
