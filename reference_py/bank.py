@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .config import EstimatorConfig
+from .config import EstimatorConfig, check_nominal
 from .ekf import Matrix, joseph_update, positive_definite, predict_covariance
 from .fmath import Array, Real
 from .model import (DepthTerms, Theta, ScaledParams, clamp_depth, depth_terms, output,
@@ -67,6 +67,7 @@ class FilterBank:
 
     def __init__(self, R: Real, cfg: EstimatorConfig, nominal: list[list[float]]) -> None:
         cfg.validate()
+        check_nominal(nominal)
         self.R, self.cfg = R, cfg
         self.batch = len(nominal)
         self.identified = MODEL_PARAMS[cfg.model]

@@ -43,6 +43,14 @@ INT_RANGES: dict[str, tuple[int, int]] = {
 POSITIVE_FIELDS = ("eps_mm_s", "beta0", "r_n2", "p0_z", "p0_u", "gate_sigma", "u_max",
                    "var_floor_z", "var_floor_u", "dt_max_s", "depth_max_mm", "speed_max_mm_s",
                    "force_max_n")
+#: real fields with an upper bound as well (inclusive).  Beyond them a published parameter
+#: estimate (nominal * e^u) or its standard deviation (|theta| sqrt(var u)) can overflow:
+#: |u| <= 10 is a factor 22 000 from the nominal, var(u) <= 100 a standard deviation of 10 log units
+UPPER_BOUNDS: dict[str, float] = {"u_max": 10.0, "p0_u": 100.0}
+#: the robust estimator's real upper bound (var(u) after a restart, as p0_u)
+ROBUST_UPPER_BOUNDS: dict[str, float] = {"restart_p0_u": 100.0}
+#: |nominal| of every physical parameter, in its own unit (the presets span 7.6e-4 .. 2.46)
+NOMINAL_ABS_MAX = 1.0e3
 #: real fields that must be finite and >= 0
 NONNEGATIVE_FIELDS = ("q_z", "q_u_default", "v_still_mm_s")
 #: the robust estimator's integer fields, inclusive (min, max); buffer_len must also be even
@@ -104,6 +112,10 @@ class EstimatorConfig:
                 raise ValueError(f"config field {name} must be in {lo}..{hi}")
         for name in POSITIVE_FIELDS:
             positive(name)
+        for name, hi in UPPER_BOUNDS.items():
+            if getattr(self, name) > hi:
+                v = getattr(self, name)
+                raise ValueError(f"config field {name} must be <= {hi:g} (got {v!r})")
         for name in NONNEGATIVE_FIELDS:
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0):
@@ -111,6 +123,15 @@ class EstimatorConfig:
         for name, v in self.q_u.items():
             if name not in PARAM_NAMES or not (math.isfinite(v) and v >= 0):
                 raise ValueError(f"config field q_u[{name!r}] invalid ({v!r})")
+
+
+def check_nominal(nominal: list[list[float]]) -> None:
+    """Raise ValueError unless every nominal (start) value is finite with |x| <= NOMINAL_ABS_MAX."""
+    for row in nominal:
+        for name, v in zip(PARAM_NAMES, row):
+            if not (math.isfinite(v) and abs(v) <= NOMINAL_ABS_MAX):
+                raise ValueError(f"nominal {name} must be finite with |{name}| <= "
+                                 f"{NOMINAL_ABS_MAX:g} (got {v!r})")
 
 
 def default_config(model: int = 2, schedule: str = "all") -> EstimatorConfig:

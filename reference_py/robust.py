@@ -27,7 +27,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .bank import STATUS_REJECTED, FilterBank, StepOutput
-from .config import ROBUST_INT_RANGES, ROBUST_POSITIVE_FIELDS, EstimatorConfig
+from .config import (ROBUST_INT_RANGES, ROBUST_POSITIVE_FIELDS, ROBUST_UPPER_BOUNDS,
+                     EstimatorConfig)
 from .fmath import Array, Real
 from .model import (ScaledParams, Theta, clamp_depth, depth_terms, output, output_du, output_dz,
                     smooth_sign)
@@ -52,7 +53,8 @@ class RobustConfig:
 
     def validate(self) -> None:
         """Raise ValueError naming the first invalid field.  The ranges are config.py's
-        ROBUST_INT_RANGES and ROBUST_POSITIVE_FIELDS, from which the C checks are generated."""
+        ROBUST_INT_RANGES, ROBUST_POSITIVE_FIELDS and ROBUST_UPPER_BOUNDS, from which the C
+        checks are generated."""
         lo, hi = ROBUST_INT_RANGES["buffer_len"]
         if not (lo <= self.buffer_len <= hi and self.buffer_len % 2 == 0):
             raise ValueError(f"robust buffer_len must be even and in {lo}..{hi}")
@@ -67,6 +69,10 @@ class RobustConfig:
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
                 raise ValueError(f"robust {name} must be finite and > 0 (got {v!r})")
+        for name, hi in ROBUST_UPPER_BOUNDS.items():
+            if getattr(self, name) > hi:
+                v = getattr(self, name)
+                raise ValueError(f"robust {name} must be <= {hi:g} (got {v!r})")
 
 
 class RobustEstimator:

@@ -181,8 +181,8 @@ typedef enum nte_err_t {
     nte_err_bad_gate_reopen = -5, /**< gate_reopen_after outside 1..1000 */
     nte_err_not_finite = -6,      /**< a real field is NaN or infinite */
     nte_err_not_positive = -7,    /**< a field that must be > 0 (or >= 0) is not */
-    nte_err_bad_range = -8,       /**< depth_min_mm > depth_max_mm */
-    nte_err_bad_nominal = -9,     /**< a nominal parameter is NaN or infinite */
+    nte_err_bad_range = -8,       /**< depth_min_mm > depth_max_mm, or u_max > 10, p0_u > 100 */
+    nte_err_bad_nominal = -9,     /**< a nominal parameter is NaN, infinite or |x| > 1000 */
     nte_err_bad_f1 = -10,         /**< nominal f1 does not exceed -f2 (g(0) must be > 0) */
     nte_err_bad_estimator = -11,  /**< estimator is not a nte_estimator_t value, or robust
                                        while NTE_ROBUST_BUFFER_LEN is 0 */
@@ -257,7 +257,8 @@ typedef struct nte_robust_config_t {
     int32_t fit_substeps;   /**< [2] RK3 sub-steps between buffer entries, 1..16 */
     int32_t fit_iterations; /**< [8] LM iterations per start, 1..200 */
     int32_t min_entries;    /**< [24] a shorter insertion is not refined, 2..buffer_len */
-    nte_real_t restart_p0_u;         /**< [0.01] var(u) of the bank after a restart, log^2, > 0 */
+    nte_real_t restart_p0_u;         /**< [0.01] var(u) of the bank after a restart, log^2,
+                                          > 0, <= 100 */
     nte_real_t lm_lambda0;           /**< [0.01] initial LM damping, > 0 */
     nte_real_t converged_confidence; /**< [0.75] CONVERGED needs confidence >= this, > 0 */
     nte_real_t converged_change;     /**< [0.05] and a relative change <= this, > 0 */
@@ -288,10 +289,10 @@ typedef struct nte_config_t {
                                           each u, log^2, >= 0, or negative: q_u_default */
     nte_real_t q_u_default;     /**< [2e-7] variance of u for defaulted entries, >= 0 */
     nte_real_t p0_z;            /**< [1e-6] initial variance of z, > 0 */
-    nte_real_t p0_u;            /**< [0.03] initial variance of every u, log^2, > 0 */
+    nte_real_t p0_u;            /**< [0.03] initial variance of every u, log^2, > 0, <= 100 */
     nte_real_t gate_sigma;      /**< [12] innovation gate in standard deviations, > 0; the gate
                                      compares NIS with gate_sigma^2 computed in nte_real_t */
-    nte_real_t u_max;           /**< [3.9] |u| clip, log units (3.9 = factor 50), > 0 */
+    nte_real_t u_max;           /**< [3.9] |u| clip, log units (3.9 = factor 50), > 0, <= 10 */
     nte_real_t var_floor_z;     /**< [1e-12] lower bound of var(z), > 0 */
     nte_real_t var_floor_u;     /**< [1e-10] lower bound of var(u), log^2, > 0 */
     nte_real_t v_still_mm_s;    /**< [1e-3] |v| below: a dwell (no sign inflation), mm/s, >= 0 */
@@ -302,8 +303,8 @@ typedef struct nte_config_t {
     nte_real_t force_max_n;     /**< [50] accepted |force| and the physical range of every
                                      predicted and published force, N, > 0 */
     /** [preset paper-10mms] Nominal (starting) physical values, nte_param_id_t order,
-     *  finite.  Model II keeps f2 and alpha fixed at theirs; Model I ignores nominal beta and
-     *  uses beta0. */
+     *  finite, |x| <= 1000.  Model II keeps f2 and alpha fixed at theirs; Model I ignores
+     *  nominal beta and uses beta0. */
     nte_real_t nominal[NTE_PARAM_COUNT];
     /** [the preset's, computed in double] The identified part of nominal f1:
      *  f1 - kappa (-f2), kappa = 1 if f2 < 0 else 0; > 0.  0 means "compute it in nte_real_t

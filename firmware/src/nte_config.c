@@ -126,6 +126,9 @@ static nte_err_t check_robust(const nte_robust_config_t* rc)
             return nte_err_bad_robust;
         }
     }
+    if (rc->restart_p0_u > NTE_K_RANGE_RESTART_P0_U_MAX) {
+        return nte_err_bad_robust;
+    }
     return nte_err_ok;
 }
 #endif
@@ -174,8 +177,14 @@ nte_err_t nte_config_check(const nte_config_t* cfg)
     if (cfg->depth_min_mm > cfg->depth_max_mm) {
         return nte_err_bad_range;
     }
+    /* upper bounds (config.py UPPER_BOUNDS): beyond them a published estimate or its standard
+     * deviation can overflow */
+    if ((cfg->u_max > NTE_K_RANGE_U_MAX_MAX) || (cfg->p0_u > NTE_K_RANGE_P0_U_MAX)) {
+        return nte_err_bad_range;
+    }
     for (size_t j = 0U; j < NTE_PARAM_COUNT; j++) {
-        if (!nte_isfinite(cfg->nominal[j])) {
+        if (!nte_isfinite(cfg->nominal[j]) ||
+            (nte_abs(cfg->nominal[j]) > NTE_K_RANGE_NOMINAL_ABS_MAX)) {
             return nte_err_bad_nominal;
         }
     }

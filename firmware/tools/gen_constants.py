@@ -79,6 +79,9 @@ def lib_header() -> str:
         v = float(getattr(rc, f))
         rows.append(pair("NTE_K_ROB_" + f.upper(), v, v))
     rows.append(pair("NTE_K_EXP_STEP_BOUND", rk3.EXP_BOUND, rk3.EXP_BOUND))
+    for f, hi in {**config.UPPER_BOUNDS, **config.ROBUST_UPPER_BOUNDS}.items():
+        rows.append(pair("NTE_K_RANGE_" + f.upper() + "_MAX", hi, hi))
+    rows.append(pair("NTE_K_RANGE_NOMINAL_ABS_MAX", config.NOMINAL_ABS_MAX, config.NOMINAL_ABS_MAX))
     rows.append(pair("NTE_K_ROB_COST_HUGE", robust.COST_HUGE, robust.COST_HUGE))
     rows.append(pair("NTE_K_ROB_SURE", 0.99, 0.99))
     rows.append(pair("NTE_K_ROB_LAMBDA_MIN", 1e-7, 1e-7))
@@ -116,7 +119,8 @@ def range_lines() -> list[str]:
     """The valid ranges of the configuration (reference_py/config.py's tables), which
     nte_config_check applies exactly as EstimatorConfig.validate and RobustConfig.validate do."""
     out = ["/* Valid configuration ranges (reference_py/config.py INT_RANGES, POSITIVE_FIELDS, */",
-           "/* NONNEGATIVE_FIELDS, ROBUST_INT_RANGES, ROBUST_POSITIVE_FIELDS). */"]
+           "/* NONNEGATIVE_FIELDS, ROBUST_INT_RANGES, ROBUST_POSITIVE_FIELDS; the real */",
+           "/* upper bounds are the NTE_K_RANGE_* constants above). */"]
     for prefix, table in (("NTE_RANGE_", config.INT_RANGES),
                           ("NTE_RANGE_ROB_", config.ROBUST_INT_RANGES)):
         for name, (lo, hi) in table.items():

@@ -47,6 +47,10 @@ static void spoil_vstill(nte_config_t* c) { c->v_still_mm_s = (nte_real_t)NAN; }
 static void spoil_dmin_nan(nte_config_t* c) { c->depth_min_mm = (nte_real_t)NAN; }
 static void spoil_range(nte_config_t* c) { c->depth_min_mm = 600; }
 static void spoil_nominal(nte_config_t* c) { c->nominal[1] = (nte_real_t)NAN; }
+/* the upper bounds: past them a published estimate or its sd could overflow (fuzzer finding) */
+static void spoil_nominal_big(nte_config_t* c) { c->nominal[nte_param_alpha] = (nte_real_t)1.5e3; }
+static void spoil_umax(nte_config_t* c) { c->u_max = (nte_real_t)10.5; }
+static void spoil_p0u(nte_config_t* c) { c->p0_u = (nte_real_t)101; }
 static void spoil_f1_low(nte_config_t* c)
 {
     c->f1_excess = 0;
@@ -74,6 +78,8 @@ static void test_every_error_code_leaves_instance_untouched(void** state)
         {spoil_dmin_nan, nte_err_not_finite},     {spoil_range, nte_err_bad_range},
         {spoil_nominal, nte_err_bad_nominal},     {spoil_f1_low, nte_err_bad_f1},
         {spoil_f1_neg, nte_err_bad_f1},           {spoil_f1_nan, nte_err_bad_f1},
+        {spoil_nominal_big, nte_err_bad_nominal}, {spoil_umax, nte_err_bad_range},
+        {spoil_p0u, nte_err_bad_range},
     };
     static nte_t est;
     static nte_t snapshot;

@@ -297,6 +297,7 @@ static void spoil_iters(nte_config_t* c) { c->robust.fit_iterations = -1; }
 static void spoil_min0(nte_config_t* c) { c->robust.min_entries = 0; }
 static void spoil_min_big(nte_config_t* c) { c->robust.min_entries = 97; }
 static void spoil_p0u(nte_config_t* c) { c->robust.restart_p0_u = 0; }
+static void spoil_p0u_big(nte_config_t* c) { c->robust.restart_p0_u = 101; }
 static void spoil_lambda(nte_config_t* c) { c->robust.lm_lambda0 = (nte_real_t)NAN; }
 static void spoil_conf(nte_config_t* c) { c->robust.converged_confidence = (nte_real_t)INFINITY; }
 static void spoil_change(nte_config_t* c) { c->robust.converged_change = -1; }
@@ -314,6 +315,7 @@ static void test_robust_config_errors(void** state)
         {spoil_min0, nte_err_bad_robust},         {spoil_min_big, nte_err_bad_robust},
         {spoil_p0u, nte_err_bad_robust},          {spoil_lambda, nte_err_bad_robust},
         {spoil_conf, nte_err_bad_robust},         {spoil_change, nte_err_bad_robust},
+        {spoil_p0u_big, nte_err_bad_robust},
     };
     static nte_t est;
     static nte_t snapshot;

@@ -6,7 +6,9 @@
 # crashed (a property abort(), a sanitizer finding, a timeout or out-of-memory), 2 on a build
 # error.  Crashing inputs are kept in build/fuzz/artifacts/<harness>/; the corpus grown by a run
 # stays in build/fuzz/corpus/<harness>/ (the committed seeds are in tests/fuzz/corpus/).
-# Environment: CC (default clang), NTE_FUZZ_BUILD (default build/fuzz), NTE_FUZZ_JOBS.
+# Environment: CC (default clang), NTE_FUZZ_BUILD (default build/fuzz), NTE_FUZZ_JOBS;
+# NTE_FUZZ_RUNS=N runs exactly N inputs per harness from seed 1 and an empty working corpus
+# instead of SECONDS: the same inputs on every machine and load (what the test suite uses).
 set -u
 SECONDS_EACH=${1:-20}
 [ $# -gt 0 ] && shift
@@ -43,10 +45,18 @@ for h in $HARNESSES; do
     corpus=$BUILD/corpus/$h
     art=$BUILD/artifacts/$h
     rm -rf "$art"
+    if [ -n "${NTE_FUZZ_RUNS:-}" ]; then
+        corpus=$BUILD/corpus-fixed/$h      # deterministic: start from the committed seeds only
+        rm -rf "$corpus"
+        budget="-runs=$NTE_FUZZ_RUNS -seed=1"
+    else
+        budget="-max_total_time=$SECONDS_EACH"
+    fi
     mkdir -p "$corpus" "$art"
     log=$BUILD/$h.log
     # -timeout: one input taking longer is a finding (a hang); -rss_limit_mb: memory blow-up.
-    "$BUILD/bin/fuzz_$h" -max_total_time="$SECONDS_EACH" -timeout=10 -rss_limit_mb=2048 \
+    # shellcheck disable=SC2086  # $budget is two options
+    "$BUILD/bin/fuzz_$h" $budget -timeout=10 -rss_limit_mb=2048 \
         -print_final_stats=1 -artifact_prefix="$art/" "$corpus" "$seeds" >"$log" 2>&1
     rc=$?
     execs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" | tail -1)

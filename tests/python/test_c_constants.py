@@ -65,3 +65,36 @@ def test_configuration_ranges_have_one_source():
         assert name in _first_error(lambda: replace(rb, **extra, **{name: hi + step}).validate())
     for name in config.ROBUST_POSITIVE_FIELDS:
         assert name in _first_error(lambda: replace(rb, **{name: 0.0}).validate())
+
+
+def test_real_upper_bounds_have_one_source():
+    """The upper bounds that keep every published estimate and standard deviation finite
+    (a fuzzer found nominal alpha = -5.7e303 with p0_u = 2e78 publishing an infinite sd): one
+    table in config.py, generated into the C constants, applied on both sides at the bound."""
+    from dataclasses import replace
+
+    from reference_py import config, robust
+    from reference_py.bank import FilterBank
+    from reference_py.fmath import F64
+    from reference_py.params import get_preset
+
+    header = (ROOT / "firmware" / "src" / "nte_constants.h").read_text()
+    source = (ROOT / "firmware" / "src" / "nte_config.c").read_text()
+    bounds = {**config.UPPER_BOUNDS, **config.ROBUST_UPPER_BOUNDS,
+              "nominal_abs": config.NOMINAL_ABS_MAX}
+    for name, hi in bounds.items():
+        macro = f"NTE_K_RANGE_{name.upper()}_MAX"
+        assert f"#define {macro} ({float(hi).hex()})" in header, macro
+        assert macro in source, f"nte_config.c does not check {macro}"
+    base = config.EstimatorConfig()
+    for name, hi in config.UPPER_BOUNDS.items():
+        assert _first_error(lambda: replace(base, **{name: hi}).validate()) is None
+        assert name in _first_error(lambda: replace(base, **{name: hi * 1.01}).validate())
+    rb = robust.RobustConfig()
+    for name, hi in config.ROBUST_UPPER_BOUNDS.items():
+        assert _first_error(lambda: replace(rb, **{name: hi}).validate()) is None
+        assert name in _first_error(lambda: replace(rb, **{name: hi * 1.01}).validate())
+    nominal = get_preset("paper-10mms").params.as_list()
+    FilterBank(F64, base, [nominal])                    # the preset is accepted
+    big = nominal[:5] + [-1.01 * config.NOMINAL_ABS_MAX] + nominal[6:]
+    assert "alpha" in _first_error(lambda: FilterBank(F64, base, [big]))

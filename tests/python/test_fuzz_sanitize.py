@@ -4,8 +4,11 @@
   cmocka tests) built with -fsanitize=address,undefined,float-cast-overflow
   -fno-sanitize-recover=all through cmake/sanitize.cmake, then ctest: every test passes and no
   sanitizer reports anything.
-* tests/fuzz/run.sh 20 HARNESS for each harness: 0 crashes (property aborts, sanitizer findings,
-  timeouts, out-of-memory).  Skipped only when clang is not installed.
+* tests/fuzz/run.sh for each harness with NTE_FUZZ_RUNS (default 6000 inputs from seed 1 and
+  the committed corpus: the same inputs on every machine and under any load, so the result
+  cannot depend on the speed of the run): 0 crashes (property aborts, sanitizer findings,
+  timeouts, out-of-memory).  Long, time-based runs: tests/fuzz/run.sh 600.  Skipped only when
+  clang is not installed.
 """
 from __future__ import annotations
 
@@ -18,7 +21,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
-FUZZ_SECONDS = int(os.environ.get("NTE_FUZZ_SECONDS", "20"))
+FUZZ_RUNS = int(os.environ.get("NTE_FUZZ_RUNS", "6000"))
 SAN_REPORT = re.compile(r"runtime error:|ERROR: (Address|Leak|UndefinedBehavior)Sanitizer|"
                         r"SUMMARY: (Address|UndefinedBehavior)Sanitizer")
 SAN_ENV = {"ASAN_OPTIONS": "detect_leaks=1:abort_on_error=1:halt_on_error=1",
@@ -56,9 +59,10 @@ def test_sanitizer_build_ctest() -> None:
 
 def _run_harness(name: str) -> dict[str, int]:
     _clang_or_skip()
-    run = subprocess.run([str(ROOT / "tests" / "fuzz" / "run.sh"), str(FUZZ_SECONDS), name],
-                         capture_output=True, text=True, timeout=FUZZ_SECONDS * 4 + 300,
-                         env=dict(os.environ, NTE_FUZZ_BUILD=str(ROOT / "build" / "fuzz")))
+    run = subprocess.run([str(ROOT / "tests" / "fuzz" / "run.sh"), "1", name],
+                         capture_output=True, text=True, timeout=1200,
+                         env=dict(os.environ, NTE_FUZZ_BUILD=str(ROOT / "build" / "fuzz"),
+                                  NTE_FUZZ_RUNS=str(FUZZ_RUNS)))
     print(run.stdout, run.stderr[-3000:])
     assert run.returncode in (0, 1), run.stdout + run.stderr  # 2 = build error
     m = re.search(rf"^fuzz {name}: executions=(\d+) crashes=(\d+) sanitizer_reports=(\d+)",
@@ -76,7 +80,7 @@ def _run_harness(name: str) -> dict[str, int]:
 ])
 def test_fuzz_harness(name: str) -> None:
     r = _run_harness(name)
-    assert r["executions"] > 1000, r
+    assert r["executions"] >= FUZZ_RUNS, r
     assert r["crashes"] == 0 and r["sanitizer_reports"] == 0 and r["rc"] == 0, r
 
 
@@ -100,3 +104,23 @@ def test_divergence_reproducer(prec: str) -> None:
     assert m, run.stderr[-2000:]
     steps, diverged, max_force = int(m.group(1)), int(m.group(2)), float(m.group(3))
     assert steps >= 30 and diverged == 0 and max_force < 50.0, m.group(0)
+
+
+@pytest.mark.parametrize("prec", ["f32", "f64"])
+def test_overflowing_configuration_is_refused(prec: str) -> None:
+    """A fuzzer finding (tests/fuzz/regressions/config_overflow_*.bin): a nominal alpha of
+    -5.7e303 (float: 1.9e31) with p0_u = 2e78 (2.8e26) used to be accepted, and the published
+    standard deviation of alpha was infinite.  The configuration is now refused at init
+    (|nominal| <= 1000, p0_u <= 100, u_max <= 10: config.py UPPER_BOUNDS), so the harness
+    runs no sample and reports no violation."""
+    _clang_or_skip()
+    exe = ROOT / "build" / "fuzz" / "bin" / f"fuzz_config_{prec}"
+    subprocess.run([str(ROOT / "tests" / "fuzz" / "run.sh"), "0"], capture_output=True,
+                   check=True, env=dict(os.environ, NTE_FUZZ_BUILD=str(exe.parents[1])))
+    run = subprocess.run([str(exe), str(ROOT / "tests" / "fuzz" / "regressions" /
+                                        f"config_overflow_{prec}.bin")],
+                         capture_output=True, text=True,
+                         env=dict(os.environ, NTE_FUZZ_REPORT="1", **SAN_ENV))
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert "property violated" not in run.stderr
+    assert "report: steps=" not in run.stderr     # refused at init: no sample ran
