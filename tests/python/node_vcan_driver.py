@@ -128,8 +128,9 @@ def case_full_rate(procs: Procs) -> dict:
     with `candump -l` (input ids) replayed with canplayer to a fresh node."""
     frames = paper_frames()
     write_candump(OUT / "full_in.log", frames, "vcan0", 1.0)
-    node = start_node(procs, "full")
-    dump = start_candump(procs, OUT / "full_cap.log", OUT_FILTER)
+    # the outputs are taken from the node's own record of what it sent: a candump of the
+    # outputs inside the user-mode kernel dropped frames on a loaded host (a flaky count)
+    node = start_node(procs, "full", "--record", str(OUT / "full.sent.log"))
     (OUT / "session").mkdir(exist_ok=True)
     for f in (OUT / "session").glob("*.log"):
         f.unlink()
@@ -137,9 +138,8 @@ def case_full_rate(procs: Procs) -> dict:
     play(procs, OUT / "full_in.log")
     time.sleep(0.5)
     procs.stop(rec)
-    procs.stop(dump)
     rc = procs.stop(node)
-    res = analyse(capture(OUT / "full_cap.log"), "full", [m for _, m in frames])
+    res = analyse(capture(OUT / "full.sent.log"), "full", [m for _, m in frames])
     res["node_exit"] = rc
     res["sent"] = len(frames)
     res["forces_sent"] = sum(1 for _, m in frames if m.arbitration_id == DB.frame_id("Force"))
@@ -147,17 +147,15 @@ def case_full_rate(procs: Procs) -> dict:
     session = sorted((OUT / "session").glob("candump-*.log"))[0]
     sess = list(can.CanutilsLogReader(str(session)))
     res["session_frames"] = len(sess)
-    node = start_node(procs, "again")
-    dump = start_candump(procs, OUT / "again_cap.log", OUT_FILTER)
+    node = start_node(procs, "again", "--record", str(OUT / "again.sent.log"))
     play(procs, session)
     time.sleep(0.5)
-    procs.stop(dump)
     procs.stop(node)
-    again = analyse(capture(OUT / "again_cap.log"), "again", sess)
+    again = analyse(capture(OUT / "again.sent.log"), "again", sess)
     res["session_replay"] = {k: again[k] for k in ("estimates_node", "estimates_reference",
                                                    "estimate_mismatches", "param_value_mismatches")}
-    a = [m for m in capture(OUT / "full_cap.log") if m.arbitration_id == DB.frame_id("Estimate")]
-    b = [m for m in capture(OUT / "again_cap.log") if m.arbitration_id == DB.frame_id("Estimate")]
+    a = [m for m in capture(OUT / "full.sent.log") if m.arbitration_id == DB.frame_id("Estimate")]
+    b = [m for m in capture(OUT / "again.sent.log") if m.arbitration_id == DB.frame_id("Estimate")]
     res["replayed_identical"] = [bytes(m.data) for m in a] == [bytes(m.data) for m in b]
     return res
 
