@@ -84,21 +84,26 @@ def test_fuzz_harness(name: str) -> None:
     assert r["crashes"] == 0 and r["sanitizer_reports"] == 0 and r["rc"] == 0, r
 
 
+def _run_regression(prec: str, stem: str) -> subprocess.CompletedProcess:
+    """The config harness of `prec`, freshly (re)built (a stale harness would test old library
+    code), on tests/fuzz/regressions/STEM_PREC.bin, with its report line on."""
+    _clang_or_skip()
+    exe = ROOT / "build" / "fuzz" / "bin" / f"fuzz_config_{prec}"
+    subprocess.run([str(ROOT / "tests" / "fuzz" / "run.sh"), "0"], capture_output=True,
+                   check=True, env=dict(os.environ, NTE_FUZZ_BUILD=str(exe.parents[1])))
+    return subprocess.run([str(exe), str(ROOT / "tests" / "fuzz" / "regressions" /
+                                         f"{stem}_{prec}.bin")],
+                          capture_output=True, text=True,
+                          env=dict(os.environ, NTE_FUZZ_REPORT="1", **SAN_ENV))
+
+
 @pytest.mark.parametrize("prec", ["f32", "f64"])
 def test_divergence_reproducer(prec: str) -> None:
     """The inputs that once drove the estimate to inf (tests/fuzz/regressions/): the harness
     checks every output finite, the published force within +-force_max_n and the DIVERGED flag
     in step with its counter; here: all samples ran, and the integrator alone kept them in
     range (no reset needed; the bound itself is exercised in test_plausible.py)."""
-    _clang_or_skip()
-    exe = ROOT / "build" / "fuzz" / "bin" / f"fuzz_config_{prec}"
-    # (re)build: a stale harness would test old library code
-    subprocess.run([str(ROOT / "tests" / "fuzz" / "run.sh"), "0"], capture_output=True,
-                   check=True, env=dict(os.environ, NTE_FUZZ_BUILD=str(exe.parents[1])))
-    run = subprocess.run([str(exe), str(ROOT / "tests" / "fuzz" / "regressions" /
-                                        f"config_divergence_{prec}.bin")],
-                         capture_output=True, text=True,
-                         env=dict(os.environ, NTE_FUZZ_REPORT="1", **SAN_ENV))
+    run = _run_regression(prec, "config_divergence")
     assert run.returncode == 0, run.stderr[-2000:]
     m = re.search(r"^report: steps=(\d+) diverged=(\d+) max_force=(\S+)$", run.stderr, re.M)
     assert m, run.stderr[-2000:]
@@ -113,14 +118,7 @@ def test_overflowing_configuration_is_refused(prec: str) -> None:
     standard deviation of alpha was infinite.  The configuration is now refused at init
     (|nominal| <= 1000, p0_u <= 100, u_max <= 10: config.py UPPER_BOUNDS), so the harness
     runs no sample and reports no violation."""
-    _clang_or_skip()
-    exe = ROOT / "build" / "fuzz" / "bin" / f"fuzz_config_{prec}"
-    subprocess.run([str(ROOT / "tests" / "fuzz" / "run.sh"), "0"], capture_output=True,
-                   check=True, env=dict(os.environ, NTE_FUZZ_BUILD=str(exe.parents[1])))
-    run = subprocess.run([str(exe), str(ROOT / "tests" / "fuzz" / "regressions" /
-                                        f"config_overflow_{prec}.bin")],
-                         capture_output=True, text=True,
-                         env=dict(os.environ, NTE_FUZZ_REPORT="1", **SAN_ENV))
+    run = _run_regression(prec, "config_overflow")
     assert run.returncode == 0, run.stderr[-2000:]
     assert "property violated" not in run.stderr
     assert "report: steps=" not in run.stderr     # refused at init: no sample ran
