@@ -300,6 +300,18 @@ class _Slcan:
         self.sock.close()
 
 
+def _short_insertion_frames(tmp_path: Path, db) -> list:
+    """The frames (E2E-protected, depth and force at 200 Hz) of a short paper insertion, 8 mm at
+    the preset's speed with a 0.1 s dwell: the input both board-over-SLCAN tests replay."""
+    sys.path.insert(0, str(ROOT))
+    from host_bench.cli import scenario_frames
+    csv = tmp_path / "s.csv"
+    subprocess.run([sys.executable, "-m", "reference_py", "simulate", "--preset", "paper-10mms",
+                    "--depth", "8", "--dwell", "0.1", "--seed", "1", "--out", str(csv)],
+                   cwd=ROOT, check=True, stdout=subprocess.DEVNULL)
+    return [m for _t, m in scenario_frames(str(csv), db, 200.0)]
+
+
 def test_board_node_over_slcan_matches_mirror(built, tmp_path: Path) -> None:
     """nte-board.elf under QEMU, UART0 on a TCP socket: the SLCAN open sequence is answered
     with '\\r', and the node's Estimate/Params frames for a short paper insertion equal the
@@ -308,16 +320,11 @@ def test_board_node_over_slcan_matches_mirror(built, tmp_path: Path) -> None:
     can = pytest.importorskip("can")
     pytest.importorskip("numpy")
     sys.path.insert(0, str(ROOT))
-    from host_bench.cli import scenario_frames
     from host_bench.dbc import NteDatabase
     from host_bench.node_mirror import NodeMirror, compare, node_outputs
 
-    csv = tmp_path / "s.csv"
-    subprocess.run([sys.executable, "-m", "reference_py", "simulate", "--preset", "paper-10mms",
-                    "--depth", "8", "--dwell", "0.1", "--seed", "1", "--out", str(csv)],
-                   cwd=ROOT, check=True, stdout=subprocess.DEVNULL)
     db = NteDatabase()
-    frames = [m for _t, m in scenario_frames(str(csv), db, 200.0)]
+    frames = _short_insertion_frames(tmp_path, db)
     heartbeat = b"t%03X" % db.frame_id("Heartbeat")
 
     port = _free_port()
@@ -396,16 +403,11 @@ def test_board_over_python_can_slcan_matches_mirror(built, tmp_path: Path) -> No
     pytest.importorskip("serial")  # pyserial: python-can's slcan interface opens the URL with it
     pytest.importorskip("numpy")
     sys.path.insert(0, str(ROOT))
-    from host_bench.cli import scenario_frames
     from host_bench.dbc import NteDatabase
     from host_bench.node_mirror import NodeMirror, compare, node_outputs
 
-    csv = tmp_path / "s.csv"
-    subprocess.run([sys.executable, "-m", "reference_py", "simulate", "--preset", "paper-10mms",
-                    "--depth", "8", "--dwell", "0.1", "--seed", "1", "--out", str(csv)],
-                   cwd=ROOT, check=True, stdout=subprocess.DEVNULL)
     db = NteDatabase()
-    frames = [m for _t, m in scenario_frames(str(csv), db, 200.0)]
+    frames = _short_insertion_frames(tmp_path, db)
     mirror = NodeMirror()
     mirror.feed_all(frames)
     want_est, want_par = len(mirror.estimates), len(mirror.params)
