@@ -26,9 +26,10 @@ import numpy as np
 from .config import EstimatorConfig, check_nominal
 from .ekf import Matrix, joseph_update, positive_definite, predict_covariance
 from .fmath import Array, Real
-from .model import (DepthTerms, Theta, ScaledParams, clamp_depth, depth_terms, output,
+from .model import (DepthTerms, Theta, ScaledParams, clamp_depth, depth_terms, exact_sign, output,
                     output_du, output_dz, smooth_sign, steady_state_z)
-from .params import FILTER_SUBSETS, IDX, MODEL_PARAMS, PARAM_NAMES
+from .params import (ALL_NAMES, FILTER_SUBSETS, IDX, MODEL_PARAMS, PARAM_NAMES, RELAX_NAMES,
+                     RELAX_NOMINAL)
 from .rk3 import Rk3Result, rk3_step
 
 # Status bits of one sample (the C library uses the same values)
@@ -62,22 +63,57 @@ class StepOutput:
     params_sd: Array     # (n_identified, batch) standard deviations
 
 
+def relax_count(cfg: EstimatorConfig) -> int:
+    """Model III's relaxation branches in use (0 when relaxation is off or for Models I, II)."""
+    return cfg.relax_branches if (cfg.model == 3 and cfg.relaxation) else 0
+
+
+def identified_names(cfg: EstimatorConfig) -> tuple[str, ...]:
+    """The parameters a configuration identifies, in CSV column order (Model III: Model II's
+    and the strengths of the branches in use)."""
+    if cfg.model != 3:
+        return MODEL_PARAMS[cfg.model]
+    return MODEL_PARAMS[3][:len(MODEL_PARAMS[2]) + relax_count(cfg)]
+
+
+def filter_subsets(cfg: EstimatorConfig) -> tuple[tuple[str, ...], ...]:
+    """Table I for a configuration: Model III's filter 1 takes the strengths in use."""
+    subsets = FILTER_SUBSETS[cfg.model]
+    if cfg.model != 3:
+        return subsets
+    return (subsets[0][:1 + relax_count(cfg)],) + subsets[1:]
+
+
+def _dynamic(names: tuple[str, ...]) -> tuple[str, ...]:
+    """The parameters of the state equation among names (the relaxation strengths act on the
+    output only: dz/du_g = 0)."""
+    return tuple(nm for nm in names if nm in PARAM_NAMES)
+
+
 class FilterBank:
-    """The bank for a batch of runs.  ``nominal``: per-run list of the seven start values."""
+    """The bank for a batch of runs.  ``nominal``: per-run list of the seven start values (or
+    nine: Model III's relaxation strengths g_fast, g_slow appended; default RELAX_NOMINAL)."""
 
     def __init__(self, R: Real, cfg: EstimatorConfig, nominal: list[list[float]]) -> None:
         cfg.validate()
         check_nominal(nominal)
         self.R, self.cfg = R, cfg
         self.batch = len(nominal)
-        self.identified = MODEL_PARAMS[cfg.model]
-        self.subsets = FILTER_SUBSETS[cfg.model]
+        self.identified = identified_names(cfg)
+        self.subsets = filter_subsets(cfg)
+        self.m3 = cfg.model == 3
+        self.n_relax = relax_count(cfg)
+        nominal = [list(row) + [RELAX_NOMINAL[nm] for nm in RELAX_NAMES[len(row) -
+                                                                        len(PARAM_NAMES):]]
+                   for row in nominal]
         if cfg.model == 1:
             # Model I: beta is the fixed normalising constant beta0 of the configuration
             nominal = [row[:IDX["beta"]] + [cfg.beta0] + row[IDX["beta"] + 1:] for row in nominal]
         # per-parameter nominal arrays: nominal[b][j] -> column j over b
         cols = list(zip(*nominal))
         self.scaled = _BatchScaled(R, cols, self.batch)
+        if self.n_relax:
+            self._relax_nominal(R)
         self._nominal0 = ([x.copy() for x in self.scaled.nominal], self.scaled.ex_nominal.copy())
         self.c = _Constants(R, cfg)
         self.reset()
@@ -89,11 +125,16 @@ class FilterBank:
         R, B = self.R, self.batch
         self.scaled.nominal = [x.copy() for x in self._nominal0[0]]
         self.scaled.ex_nominal = self._nominal0[1].copy()
-        self.u = [R.full(B, 0.0) for _ in PARAM_NAMES]
+        self.u = [R.full(B, 0.0) for _ in ALL_NAMES]
         self.th = self.scaled.theta(self.u)
         self.z = R.full(B, 0.0)
         self.P = [self._p0(len(s) + 1) for s in self.subsets]
         self.initialised = np.zeros(B, dtype=bool)
+        # Model III: the direction state and the relaxation memories (MODEL.md §3b)
+        self.sdir = R.full(B, 0.0)
+        self.mrel = [R.full(B, 0.0) for _ in range(self.n_relax)]
+        self.G = [self.scaled.nominal[IDX[nm]] * R.exp(self.u[IDX[nm]])
+                  for nm in RELAX_NAMES[:self.n_relax]]
         self.t_prev = np.zeros(B, dtype=np.int64)
         self.l_prev = R.full(B, 0.0)
         self.k = np.zeros(B, dtype=np.int64)   # accepted samples since reset (rotation index)
@@ -177,7 +218,13 @@ class FilterBank:
         l_prev = clamp_depth(R, self.l_prev)
         surface = ~(l > R.c(0.0))
         gap = run & (dt > c.dt_max)
-        s = smooth_sign(R, v, c.eps)
+        if self.m3 and cfg.direction_memory:
+            s = self._direction(l, l_prev, surface | first)
+        else:
+            s = smooth_sign(R, v, c.eps)
+        # Model III: each relaxation branch's decay over this sample (exact for an input held
+        # over the sample: stable at every rate)
+        self._a_rel = [R.exp(-(dt / c.tau[k])) for k in range(self.n_relax)]
         status |= np.where(surface, np.uint32(STATUS_OUT_OF_TISSUE), np.uint32(0))
         status |= np.where(gap, np.uint32(STATUS_GAP), np.uint32(0))
         z_prev = self.z
@@ -188,13 +235,14 @@ class FilterBank:
         if rotate:
             # one prediction, with every identified parameter's sensitivity, serves all three
             shared_pred = rk3_step(R, self.th, z_prev, l_prev, l, dt, cfg.substeps,
-                                   self.identified)
+                                   _dynamic(self.identified))
         for i, names in enumerate(self.subsets):
             if rotate:
                 pred = shared_pred
                 active = run & ((self.k % 3) == i)
             else:
-                pred = rk3_step(R, self.th, z_prev, l_prev, l, dt, cfg.substeps, names)
+                pred = rk3_step(R, self.th, z_prev, l_prev, l, dt, cfg.substeps,
+                                _dynamic(names))
                 active = run
             d = depth_terms(R, self.th, l)
             x, P_pred, z_ss = self._predict(i, names, pred, d, gap | surface, surface)
@@ -220,6 +268,9 @@ class FilterBank:
         d = depth_terms(R, self.th, l)
         o = output(self.th, d, self.z, s)
         force = o.h
+        fe = o.h   # Model III: the elastic force the relaxation memories follow
+        if self.n_relax:
+            force = fe - self._relax_terms(fe)[2]
         bad = (run | first) & ~self._in_range(d, self.z, force)
         if np.any(bad):
             # never publish a force or z outside their range: z to its steady state, and if the
@@ -230,10 +281,22 @@ class FilterBank:
             o_fix = output(self.th, d, z_fix, s)
             fmax = c.force_max
             h = o_fix.h
+            if self.n_relax:
+                fe = np.where(bad, o_fix.h, fe)
+                h = o_fix.h - self._relax_terms(o_fix.h)[2]
             h = np.where(np.abs(h) <= fmax, h,
                          np.where(h > fmax, fmax, np.where(h < -fmax, -fmax, R.c(0.0))))
             force = np.where(bad, h, force)
             status |= np.where(bad, np.uint32(STATUS_DIVERGED), np.uint32(0))
+        if self.n_relax:
+            # commit the memories with the posterior elastic force (0 out of tissue and at the
+            # first sample, like z)
+            mp = self._relax_terms(fe)[1]
+            self.mrel = [np.where(run & ~surface, mp[k],
+                                  np.where(run | first, R.c(0.0), self.mrel[k]))
+                         for k in range(self.n_relax)]
+        if self.m3:
+            self.sdir = np.where(run | first, s, self.sdir)
         innov = np.where(run, innovation0, y - force)
         nis = np.where(run, nis0, R.c(0.0))
         params, sds = self.parameter_estimates()
@@ -252,7 +315,8 @@ class FilterBank:
         z_restart = np.where(surface, zero, z_ss)
         zp = np.where(restart, z_restart, pred.z)
         F: Matrix = [[np.where(restart, zero, pred.dz_dz0)] +
-                     [np.where(restart, zero, pred.dz_du[nm]) for nm in names]]
+                     [np.where(restart, zero, pred.dz_du[nm] if nm in pred.dz_du else zero)
+                      for nm in names]]
         for a in range(len(names)):
             F.append([R.full(B, 0.0)] + [R.full(B, 1.0 if a == b else 0.0)
                                          for b in range(len(names))])
@@ -269,9 +333,14 @@ class FilterBank:
         zero = R.c(0.0)
         status = np.zeros(self.batch, dtype=np.uint32)
         o = output(self.th, d, zp, s)
-        hrow = [output_dz(self.th, d, o)] + [output_du(self.th, d, zp, o, nm) for nm in names]
+        hrow = [output_dz(self.th, d, o)] + [output_du(self.th, d, zp, o, nm)
+                                             for nm in _dynamic(names)]
+        h = o.h
+        if self.n_relax:
+            h, hrow = self._relax_output(names, o.h, hrow)
         r_eff = c.r
-        if cfg.sign_inflation:
+        # Model III's direction state is known from the depth: no sign to be wrong about
+        if cfg.sign_inflation and not (self.m3 and cfg.direction_memory):
             # the data follow the true direction sign(v), the model tanh(v/eps): their
             # difference is at most (1 - |s|) l fr, treated as extra measurement noise
             w = (R.c(1.0) - np.abs(s)) * (d.l * o.fr)
@@ -279,8 +348,69 @@ class FilterBank:
             r_eff = c.r + np.where(moving, w * w, zero)
             status |= np.where(active & moving & (w * w > c.r), np.uint32(STATUS_SIGN_UNCERTAIN),
                                np.uint32(0))
-        innovation = y - o.h
-        return innovation, hrow, r_eff, self._in_range(d, zp, o.h), status
+        innovation = y - h
+        return innovation, hrow, r_eff, self._in_range(d, zp, h), status
+
+    # ------------------------------------------------------------------------------------
+    # Model III (MODEL.md §3b, JACOBIANS.md §7)
+    def _relax_nominal(self, R: Real) -> None:
+        """The configured strengths g (fractions, sum < 1) as the odds G the filters scale,
+        G_i = g_i / (1 - sum g), so that g_i = G_i / (1 + sum G) stays in (0, 1) with a sum
+        below 1 for every u."""
+        idx = [IDX[nm] for nm in RELAX_NAMES[:self.n_relax]]
+        g = [self.scaled.nominal[j] for j in idx]
+        total = g[0] if len(g) == 1 else g[0] + g[1]
+        den = R.c(1.0) - total
+        if not (all(np.all(gk > R.c(0.0)) for gk in g) and np.all(den > R.c(0.0))):
+            raise ValueError("nominal relaxation strengths g_fast, g_slow must be > 0 with a "
+                             "sum < 1")
+        for j, gk in zip(idx, g):
+            self.scaled.nominal[j] = gk / den
+
+    def _relax_fractions(self) -> list[Array]:
+        """g_i = G_i / (1 + sum G): the strengths, each in (0, 1), their sum below 1."""
+        G = self.G
+        den = self.R.c(1.0) + (G[0] if len(G) == 1 else G[0] + G[1])
+        return [Gk / den for Gk in G]
+
+    def _relax_terms(self, fe: Array) -> tuple[list[Array], list[Array], Array]:
+        """The strengths g, each branch's memory after this sample for the elastic force fe,
+        m_i' = a_i m_i + (1 - a_i) fe, and what the branches take off, M = sum g_i m_i'."""
+        one = self.R.c(1.0)
+        a = self._a_rel
+        g = self._relax_fractions()
+        mp = [a[k] * self.mrel[k] + (one - a[k]) * fe for k in range(self.n_relax)]
+        M = g[0] * mp[0] if self.n_relax == 1 else g[0] * mp[0] + g[1] * mp[1]
+        return g, mp, M
+
+    def _relax_output(self, names: tuple[str, ...], fe: Array, hrow: list[Array]
+                      ) -> tuple[Array, list[Array]]:
+        """h = fe - M and its Jacobian row: the elastic row times the fraction a change of fe
+        keeps, 1 - sum g_i (1 - a_i) (the memories' past is known, not a state), then
+        dh/du_gk = -g_k (m_k' - M) for the strengths in names."""
+        one = self.R.c(1.0)
+        a = self._a_rel
+        g, mp, M = self._relax_terms(fe)
+        lost = g[0] * (one - a[0])
+        if self.n_relax == 2:
+            lost = lost + g[1] * (one - a[1])
+        keep = one - lost
+        row = [hj * keep for hj in hrow]
+        for k, nm in enumerate(RELAX_NAMES[:self.n_relax]):
+            if nm in names:
+                row.append(-(g[k] * (mp[k] - M)))
+        return fe - M, row
+
+    def _direction(self, l: Array, l_prev: Array, restart: Array) -> Array:
+        """The direction state after the depth step l - l_prev: ds/dl = (1 - s sign(dl))/delta
+        integrated exactly, s' = sigma + (s - sigma) exp(-|dl|/delta), sigma = sign(dl) (s held
+        when dl = 0); 0 at the surface and at the first sample, like z."""
+        R = self.R
+        dl = l - l_prev
+        sig = exact_sign(R, dl)
+        E = R.exp(-(np.abs(dl) / self.c.delta))
+        s = sig + (self.sdir - sig) * E
+        return np.where(restart, R.c(0.0), s)
 
     def _in_range(self, d: DepthTerms, z: Array, h: Array) -> Array:
         """The physical range of a predicted force h = sigma0 z l + ... and of z: both |h| and
@@ -321,7 +451,10 @@ class FilterBank:
                      for a in range(len(x))]
         for a, nm in enumerate(names):
             self.u[IDX[nm]] = np.where(run, newx[a + 1], self.u[IDX[nm]])
-        self.th = self.scaled.refresh(self.th, self.u, names)
+        self.th = self.scaled.refresh(self.th, self.u, _dynamic(names))
+        for k, nm in enumerate(RELAX_NAMES[:self.n_relax]):
+            if nm in names:
+                self.G[k] = self.scaled.nominal[IDX[nm]] * R.exp(self.u[IDX[nm]])
         return newx[0], upd.nis, status
 
     def _guard(self, x: list[Array], P: Matrix, x_prior: list[Array], prior_ok: Array,
@@ -367,9 +500,16 @@ class FilterBank:
         """Physical estimates and standard deviations (delta method on u) of the identified set."""
         th = self.th
         vals, sds = [], []
+        g = self._relax_fractions() if self.n_relax else []
         for name in self.identified:
             i, a = self.owner(name)
             sd_u = np.sqrt(self.P[i][a][a])
+            if name in RELAX_NAMES:
+                # g = G / (1 + sum G): dg_k/du_k = g_k (1 - g_k)
+                gk = g[RELAX_NAMES.index(name)]
+                vals.append(gk)
+                sds.append(np.abs(gk * (self.R.c(1.0) - gk)) * sd_u)
+                continue
             vals.append(getattr(th, name))
             sds.append(np.abs(self.scaled.dtheta_du(th, name)) * sd_u)
         return np.stack(vals), np.stack(sds)
@@ -403,7 +543,7 @@ class _Constants:
         self.eps = R.c(cfg.eps_mm_s)
         self.r = R.c(cfg.r_n2)
         self.q_z = R.c(cfg.q_z)
-        self.q_u = {n: R.c(cfg.q_for(n)) for n in PARAM_NAMES}
+        self.q_u = {n: R.c(cfg.q_for(n)) for n in ALL_NAMES}
         self.p0_z = R.c(cfg.p0_z)
         self.p0_u = R.c(cfg.p0_u)
         self.gate2 = R.c(cfg.gate_sigma) * R.c(cfg.gate_sigma)
@@ -416,4 +556,6 @@ class _Constants:
         self.depth_max = R.c(cfg.depth_max_mm)
         self.speed_max = R.c(cfg.speed_max_mm_s)
         self.force_max = R.c(cfg.force_max_n)
+        self.delta = R.c(cfg.presliding_mm)
+        self.tau = [R.c(cfg.tau_fast_s), R.c(cfg.tau_slow_s)]
         self.us_per_s = R.c(1.0e6)

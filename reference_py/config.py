@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 
-from .params import BETA0_DEFAULT, FILTER_SUBSETS, PARAM_NAMES
+from .params import ALL_NAMES, BETA0_DEFAULT, FILTER_SUBSETS
 
 #: Table I: the raw diagonal entries of Q, per model and parameter
 PAPER_Q_ENTRIES: dict[int, dict[str, float]] = {
@@ -38,15 +38,20 @@ SCHEDULES = ("all", "rotate")
 INT_RANGES: dict[str, tuple[int, int]] = {
     "substeps": (1, 16),
     "gate_reopen_after": (1, 1000),
+    "relax_branches": (1, 2),          # Model III: relaxation branches (fast, then slow)
 }
 #: real fields that must be finite and > 0
 POSITIVE_FIELDS = ("eps_mm_s", "beta0", "r_n2", "p0_z", "p0_u", "gate_sigma", "u_max",
                    "var_floor_z", "var_floor_u", "dt_max_s", "depth_max_mm", "speed_max_mm_s",
-                   "force_max_n")
+                   "force_max_n", "presliding_mm", "tau_fast_s", "tau_slow_s")
 #: real fields with an upper bound as well (inclusive).  Beyond them a published parameter
 #: estimate (nominal * e^u) or its standard deviation (|theta| sqrt(var u)) can overflow:
 #: |u| <= 10 is a factor 22 000 from the nominal, var(u) <= 100 a standard deviation of 10 log units
-UPPER_BOUNDS: dict[str, float] = {"u_max": 10.0, "p0_u": 100.0}
+UPPER_BOUNDS: dict[str, float] = {"u_max": 10.0, "p0_u": 100.0,
+                                  # Model III: a turn-over longer than any stroke, a relaxation
+                                  # slower than an hour, are no longer the effects they model
+                                  "presliding_mm": 1000.0, "tau_fast_s": 3600.0,
+                                  "tau_slow_s": 3600.0}
 #: the robust estimator's real upper bound (var(u) after a restart, as p0_u)
 ROBUST_UPPER_BOUNDS: dict[str, float] = {"restart_p0_u": 100.0}
 #: |nominal| of every physical parameter, in its own unit (the presets span 7.6e-4 .. 2.46)
@@ -68,7 +73,7 @@ ROBUST_POSITIVE_FIELDS = ("restart_p0_u", "lm_lambda0", "converged_confidence",
 
 @dataclass(frozen=True)
 class EstimatorConfig:
-    model: int = 2                     # 1 or 2 (paper's Model I / Model II)
+    model: int = 2                     # 1, 2 (paper's Model I / Model II) or 3 (Model III)
     schedule: str = "all"              # "all": three filters every sample; "rotate": one per sample
     eps_mm_s: float = 0.5              # smooth-sign width: s(v) = tanh(v / eps), mm/s, > 0
     beta0: float = BETA0_DEFAULT       # Model I's fixed beta, > 0 (overridden by a preset's beta)
@@ -91,6 +96,13 @@ class EstimatorConfig:
     depth_max_mm: float = 500.0
     speed_max_mm_s: float = 500.0      # accepted |velocity|, mm/s
     force_max_n: float = 50.0          # accepted |force|, N
+    # Model III (MODEL.md §3b); Models I and II ignore these fields
+    direction_memory: bool = True      # the direction state s (Dahl) replaces tanh(v / eps)
+    presliding_mm: float = 1.5         # its turn-over length delta, mm, > 0, <= 1000
+    relaxation: bool = True            # Maxwell branches take g_i m_i off the elastic force
+    relax_branches: int = 2            # 1: the fast branch only; 2: fast and slow
+    tau_fast_s: float = 0.3            # time constant of the fast branch, s, > 0, <= 3600
+    tau_slow_s: float = 3.0            # of the slow branch, s, > 0, <= 3600
 
     def q_for(self, name: str) -> float:
         return self.q_u.get(name, self.q_u_default)
@@ -103,10 +115,10 @@ class EstimatorConfig:
                 raise ValueError(f"config field {name} must be finite and > 0 (got {v!r})")
 
         if self.model not in FILTER_SUBSETS:
-            raise ValueError(f"config field model must be 1 or 2 (got {self.model!r})")
+            raise ValueError(f"config field model must be 1, 2 or 3 (got {self.model!r})")
         if self.schedule not in SCHEDULES:
             raise ValueError(f"config field schedule must be one of {SCHEDULES}")
-        for name in ("gate_reopen_after", "substeps"):
+        for name in ("gate_reopen_after", "substeps", "relax_branches"):
             lo, hi = INT_RANGES[name]
             if not lo <= getattr(self, name) <= hi:
                 raise ValueError(f"config field {name} must be in {lo}..{hi}")
@@ -121,14 +133,14 @@ class EstimatorConfig:
             if not (math.isfinite(v) and v >= 0):
                 raise ValueError(f"config field {name} must be finite and >= 0 (got {v!r})")
         for name, v in self.q_u.items():
-            if name not in PARAM_NAMES or not (math.isfinite(v) and v >= 0):
+            if name not in ALL_NAMES or not (math.isfinite(v) and v >= 0):
                 raise ValueError(f"config field q_u[{name!r}] invalid ({v!r})")
 
 
 def check_nominal(nominal: list[list[float]]) -> None:
     """Raise ValueError unless every nominal (start) value is finite with |x| <= NOMINAL_ABS_MAX."""
     for row in nominal:
-        for name, v in zip(PARAM_NAMES, row):
+        for name, v in zip(ALL_NAMES, row):
             if not (math.isfinite(v) and abs(v) <= NOMINAL_ABS_MAX):
                 raise ValueError(f"nominal {name} must be finite with |{name}| <= "
                                  f"{NOMINAL_ABS_MAX:g} (got {v!r})")
@@ -139,7 +151,8 @@ def default_config(model: int = 2, schedule: str = "all") -> EstimatorConfig:
 
 
 def paper_config(model: int = 2, schedule: str = "all") -> EstimatorConfig:
-    q = {k: v * PAPER_Q_SCALE for k, v in PAPER_Q_ENTRIES[model].items()}
+    # Model III: Model II's Table I (the relaxation strengths take q_u_default)
+    q = {k: v * PAPER_Q_SCALE for k, v in PAPER_Q_ENTRIES[min(model, 2)].items()}
     return EstimatorConfig(model=model, schedule=schedule, r_n2=0.01, q_u=q, p0_u=1.0)
 
 

@@ -1,4 +1,5 @@
-"""The small dense EKF kernels every filter of the bank uses (state dimension n <= 3 here).
+"""The small dense EKF kernels every filter of the bank uses (state dimension n <= 4 here:
+Model III's filter 1 carries z, sigma0 and two relaxation strengths).
 
 Matrices are lists of lists of batch arrays (P[i][j] has shape (batch,)).  Every product is an
 explicit sum in a fixed order — k = 0, 1, ..., n-1, accumulated left to right — and only the upper
@@ -77,7 +78,7 @@ def joseph_update(R: Real, x: list[Array], P: Matrix, h: list[Array], innovation
 
 
 def positive_definite(R: Real, P: Matrix) -> Array:
-    """Sylvester's criterion: every leading principal minor > 0 (n <= 3), all entries finite."""
+    """Sylvester's criterion: every leading principal minor > 0 (n <= 4), all entries finite."""
     n = len(P)
     zero = R.c(0.0)
     ok = P[0][0] > zero
@@ -90,6 +91,15 @@ def positive_definite(R: Real, P: Matrix) -> Array:
         c2 = P[1][0] * P[2][1] - P[1][1] * P[2][0]
         d3 = (P[0][0] * c0 - P[0][1] * c1) + P[0][2] * c2
         ok = ok & (d3 > zero)
+    if n >= 4:
+        # Laplace expansion along the first two rows: 2x2 minors of rows 0, 1 (s) times the
+        # complementary minors of rows 2, 3 (c), columns (i, j)
+        def m2(r: int, i: int, j: int) -> Array:
+            return P[r][i] * P[r + 1][j] - P[r][j] * P[r + 1][i]
+        d4 = (((((m2(0, 0, 1) * m2(2, 2, 3) - m2(0, 0, 2) * m2(2, 1, 3))
+                 + m2(0, 0, 3) * m2(2, 1, 2)) + m2(0, 1, 2) * m2(2, 0, 3))
+               - m2(0, 1, 3) * m2(2, 0, 2)) + m2(0, 2, 3) * m2(2, 0, 1))
+        ok = ok & (d4 > zero)
     for row in P:
         for v in row:
             ok = ok & np.isfinite(v)

@@ -83,6 +83,11 @@ class RobustEstimator:
         self.R, self.cfg = R, cfg
         self.rcfg = rcfg or RobustConfig()
         self.rcfg.validate()
+        if cfg.model == 3:
+            # its batch fit simulates Models I and II only; Model III would need the direction
+            # state and the relaxation memories in that simulation and their sensitivities
+            raise ValueError("the robust estimator supports Models I and II only (Model III: "
+                             "use the bank)")
         self.bank = FilterBank(R, cfg, nominal)
         self.batch = self.bank.batch
         self.names = MODEL_PARAMS[cfg.model]

@@ -48,6 +48,8 @@ def start_values(values: list[float], seed: int, factor: float, model: int) -> l
     draws = uniform_draws(seed, len(PARAM_NAMES))
     mult = [1.0] * len(PARAM_NAMES)
     for name in MODEL_PARAMS[model]:
+        if name not in PARAM_NAMES:
+            continue  # Model III's relaxation strengths start at their nominal values
         j = IDX[name]
         mult[j] = math.exp((2.0 * draws[j] - 1.0) * log_f)
     out = [v * m for v, m in zip(values, mult)]

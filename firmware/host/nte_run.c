@@ -3,9 +3,10 @@
  * CSV of t_s, depth_mm, force_n (velocity_mm_s optional) and writes one estimate row per
  * sample (the robust estimator adds a last column, confidence).  Built twice: nte-run (float) and nte-run-double (NTE_DOUBLE=1).
  *
- *   nte-run FILE.csv --model 1|2 [--estimator bank|robust] [--preset NAME] [--profile default|paper]
- *           [--init-seed K] [--init-factor F] [--schedule all|rotate] [--precision P]
- *           --out EST.csv
+ *   nte-run FILE.csv --model 1|2|3 [--estimator bank|robust] [--preset NAME]
+ *           [--profile default|paper] [--init-seed K] [--init-factor F] [--schedule all|rotate]
+ *           [--precision P] [--presliding-mm MM] [--tau-fast S] [--tau-slow S]
+ *           [--relax-branches 1|2] [--no-relaxation] [--no-direction-memory] --out EST.csv
  *
  * -h/--help lists every flag and its default.  Exit status 0 on success, 2 on bad input: one
  * line on stderr ("FILE:LINE: column 'NAME': reason" or "argument --flag: why").
@@ -46,6 +47,13 @@ typedef struct args_t {
     int robust;
     long long seed;
     double factor;
+    /* Model III (nte_config_t; ignored by Models I and II) */
+    double presliding_mm;
+    double tau_fast_s;
+    double tau_slow_s;
+    int relax_branches;
+    int relaxation;
+    int direction_memory;
 } args_t;
 
 /* A refusal: one line on stderr, exit status 2 (the Python tools' form). */
@@ -58,9 +66,11 @@ static int usage(const char* msg)
 /* --help: every flag and its default, on stdout. */
 static void help(void)
 {
-    printf("usage: " PROG " FILE.csv --model 1|2 [--estimator bank|robust] [--preset NAME]\n"
+    printf("usage: " PROG " FILE.csv --model 1|2|3 [--estimator bank|robust] [--preset NAME]\n"
            "       [--profile default|paper] [--init-seed K] [--init-factor F]\n"
-           "       [--schedule all|rotate] [--precision " PRECISION "] --out EST.csv\n"
+           "       [--schedule all|rotate] [--precision " PRECISION "]\n"
+           "       [--presliding-mm MM] [--tau-fast S] [--tau-slow S] [--relax-branches 1|2]\n"
+           "       [--no-relaxation] [--no-direction-memory] --out EST.csv\n"
            "\n"
            "Run the estimator (C library, " PRECISION ") over a CSV of t_s, depth_mm, force_n\n"
            "(velocity_mm_s optional, else central differences of depth) and write one row per\n"
@@ -68,7 +78,8 @@ static void help(void)
            "its sd (the robust estimator adds confidence). The C twin of nte-ref estimate.\n"
            "\n"
            "  FILE.csv               the insertion (no default)\n"
-           "  --model 1|2            force model (no default)\n"
+           "  --model 1|2|3          force model (no default); 3: Model II with direction\n"
+           "                         memory and relaxation\n"
            "  --estimator bank|robust  (default: bank)\n"
            "  --preset NAME          starting parameters (default: %s)\n"
            "  --profile default|paper  tuning (default: default)\n"
@@ -78,6 +89,16 @@ static void help(void)
            "  --schedule all|rotate  filters per sample (default: all)\n"
            "  --precision " PRECISION "    the only precision of this binary\n"
            "                         (default: " PRECISION ")\n"
+           "  --presliding-mm MM     Model III: turn-over length of the direction state,\n"
+           "                         > 0 and <= 1000 (default: 1.5)\n"
+           "  --tau-fast S           Model III: fast relaxation time constant, s,\n"
+           "                         > 0 and <= 3600 (default: 0.3)\n"
+           "  --tau-slow S           Model III: slow relaxation time constant, s,\n"
+           "                         > 0 and <= 3600 (default: 3)\n"
+           "  --relax-branches 1|2   Model III: relaxation branches (default: 2)\n"
+           "  --no-relaxation        Model III: no relaxation branches (default: on)\n"
+           "  --no-direction-memory  Model III: tanh(v/eps) instead of the direction state\n"
+           "                         (default: on)\n"
            "  --out EST.csv          the estimates to write (no default)\n"
            "  -h, --help             this help\n"
            "\n"
@@ -99,6 +120,12 @@ static int parse_args(int argc, char** argv, args_t* a)
     a->robust = 0;
     a->seed = 0;
     a->factor = 5.0;
+    a->presliding_mm = 1.5;
+    a->tau_fast_s = 0.3;
+    a->tau_slow_s = 3.0;
+    a->relax_branches = 2;
+    a->relaxation = 1;
+    a->direction_memory = 1;
     for (int i = 1; i < argc; i++) {
         if ((strcmp(argv[i], "--help") == 0) || (strcmp(argv[i], "-h") == 0)) {
             help();
@@ -110,6 +137,14 @@ static int parse_args(int argc, char** argv, args_t* a)
         if ((opt[0] == '-') && (opt[1] != '-') && (opt[1] != '\0')) {
             (void)snprintf(msg, sizeof msg, "unrecognized arguments: %s", opt);
             return usage(msg);
+        }
+        if (strcmp(opt, "--no-relaxation") == 0) {
+            a->relaxation = 0;
+            continue;
+        }
+        if (strcmp(opt, "--no-direction-memory") == 0) {
+            a->direction_memory = 0;
+            continue;
         }
         if (strncmp(opt, "--", 2) != 0) {
             if (a->csv != NULL) {
@@ -138,7 +173,7 @@ static int parse_args(int argc, char** argv, args_t* a)
         }
         char* end = NULL;
         if (strcmp(name, "--model") == 0) {
-            if ((strcmp(val, "1") != 0) && (strcmp(val, "2") != 0)) {
+            if ((strcmp(val, "1") != 0) && (strcmp(val, "2") != 0) && (strcmp(val, "3") != 0)) {
                 (void)snprintf(msg, sizeof msg, "argument --model: invalid choice: '%s'", val);
                 return usage(msg);
             }
@@ -192,6 +227,35 @@ static int parse_args(int argc, char** argv, args_t* a)
                                "argument --init-factor: must be >= 1 and <= 100 (got %s)", val);
                 return usage(msg);
             }
+        } else if ((strcmp(name, "--presliding-mm") == 0) || (strcmp(name, "--tau-fast") == 0) ||
+                   (strcmp(name, "--tau-slow") == 0)) {
+            /* bounded(0, hi, unit, lo_open=True) of the reference's CLI */
+            const int mm = strcmp(name, "--presliding-mm") == 0;
+            const double hi = mm ? 1000.0 : 3600.0;
+            const double x = strtod(val, &end);
+            if ((end == val) || (*end != '\0')) {
+                (void)snprintf(msg, sizeof msg, "argument %s: not a number: '%s'", name, val);
+                return usage(msg);
+            }
+            if (!((x > 0.0) && (x <= hi))) { /* also NaN */
+                (void)snprintf(msg, sizeof msg, "argument %s: must be > 0 and <= %g %s (got %s)",
+                               name, hi, mm ? "mm" : "s", val);
+                return usage(msg);
+            }
+            if (mm) {
+                a->presliding_mm = x;
+            } else if (strcmp(name, "--tau-fast") == 0) {
+                a->tau_fast_s = x;
+            } else {
+                a->tau_slow_s = x;
+            }
+        } else if (strcmp(name, "--relax-branches") == 0) {
+            if ((strcmp(val, "1") != 0) && (strcmp(val, "2") != 0)) {
+                (void)snprintf(msg, sizeof msg, "argument --relax-branches: invalid choice: '%s'",
+                               val);
+                return usage(msg);
+            }
+            a->relax_branches = atoi(val);
         } else if (strcmp(name, "--out") == 0) {
             a->out = val;
         } else {
@@ -417,9 +481,17 @@ int main(int argc, char** argv)
     }
     /* Model I's fixed beta0 is the preset's beta (reference_py/MODEL.md §2) */
     cfg.beta0 = (nte_real_t)preset->values[6];
-    for (size_t j = 0U; j < NTE_PARAM_COUNT; j++) {
+    /* the seven force-model parameters; Model III's relaxation strengths keep the
+     * configuration's nominal values (the starts move only the seven) */
+    for (size_t j = 0U; j < 7U; j++) {
         cfg.nominal[j] = (nte_real_t)start[j];
     }
+    cfg.presliding_mm = (nte_real_t)a.presliding_mm;
+    cfg.tau_fast_s = (nte_real_t)a.tau_fast_s;
+    cfg.tau_slow_s = (nte_real_t)a.tau_slow_s;
+    cfg.relax_branches = a.relax_branches;
+    cfg.relaxation = a.relaxation != 0;
+    cfg.direction_memory = a.direction_memory != 0;
     /* the identified part of f1, computed in double as the reference does, rounded once */
     const double kappa = (start[4] < 0.0) ? 1.0 : 0.0;
     const double excess = start[3] - (kappa * (-start[4]));
@@ -440,7 +512,7 @@ int main(int argc, char** argv)
     const int rc = run(&a, &out, &tr, &est, &counts);
     if (rc == 0) {
         printf("%zu samples, Model %s, " PRECISION "; wrote %s\n", tr.n,
-               (a.model == 1) ? "I" : "II", a.out);
+               (a.model == 1) ? "I" : ((a.model == 2) ? "II" : "III"), a.out);
         printf("samples: %zu; rejected %zu, gated %zu, clipped %zu\n", tr.n, counts.rejected,
                counts.gated, counts.clipped);
     }

@@ -152,13 +152,28 @@ typedef enum nte_param_id_t {
     nte_param_f1 = 3,     /**< g(l) constant part */
     nte_param_f2 = 4,     /**< g(l) exponential part */
     nte_param_alpha = 5,  /**< decay rate of the exponential, 1/mm */
-    nte_param_beta = 6    /**< normalising constant (Model I: fixed beta0) */
+    nte_param_beta = 6,   /**< normalising constant (Model I: fixed beta0) */
+    nte_param_g_fast = 7, /**< Model III: strength of the fast relaxation branch, the
+                               fraction of the elastic force it takes once relaxed */
+    nte_param_g_slow = 8  /**< Model III: strength of the slow branch (g_fast + g_slow < 1) */
 } nte_param_id_t;
 
-#define NTE_PARAM_COUNT 7
-/** At most this many parameters are identified (Model I: six, Model II: five). */
-#define NTE_IDENTIFIED_MAX 6
+/** Every parameter: the seven of the force model (Models I, II) and Model III's two
+ *  relaxation strengths. */
+#define NTE_PARAM_COUNT 9
+/** At most this many parameters are identified (Model I: six, Model II: five, Model III:
+ *  seven). */
+#define NTE_IDENTIFIED_MAX 7
 #define NTE_FILTER_COUNT 3
+/** Largest state of one filter of the bank (z and its parameters): 4 for Model III's filter 1
+ *  (z, sigma0, g_fast, g_slow); Models I and II need 3.  Each covariance is
+ *  NTE_STATE_MAX^2 reals. */
+#ifndef NTE_STATE_MAX
+#define NTE_STATE_MAX 4
+#endif
+#if (NTE_STATE_MAX != 3) && (NTE_STATE_MAX != 4)
+#error "NTE_STATE_MAX must be 3 (Models I and II only) or 4"
+#endif
 
 /** One identified parameter: its physical estimate and standard deviation (delta method). */
 typedef struct nte_param_estimate_t {
@@ -175,7 +190,8 @@ typedef struct nte_param_estimate_t {
 typedef enum nte_err_t {
     nte_err_ok = 0,
     nte_err_null_argument = -1,   /**< a pointer argument was NULL */
-    nte_err_bad_model = -2,       /**< model is not 1 or 2 */
+    nte_err_bad_model = -2,       /**< model is not 1, 2 or 3 (3 needs NTE_STATE_MAX 4 when
+                                       the relaxation has two branches) */
     nte_err_bad_schedule = -3,    /**< schedule is not a nte_schedule_t value */
     nte_err_bad_substeps = -4,    /**< substeps outside 1..16 */
     nte_err_bad_gate_reopen = -5, /**< gate_reopen_after outside 1..1000 */
@@ -276,7 +292,7 @@ typedef struct nte_robust_config_t {
  * reference's float64 value rounded to nte_real_t.
  */
 typedef struct nte_config_t {
-    int32_t model;              /**< [argument] 1 (Model I) or 2 (Model II) */
+    int32_t model;              /**< [argument] 1 (Model I), 2 (Model II) or 3 (Model III) */
     nte_schedule_t schedule;    /**< [argument] nte_schedule_all or _rotate */
     int32_t substeps;           /**< [1] RK3 sub-steps per sample, 1..16 (cost linear) */
     int32_t gate_reopen_after;  /**< [10] after this many gated updates accept one, 1..1000 */
@@ -302,9 +318,19 @@ typedef struct nte_config_t {
     nte_real_t speed_max_mm_s;  /**< [500] accepted |velocity|, mm/s, > 0 */
     nte_real_t force_max_n;     /**< [50] accepted |force| and the physical range of every
                                      predicted and published force, N, > 0 */
-    /** [preset paper-10mms] Nominal (starting) physical values, nte_param_id_t order,
-     *  finite, |x| <= 1000.  Model II keeps f2 and alpha fixed at theirs; Model I ignores
-     *  nominal beta and uses beta0. */
+    /* Model III (reference_py/MODEL.md §3b); Models I and II ignore these fields */
+    bool direction_memory;      /**< [true] the direction state s (travelled distance, Dahl)
+                                     replaces tanh(v/eps); no sign inflation of R then */
+    bool relaxation;            /**< [true] relaxation branches take sum g_i m_i off the
+                                     elastic force */
+    int32_t relax_branches;     /**< [2] 1: the fast branch only; 2: fast and slow, 1..2 */
+    nte_real_t presliding_mm;   /**< [1.5] turn-over length delta of s, mm, > 0, <= 1000 */
+    nte_real_t tau_fast_s;      /**< [0.3] time constant of the fast branch, s, > 0, <= 3600 */
+    nte_real_t tau_slow_s;      /**< [3] time constant of the slow branch, s, > 0, <= 3600 */
+    /** [preset paper-10mms; g_fast 0.15, g_slow 0.25] Nominal (starting) physical values,
+     *  nte_param_id_t order, finite, |x| <= 1000.  Model II keeps f2 and alpha fixed at
+     *  theirs; Model I ignores nominal beta and uses beta0.  Model III with relaxation: the
+     *  strengths in use > 0 with a sum < 1 (else nte_err_bad_nominal). */
     nte_real_t nominal[NTE_PARAM_COUNT];
     /** [the preset's, computed in double] The identified part of nominal f1:
      *  f1 - kappa (-f2), kappa = 1 if f2 < 0 else 0; > 0.  0 means "compute it in nte_real_t
@@ -401,8 +427,11 @@ typedef struct nte_t {
     nte_real_t u[NTE_PARAM_COUNT];
     nte_theta_t th;
     nte_real_t z;
-    /* one covariance per filter, dimension 1 + its parameter count (at most 3) */
-    nte_real_t P[NTE_FILTER_COUNT][3][3];
+    /* one covariance per filter, dimension 1 + its parameter count (at most NTE_STATE_MAX) */
+    nte_real_t P[NTE_FILTER_COUNT][NTE_STATE_MAX][NTE_STATE_MAX];
+    /* Model III: the direction state s in [-1, 1] and the relaxation memories m_i, N */
+    nte_real_t sdir;
+    nte_real_t mrel[2];
     uint32_t gated_run[NTE_FILTER_COUNT];
     /* time line */
     int64_t t_prev_us;

@@ -8,8 +8,8 @@
 #include "nte_bank.h"
 #include "nte_robust.h"
 
-static const char* const param_names[NTE_PARAM_COUNT] = {"sigma0", "sigma1", "sigma2", "f1",
-                                                         "f2",     "alpha",  "beta"};
+static const char* const param_names[NTE_PARAM_COUNT] = {
+    "sigma0", "sigma1", "sigma2", "f1", "f2", "alpha", "beta", "g_fast", "g_slow"};
 
 const char* nte_param_name(const nte_param_id_t id)
 {

@@ -10,29 +10,63 @@
 #include "nte_ekf.h"
 #include "nte_model.h"
 
-/* Table I: the parameters each filter identifies together with z, per model. */
-static const uint8_t subset_len[2][NTE_FILTER_COUNT] = {{2U, 2U, 2U}, {1U, 2U, 2U}};
-static const uint8_t subsets[2][NTE_FILTER_COUNT][2] = {
-    {{nte_param_f2, nte_param_sigma0}, {nte_param_f1, nte_param_sigma1},
-     {nte_param_alpha, nte_param_sigma2}},
-    {{nte_param_sigma0, 0U}, {nte_param_f1, nte_param_sigma1}, {nte_param_beta, nte_param_sigma2}}};
+/* Table I: the parameters each filter identifies together with z, per model (Model III:
+ * Model II with the relaxation strengths in filter 1; bank.py filter_subsets drops those a
+ * configuration switches off, as subset_count does). */
+static const uint8_t subset_len[3][NTE_FILTER_COUNT] = {{2U, 2U, 2U}, {1U, 2U, 2U}, {3U, 2U, 2U}};
+static const uint8_t subsets[3][NTE_FILTER_COUNT][3] = {
+    {{nte_param_f2, nte_param_sigma0, 0U}, {nte_param_f1, nte_param_sigma1, 0U},
+     {nte_param_alpha, nte_param_sigma2, 0U}},
+    {{nte_param_sigma0, 0U, 0U}, {nte_param_f1, nte_param_sigma1, 0U},
+     {nte_param_beta, nte_param_sigma2, 0U}},
+    {{nte_param_sigma0, nte_param_g_fast, nte_param_g_slow}, {nte_param_f1, nte_param_sigma1, 0U},
+     {nte_param_beta, nte_param_sigma2, 0U}}};
 /* reference MODEL_PARAMS: the identified parameters in output order */
-static const uint8_t identified_len[2] = {6U, 5U};
-static const uint8_t identified[2][NTE_IDENTIFIED_MAX] = {
+static const uint8_t identified_len[3] = {6U, 5U, 5U};
+static const uint8_t identified[3][NTE_IDENTIFIED_MAX] = {
     {nte_param_sigma0, nte_param_sigma1, nte_param_sigma2, nte_param_f1, nte_param_f2,
-     nte_param_alpha},
-    {nte_param_sigma0, nte_param_sigma1, nte_param_sigma2, nte_param_f1, nte_param_beta, 0U}};
+     nte_param_alpha, 0U},
+    {nte_param_sigma0, nte_param_sigma1, nte_param_sigma2, nte_param_f1, nte_param_beta, 0U, 0U},
+    {nte_param_sigma0, nte_param_sigma1, nte_param_sigma2, nte_param_f1, nte_param_beta,
+     nte_param_g_fast, nte_param_g_slow}};
 
 static size_t model_index(const nte_t* self)
 {
-    return (self->cfg.model == 1) ? 0U : 1U;
+    return (self->cfg.model == 1) ? 0U : ((self->cfg.model == 2) ? 1U : 2U);
+}
+
+/* bank.relax_count: Model III's relaxation branches in use (0 for Models I and II). */
+static size_t relax_count(const nte_t* self)
+{
+    /* 1 or 2 (nte_config_check) */
+    return ((self->cfg.model == 3) && self->cfg.relaxation)
+               ? ((self->cfg.relax_branches == 1) ? 1U : 2U)
+               : 0U;
+}
+
+/* The parameter count of filter i (bank.filter_subsets). */
+static size_t subset_count(const nte_t* self, const size_t i)
+{
+    const size_t mi = model_index(self);
+    return ((mi == 2U) && (i == 0U)) ? (1U + relax_count(self)) : (size_t)subset_len[mi][i];
+}
+
+/* The leading parameters of ids[0..count) that enter the state equation (bank._dynamic): the
+ * relaxation strengths act on the output only and come last in every list. */
+static size_t dynamic_count(const uint8_t* ids, const size_t count)
+{
+    size_t n = 0U;
+    while ((n < count) && (ids[n] < (uint8_t)nte_param_g_fast)) {
+        n++;
+    }
+    return n;
 }
 
 size_t nte_bank_identified(const nte_t* self, const uint8_t** ids)
 {
     const size_t mi = model_index(self);
     *ids = identified[mi];
-    return identified_len[mi];
+    return (size_t)identified_len[mi] + relax_count(self);
 }
 
 /* bank._p0: the initial covariance of a filter with n states, var(u) = p0_u. */
@@ -70,12 +104,24 @@ static void set_nominal(nte_t* self)
     self->ex_nominal = (cfg->f1_excess > NTE_C(0.0))
                            ? cfg->f1_excess
                            : (cfg->nominal[nte_param_f1] - (self->kappa * (-f2)));
+    const size_t nr = relax_count(self);
+    if (nr > 0U) {
+        /* bank._relax_nominal: the strengths g (fractions) as the odds G the filters scale,
+         * G_i = g_i / (1 - sum g), so that g_i = G_i / (1 + sum G) */
+        const nte_real_t g0 = cfg->nominal[nte_param_g_fast];
+        const nte_real_t g1 = cfg->nominal[nte_param_g_slow];
+        const nte_real_t total = (nr == 1U) ? g0 : (g0 + g1);
+        const nte_real_t den = NTE_C(1.0) - total;
+        self->nominal[nte_param_g_fast] = g0 / den;
+        if (nr == 2U) {
+            self->nominal[nte_param_g_slow] = g1 / den;
+        }
+    }
 }
 
 void nte_bank_restart_from(nte_t* self, const nte_real_t theta[NTE_PARAM_COUNT],
                            const nte_real_t p0_u)
 {
-    const size_t mi = model_index(self);
     for (size_t j = 0U; j < NTE_PARAM_COUNT; j++) {
         self->nominal[j] = theta[j];
     }
@@ -85,22 +131,24 @@ void nte_bank_restart_from(nte_t* self, const nte_real_t theta[NTE_PARAM_COUNT],
     }
     nte_model_theta(&self->th, self->nominal, self->ex_nominal, self->kappa, self->u);
     for (size_t i = 0U; i < NTE_FILTER_COUNT; i++) {
-        p0_with(self, (size_t)subset_len[mi][i] + 1U, self->P[i], p0_u);
+        p0_with(self, subset_count(self, i) + 1U, self->P[i], p0_u);
         self->gated_run[i] = 0U;
     }
 }
 
 void nte_bank_start(nte_t* self)
 {
-    const size_t mi = model_index(self);
     set_nominal(self);
     for (size_t j = 0U; j < NTE_PARAM_COUNT; j++) {
         self->u[j] = NTE_C(0.0);
     }
     nte_model_theta(&self->th, self->nominal, self->ex_nominal, self->kappa, self->u);
     self->z = NTE_C(0.0);
+    self->sdir = NTE_C(0.0);
+    self->mrel[0] = NTE_C(0.0);
+    self->mrel[1] = NTE_C(0.0);
     for (size_t i = 0U; i < NTE_FILTER_COUNT; i++) {
-        p0(self, (size_t)subset_len[mi][i] + 1U, self->P[i]);
+        p0(self, subset_count(self, i) + 1U, self->P[i]);
         self->gated_run[i] = 0U;
     }
     self->initialised = false;
@@ -184,10 +232,47 @@ typedef struct step_ctx_t {
     nte_real_t y;
     nte_real_t s;
     nte_real_t z_prev;
+    nte_real_t a_rel[2]; /* Model III: each relaxation branch's decay over the sample */
     bool surface;
     bool gap;
     bool rotate;
 } step_ctx_t;
+
+/* ---- Model III (reference_py/MODEL.md §3b, JACOBIANS.md §7) ---- */
+
+/* bank._relax_fractions: g_i = G_i / (1 + sum G), each in (0, 1), their sum below 1. */
+static void relax_fractions(const nte_t* self, const size_t nr, nte_real_t g[2])
+{
+    const nte_real_t G0 = self->th.v[nte_param_g_fast];
+    const nte_real_t G1 = self->th.v[nte_param_g_slow];
+    const nte_real_t den = NTE_C(1.0) + ((nr == 1U) ? G0 : (G0 + G1));
+    g[0] = G0 / den;
+    g[1] = (nr == 2U) ? (G1 / den) : NTE_C(0.0);
+}
+
+/* bank._relax_terms: the strengths g, each branch's memory after this sample for the elastic
+ * force fe, m_i' = a_i m_i + (1 - a_i) fe, and what the branches take off, sum g_i m_i'. */
+static nte_real_t relax_terms(const nte_t* self, const step_ctx_t* c, const size_t nr,
+                              const nte_real_t fe, nte_real_t g[2], nte_real_t mp[2])
+{
+    relax_fractions(self, nr, g);
+    for (size_t k = 0U; k < nr; k++) {
+        mp[k] = (c->a_rel[k] * self->mrel[k]) + ((NTE_C(1.0) - c->a_rel[k]) * fe);
+    }
+    return (nr == 1U) ? (g[0] * mp[0]) : ((g[0] * mp[0]) + (g[1] * mp[1]));
+}
+
+/* bank._direction: the direction state after the depth step l - l_prev, ds/dl =
+ * (1 - s sign(dl)) / delta integrated exactly: s' = sigma + (s - sigma) exp(-|dl| / delta),
+ * sigma = sign(dl) (s held when dl = 0). */
+static nte_real_t direction(const nte_t* self, const nte_real_t l, const nte_real_t l_prev)
+{
+    const nte_real_t dl = l - l_prev;
+    const nte_real_t sig =
+        (dl > NTE_C(0.0)) ? NTE_C(1.0) : ((dl < NTE_C(0.0)) ? NTE_C(-1.0) : NTE_C(0.0));
+    const nte_real_t E = nte_exp(-(nte_abs(dl) / self->cfg.presliding_mm));
+    return sig + ((self->sdir - sig) * E);
+}
 
 typedef struct filter_out_t {
     bool active;
@@ -227,7 +312,9 @@ static void predict(nte_t* self, const step_ctx_t* c, const size_t i,
     q[0] = self->cfg.q_z;
     w->x[0] = zp;
     for (size_t a = 0U; a < na; a++) {
-        F[0][a + 1U] = restart ? NTE_C(0.0) : pred->dz_du[w->names[a]];
+        /* the relaxation strengths act on the output only: dz/du_g = 0 */
+        const bool dyn = w->names[a] < (uint8_t)nte_param_g_fast;
+        F[0][a + 1U] = (restart || !dyn) ? NTE_C(0.0) : pred->dz_du[w->names[a]];
         F[a + 1U][0] = NTE_C(0.0);
         for (size_t b = 0U; b < na; b++) {
             F[a + 1U][b + 1U] = (a == b) ? NTE_C(1.0) : NTE_C(0.0);
@@ -247,11 +334,36 @@ static uint32_t measure(const nte_t* self, const step_ctx_t* c, const nte_depth_
     nte_output_terms_t o;
     nte_model_output(&o, &self->th, d, w->x[0], c->s);
     w->h[0] = nte_model_output_dz(&self->th, d, &o);
-    for (size_t a = 0U; a < na; a++) {
+    const size_t nd = dynamic_count(w->names, na);
+    for (size_t a = 0U; a < nd; a++) {
         w->h[a + 1U] = nte_model_output_du(&self->th, d, w->x[0], &o, w->names[a]);
     }
+    nte_real_t h = o.h;
+    const size_t nr = relax_count(self);
+    if (nr > 0U) {
+        /* bank._relax_output: h = fe - sum g_i m_i'; the elastic row times the fraction a
+         * change of fe keeps, 1 - sum g_i (1 - a_i) (the memories' past is known, not a
+         * state); dh/du_gk = -g_k (m_k' - sum g_i m_i') */
+        nte_real_t g[2];
+        nte_real_t mp[2];
+        const nte_real_t M = relax_terms(self, c, nr, o.h, g, mp);
+        nte_real_t lost = g[0] * (NTE_C(1.0) - c->a_rel[0]);
+        if (nr == 2U) {
+            lost = lost + (g[1] * (NTE_C(1.0) - c->a_rel[1]));
+        }
+        const nte_real_t keep = NTE_C(1.0) - lost;
+        for (size_t a = 0U; a <= nd; a++) {
+            w->h[a] = w->h[a] * keep;
+        }
+        for (size_t a = nd; a < na; a++) {
+            const size_t k = (size_t)w->names[a] - (size_t)nte_param_g_fast;
+            w->h[a + 1U] = -(g[k] * (mp[k] - M));
+        }
+        h = o.h - M;
+    }
     w->r_eff = self->cfg.r_n2;
-    if (self->cfg.sign_inflation) {
+    /* Model III's direction state is known from the depth: no sign to be wrong about */
+    if (self->cfg.sign_inflation && !((self->cfg.model == 3) && self->cfg.direction_memory)) {
         /* the data follow sign(v), the model tanh(v/eps): their difference is at most
          * (1 - |s|) l fr, treated as extra measurement noise */
         const nte_real_t dw = (NTE_C(1.0) - nte_abs(c->s)) * (d->l * o.fr);
@@ -262,8 +374,8 @@ static uint32_t measure(const nte_t* self, const step_ctx_t* c, const nte_depth_
             status |= NTE_STATUS_SIGN_UNCERTAIN;
         }
     }
-    w->innovation = c->y - o.h;
-    w->in_range = in_range(self, d, w->x[0], o.h);
+    w->innovation = c->y - h;
+    w->in_range = in_range(self, d, w->x[0], h);
     return status;
 }
 
@@ -334,7 +446,7 @@ static uint32_t run_filter(nte_t* self, const step_ctx_t* c, const size_t i,
     filter_work_t w;
     (void)memset(&w, 0, sizeof w);
     w.names = subsets[mi][i];
-    w.n = (size_t)subset_len[mi][i] + 1U;
+    w.n = subset_count(self, i) + 1U;
     nte_rk3_result_t own;
     fo->innovation = NTE_C(0.0);
     fo->nis = NTE_C(0.0);
@@ -343,7 +455,7 @@ static uint32_t run_filter(nte_t* self, const step_ctx_t* c, const size_t i,
         fo->active = (self->k_mod3 == (uint8_t)i);
     } else {
         nte_model_rk3(&own, &self->th, c->z_prev, c->l_prev, c->l, c->dt, self->cfg.substeps,
-                      w.names, w.n - 1U);
+                      w.names, dynamic_count(w.names, w.n - 1U));
         pred = &own;
         fo->active = true;
     }
@@ -359,6 +471,7 @@ void nte_bank_advance(nte_t* self, const bool first, const nte_real_t dt, const 
                     const nte_real_t v, const nte_real_t y, nte_output_t* out)
 {
     step_ctx_t c;
+    (void)memset(&c, 0, sizeof c);
     c.l = nte_model_clamp_depth(l_in);
     c.l_prev = nte_model_clamp_depth(self->l_prev);
     c.dt = dt;
@@ -366,7 +479,18 @@ void nte_bank_advance(nte_t* self, const bool first, const nte_real_t dt, const 
     c.y = y;
     c.surface = !(c.l > NTE_C(0.0));
     c.gap = (!first) && (dt > self->cfg.dt_max_s);
-    c.s = nte_model_smooth_sign(v, self->cfg.eps_mm_s);
+    const bool m3 = self->cfg.model == 3;
+    const size_t nr = relax_count(self);
+    if (m3 && self->cfg.direction_memory) {
+        /* 0 at the surface and at the first sample, like z */
+        c.s = (c.surface || first) ? NTE_C(0.0) : direction(self, c.l, c.l_prev);
+    } else {
+        c.s = nte_model_smooth_sign(v, self->cfg.eps_mm_s);
+    }
+    /* each relaxation branch's decay over this sample: exact for an input held over the
+     * sample, stable at every rate */
+    c.a_rel[0] = (nr > 0U) ? nte_exp(-(dt / self->cfg.tau_fast_s)) : NTE_C(0.0);
+    c.a_rel[1] = (nr > 1U) ? nte_exp(-(dt / self->cfg.tau_slow_s)) : NTE_C(0.0);
     c.z_prev = self->z;
     c.rotate = self->cfg.schedule == nte_schedule_rotate;
     uint32_t status = c.surface ? NTE_STATUS_OUT_OF_TISSUE : 0U;
@@ -385,7 +509,7 @@ void nte_bank_advance(nte_t* self, const bool first, const nte_real_t dt, const 
         if (c.rotate) {
             /* one prediction, with every identified parameter's sensitivity, serves all three */
             nte_model_rk3(&shared, &self->th, c.z_prev, c.l_prev, c.l, dt, self->cfg.substeps,
-                          identified[mi], identified_len[mi]);
+                          identified[mi], dynamic_count(identified[mi], identified_len[mi]));
         }
         nte_real_t z_post = c.z_prev;
         for (size_t i = 0U; i < NTE_FILTER_COUNT; i++) {
@@ -407,6 +531,12 @@ void nte_bank_advance(nte_t* self, const bool first, const nte_real_t dt, const 
     nte_model_depth_terms(&d, &self->th, c.l);
     nte_model_output(&o, &self->th, &d, self->z, c.s);
     nte_real_t force = o.h;
+    nte_real_t fe = o.h; /* Model III: the elastic force the relaxation memories follow */
+    nte_real_t g[2];
+    nte_real_t mp[2];
+    if (nr > 0U) {
+        force = fe - relax_terms(self, &c, nr, fe, g, mp);
+    }
     if (!in_range(self, &d, self->z, force)) {
         /* never publish a force or z outside their range: z to its steady state, and if the
          * parameters still put the force out of range, the force saturated (NaN: 0) */
@@ -415,11 +545,26 @@ void nte_bank_advance(nte_t* self, const bool first, const nte_real_t dt, const 
         nte_model_output(&o, &self->th, &d, self->z, c.s);
         const nte_real_t fmax = self->cfg.force_max_n;
         force = o.h;
+        if (nr > 0U) {
+            fe = o.h;
+            force = o.h - relax_terms(self, &c, nr, o.h, g, mp);
+        }
         if (!(nte_abs(force) <= fmax)) {
             force = (force > fmax) ? fmax : ((force < -fmax) ? -fmax : NTE_C(0.0));
         }
         status |= NTE_STATUS_DIVERGED;
         self->counters.diverged++;
+    }
+    if (nr > 0U) {
+        /* commit the memories with the posterior elastic force (0 out of tissue and at the
+         * first sample, like z) */
+        (void)relax_terms(self, &c, nr, fe, g, mp);
+        for (size_t k = 0U; k < nr; k++) {
+            self->mrel[k] = (first || c.surface) ? NTE_C(0.0) : mp[k];
+        }
+    }
+    if (m3) {
+        self->sdir = c.s;
     }
     out->force_hat_n = force;
     out->z = self->z;
@@ -431,7 +576,12 @@ void nte_bank_advance(nte_t* self, const bool first, const nte_real_t dt, const 
 size_t nte_bank_params(const nte_t* self, nte_param_estimate_t* out, const size_t capacity)
 {
     const size_t mi = model_index(self);
-    const size_t count = identified_len[mi];
+    const size_t nr = relax_count(self);
+    const size_t count = (size_t)identified_len[mi] + nr;
+    nte_real_t g[2] = {NTE_C(0.0), NTE_C(0.0)};
+    if (nr > 0U) {
+        relax_fractions(self, nr, g);
+    }
     for (size_t j = 0U; (j < count) && (j < capacity) && (out != NULL); j++) {
         const uint8_t id = identified[mi][j];
         out[j].id = (nte_param_id_t)id;
@@ -442,13 +592,20 @@ size_t nte_bank_params(const nte_t* self, nte_param_estimate_t* out, const size_
         }
         /* the filter that owns the parameter, and its index in that filter's state */
         for (size_t i = 0U; i < NTE_FILTER_COUNT; i++) {
-            for (size_t a = 0U; a < subset_len[mi][i]; a++) {
+            for (size_t a = 0U; a < subset_count(self, i); a++) {
                 if (subsets[mi][i][a] == id) {
 #if NTE_DOUBLE
                     const nte_real_t sd_u = sqrt(self->P[i][a + 1U][a + 1U]);
 #else
                     const nte_real_t sd_u = sqrtf(self->P[i][a + 1U][a + 1U]);
 #endif
+                    if (id >= (uint8_t)nte_param_g_fast) {
+                        /* g = G / (1 + sum G): dg_k/du_k = g_k (1 - g_k) */
+                        const nte_real_t gk = g[id - (uint8_t)nte_param_g_fast];
+                        out[j].value = gk;
+                        out[j].sd = nte_abs(gk * (NTE_C(1.0) - gk)) * sd_u;
+                        continue;
+                    }
                     const nte_real_t dth = (id == (uint8_t)nte_param_f1) ? self->th.ex
                                                                          : self->th.v[id];
                     out[j].value = self->th.v[id];

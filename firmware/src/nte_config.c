@@ -32,6 +32,12 @@ static void set_common(nte_config_t* cfg, const int32_t model, const nte_schedul
     cfg->depth_max_mm = NTE_K_DEF_DEPTH_MAX_MM;
     cfg->speed_max_mm_s = NTE_K_DEF_SPEED_MAX_MM_S;
     cfg->force_max_n = NTE_K_DEF_FORCE_MAX_N;
+    cfg->direction_memory = true;
+    cfg->relaxation = true;
+    cfg->relax_branches = 2;
+    cfg->presliding_mm = NTE_K_DEF_PRESLIDING_MM;
+    cfg->tau_fast_s = NTE_K_DEF_TAU_FAST_S;
+    cfg->tau_slow_s = NTE_K_DEF_TAU_SLOW_S;
     cfg->nominal[nte_param_sigma0] = NTE_K_NOMINAL_SIGMA0;
     cfg->nominal[nte_param_sigma1] = NTE_K_NOMINAL_SIGMA1;
     cfg->nominal[nte_param_sigma2] = NTE_K_NOMINAL_SIGMA2;
@@ -39,6 +45,8 @@ static void set_common(nte_config_t* cfg, const int32_t model, const nte_schedul
     cfg->nominal[nte_param_f2] = NTE_K_NOMINAL_F2;
     cfg->nominal[nte_param_alpha] = NTE_K_NOMINAL_ALPHA;
     cfg->nominal[nte_param_beta] = NTE_K_NOMINAL_BETA;
+    cfg->nominal[nte_param_g_fast] = NTE_K_NOMINAL_G_FAST;
+    cfg->nominal[nte_param_g_slow] = NTE_K_NOMINAL_G_SLOW;
     cfg->f1_excess = NTE_K_NOMINAL_F1_EXCESS;
     cfg->estimator = nte_estimator_bank;
     cfg->robust.buffer_len = 96;
@@ -73,7 +81,8 @@ void nte_config_paper(nte_config_t* cfg, const int32_t model, const nte_schedule
         cfg->q_u[nte_param_sigma1] = NTE_K_PAPER_Q_M1_SIGMA1;
         cfg->q_u[nte_param_alpha] = NTE_K_PAPER_Q_M1_ALPHA;
         cfg->q_u[nte_param_sigma2] = NTE_K_PAPER_Q_M1_SIGMA2;
-    } else if (model == 2) {
+    } else if ((model == 2) || (model == 3)) {
+        /* Model III: Model II's Table I (the relaxation strengths take q_u_default) */
         cfg->q_u[nte_param_sigma0] = NTE_K_PAPER_Q_M2_SIGMA0;
         cfg->q_u[nte_param_f1] = NTE_K_PAPER_Q_M2_F1;
         cfg->q_u[nte_param_sigma1] = NTE_K_PAPER_Q_M2_SIGMA1;
@@ -138,7 +147,7 @@ nte_err_t nte_config_check(const nte_config_t* cfg)
     if (cfg == NULL) {
         return nte_err_null_argument;
     }
-    if ((cfg->model != 1) && (cfg->model != 2)) {
+    if ((cfg->model < 1) || (cfg->model > 3)) {
         return nte_err_bad_model;
     }
     if ((cfg->schedule != nte_schedule_all) && (cfg->schedule != nte_schedule_rotate)) {
@@ -151,6 +160,16 @@ nte_err_t nte_config_check(const nte_config_t* cfg)
     if ((cfg->substeps < NTE_RANGE_SUBSTEPS_MIN) || (cfg->substeps > NTE_RANGE_SUBSTEPS_MAX)) {
         return nte_err_bad_substeps;
     }
+    if ((cfg->relax_branches < NTE_RANGE_RELAX_BRANCHES_MIN) ||
+        (cfg->relax_branches > NTE_RANGE_RELAX_BRANCHES_MAX)) {
+        return nte_err_bad_range;
+    }
+#if NTE_STATE_MAX < 4
+    /* filter 1 of Model III with two branches carries z, sigma0, g_fast and g_slow */
+    if ((cfg->model == 3) && cfg->relaxation && (cfg->relax_branches == 2)) {
+        return nte_err_bad_model;
+    }
+#endif
     /* the validation of EstimatorConfig.validate, field lists generated from config.py */
     const nte_real_t positive[] = {NTE_CONFIG_POSITIVE_FIELDS(cfg)};
     for (size_t i = 0U; i < (sizeof positive / sizeof positive[0]); i++) {
@@ -179,12 +198,25 @@ nte_err_t nte_config_check(const nte_config_t* cfg)
     }
     /* upper bounds (config.py UPPER_BOUNDS): beyond them a published estimate or its standard
      * deviation can overflow */
-    if ((cfg->u_max > NTE_K_RANGE_U_MAX_MAX) || (cfg->p0_u > NTE_K_RANGE_P0_U_MAX)) {
+    if ((cfg->u_max > NTE_K_RANGE_U_MAX_MAX) || (cfg->p0_u > NTE_K_RANGE_P0_U_MAX) ||
+        (cfg->presliding_mm > NTE_K_RANGE_PRESLIDING_MM_MAX) ||
+        (cfg->tau_fast_s > NTE_K_RANGE_TAU_FAST_S_MAX) ||
+        (cfg->tau_slow_s > NTE_K_RANGE_TAU_SLOW_S_MAX)) {
         return nte_err_bad_range;
     }
     for (size_t j = 0U; j < NTE_PARAM_COUNT; j++) {
         if (!nte_isfinite(cfg->nominal[j]) ||
             (nte_abs(cfg->nominal[j]) > NTE_K_RANGE_NOMINAL_ABS_MAX)) {
+            return nte_err_bad_nominal;
+        }
+    }
+    if ((cfg->model == 3) && cfg->relaxation) {
+        /* bank._relax_nominal: the strengths in use > 0 with a sum < 1 */
+        const nte_real_t g0 = cfg->nominal[nte_param_g_fast];
+        const nte_real_t g1 = cfg->nominal[nte_param_g_slow];
+        const bool two = cfg->relax_branches == 2;
+        const nte_real_t den = NTE_C(1.0) - (two ? (g0 + g1) : g0);
+        if (!(g0 > NTE_C(0.0)) || (two && !(g1 > NTE_C(0.0))) || !(den > NTE_C(0.0))) {
             return nte_err_bad_nominal;
         }
     }
@@ -198,6 +230,11 @@ nte_err_t nte_config_check(const nte_config_t* cfg)
         if (!(ex > NTE_C(0.0))) {
             return nte_err_bad_f1;
         }
+    }
+    if ((cfg->estimator == nte_estimator_robust) && (cfg->model == 3)) {
+        /* the refinement's batch fit simulates Models I and II only (nte.h, THE ROBUST
+         * ESTIMATOR) */
+        return nte_err_bad_estimator;
     }
     if (cfg->estimator == nte_estimator_robust) {
 #if NTE_ROBUST_BUFFER_LEN > 0

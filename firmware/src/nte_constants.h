@@ -29,6 +29,9 @@
 #define NTE_K_DEF_DEPTH_MAX_MM (0x1.f400000000000p+8)
 #define NTE_K_DEF_SPEED_MAX_MM_S (0x1.f400000000000p+8)
 #define NTE_K_DEF_FORCE_MAX_N (0x1.9000000000000p+5)
+#define NTE_K_DEF_PRESLIDING_MM (0x1.8000000000000p+0)
+#define NTE_K_DEF_TAU_FAST_S (0x1.3333333333333p-2)
+#define NTE_K_DEF_TAU_SLOW_S (0x1.8000000000000p+1)
 #define NTE_K_PAPER_R_N2 (0x1.47ae147ae147bp-7)
 #define NTE_K_PAPER_P0_U (0x1.0000000000000p+0)
 #define NTE_K_PAPER_Q_M1_SIGMA0 (0x1.b7cdfd9d7bdbbp-35)
@@ -49,6 +52,9 @@
 #define NTE_K_EXP_STEP_BOUND (0x1.0000000000000p+0)
 #define NTE_K_RANGE_U_MAX_MAX (0x1.4000000000000p+3)
 #define NTE_K_RANGE_P0_U_MAX (0x1.9000000000000p+6)
+#define NTE_K_RANGE_PRESLIDING_MM_MAX (0x1.f400000000000p+9)
+#define NTE_K_RANGE_TAU_FAST_S_MAX (0x1.c200000000000p+11)
+#define NTE_K_RANGE_TAU_SLOW_S_MAX (0x1.c200000000000p+11)
 #define NTE_K_RANGE_RESTART_P0_U_MAX (0x1.9000000000000p+6)
 #define NTE_K_RANGE_NOMINAL_ABS_MAX (0x1.f400000000000p+9)
 #define NTE_K_ROB_COST_HUGE (0x1.93e5939a08ceap+99)
@@ -63,6 +69,8 @@
 #define NTE_K_NOMINAL_ALPHA (0x1.ae147ae147ae1p-5)
 #define NTE_K_NOMINAL_BETA (0x1.a1cac083126e9p-6)
 #define NTE_K_NOMINAL_F1_EXCESS (0x1.1d14e3bcd35a8p-5)
+#define NTE_K_NOMINAL_G_FAST (0x1.3333333333333p-3)
+#define NTE_K_NOMINAL_G_SLOW (0x1.0000000000000p-2)
 #else
 #define NTE_K_EXP_DEGREE 7
 #define NTE_K_EXP_COEFFS { 0x1.0000000000000p+0f, 0x1.0000000000000p+0f, 0x1.0000000000000p-1f, 0x1.5555560000000p-3f, 0x1.5555560000000p-5f, 0x1.1111120000000p-7f, 0x1.6c16c20000000p-10f, 0x1.a01a020000000p-13f }
@@ -88,6 +96,9 @@
 #define NTE_K_DEF_DEPTH_MAX_MM (0x1.f400000000000p+8f)
 #define NTE_K_DEF_SPEED_MAX_MM_S (0x1.f400000000000p+8f)
 #define NTE_K_DEF_FORCE_MAX_N (0x1.9000000000000p+5f)
+#define NTE_K_DEF_PRESLIDING_MM (0x1.8000000000000p+0f)
+#define NTE_K_DEF_TAU_FAST_S (0x1.3333340000000p-2f)
+#define NTE_K_DEF_TAU_SLOW_S (0x1.8000000000000p+1f)
 #define NTE_K_PAPER_R_N2 (0x1.47ae140000000p-7f)
 #define NTE_K_PAPER_P0_U (0x1.0000000000000p+0f)
 #define NTE_K_PAPER_Q_M1_SIGMA0 (0x1.b7cdfe0000000p-35f)
@@ -108,6 +119,9 @@
 #define NTE_K_EXP_STEP_BOUND (0x1.0000000000000p+0f)
 #define NTE_K_RANGE_U_MAX_MAX (0x1.4000000000000p+3f)
 #define NTE_K_RANGE_P0_U_MAX (0x1.9000000000000p+6f)
+#define NTE_K_RANGE_PRESLIDING_MM_MAX (0x1.f400000000000p+9f)
+#define NTE_K_RANGE_TAU_FAST_S_MAX (0x1.c200000000000p+11f)
+#define NTE_K_RANGE_TAU_SLOW_S_MAX (0x1.c200000000000p+11f)
 #define NTE_K_RANGE_RESTART_P0_U_MAX (0x1.9000000000000p+6f)
 #define NTE_K_RANGE_NOMINAL_ABS_MAX (0x1.f400000000000p+9f)
 #define NTE_K_ROB_COST_HUGE (0x1.93e5940000000p+99f)
@@ -122,6 +136,8 @@
 #define NTE_K_NOMINAL_ALPHA (0x1.ae147a0000000p-5f)
 #define NTE_K_NOMINAL_BETA (0x1.a1cac00000000p-6f)
 #define NTE_K_NOMINAL_F1_EXCESS (0x1.1d14e40000000p-5f)
+#define NTE_K_NOMINAL_G_FAST (0x1.3333340000000p-3f)
+#define NTE_K_NOMINAL_G_SLOW (0x1.0000000000000p-2f)
 #endif
 
 /* Valid configuration ranges (reference_py/config.py INT_RANGES, POSITIVE_FIELDS, */
@@ -131,6 +147,8 @@
 #define NTE_RANGE_SUBSTEPS_MAX 16
 #define NTE_RANGE_GATE_REOPEN_AFTER_MIN 1
 #define NTE_RANGE_GATE_REOPEN_AFTER_MAX 1000
+#define NTE_RANGE_RELAX_BRANCHES_MIN 1
+#define NTE_RANGE_RELAX_BRANCHES_MAX 2
 #define NTE_RANGE_ROB_BUFFER_LEN_MIN 4
 #define NTE_RANGE_ROB_BUFFER_LEN_MAX 4096
 #define NTE_RANGE_ROB_FIT_SUBSTEPS_MIN 1
@@ -139,7 +157,7 @@
 #define NTE_RANGE_ROB_FIT_ITERATIONS_MAX 200
 #define NTE_RANGE_ROB_MIN_ENTRIES_MIN 2
 #define NTE_RANGE_ROB_MIN_ENTRIES_MAX 4096
-#define NTE_CONFIG_POSITIVE_FIELDS(c) (c)->eps_mm_s, (c)->beta0, (c)->r_n2, (c)->p0_z, (c)->p0_u, (c)->gate_sigma, (c)->u_max, (c)->var_floor_z, (c)->var_floor_u, (c)->dt_max_s, (c)->depth_max_mm, (c)->speed_max_mm_s, (c)->force_max_n
+#define NTE_CONFIG_POSITIVE_FIELDS(c) (c)->eps_mm_s, (c)->beta0, (c)->r_n2, (c)->p0_z, (c)->p0_u, (c)->gate_sigma, (c)->u_max, (c)->var_floor_z, (c)->var_floor_u, (c)->dt_max_s, (c)->depth_max_mm, (c)->speed_max_mm_s, (c)->force_max_n, (c)->presliding_mm, (c)->tau_fast_s, (c)->tau_slow_s
 #define NTE_CONFIG_NONNEGATIVE_FIELDS(c) (c)->q_z, (c)->q_u_default, (c)->v_still_mm_s
 #define NTE_ROBUST_POSITIVE_FIELDS(r) (r)->restart_p0_u, (r)->lm_lambda0, (r)->converged_confidence, (r)->converged_change
 

@@ -108,6 +108,28 @@ bool nte_ekf_positive_definite(const size_t n, nte_mat3_t P)
         const nte_real_t d3 = ((P[0][0] * c0) - (P[0][1] * c1)) + (P[0][2] * c2);
         ok = ok && (d3 > NTE_C(0.0));
     }
+#if NTE_EKF_N_MAX >= 4
+    if (n >= 4U) {
+        /* Laplace expansion along rows 0, 1: their 2x2 minors s_ij times the complementary
+         * minors c_kl of rows 2, 3 (ekf.py positive_definite, same order) */
+        const nte_real_t s01 = (P[0][0] * P[1][1]) - (P[0][1] * P[1][0]);
+        const nte_real_t s02 = (P[0][0] * P[1][2]) - (P[0][2] * P[1][0]);
+        const nte_real_t s03 = (P[0][0] * P[1][3]) - (P[0][3] * P[1][0]);
+        const nte_real_t s12 = (P[0][1] * P[1][2]) - (P[0][2] * P[1][1]);
+        const nte_real_t s13 = (P[0][1] * P[1][3]) - (P[0][3] * P[1][1]);
+        const nte_real_t s23 = (P[0][2] * P[1][3]) - (P[0][3] * P[1][2]);
+        const nte_real_t c01 = (P[2][0] * P[3][1]) - (P[2][1] * P[3][0]);
+        const nte_real_t c02 = (P[2][0] * P[3][2]) - (P[2][2] * P[3][0]);
+        const nte_real_t c03 = (P[2][0] * P[3][3]) - (P[2][3] * P[3][0]);
+        const nte_real_t c12 = (P[2][1] * P[3][2]) - (P[2][2] * P[3][1]);
+        const nte_real_t c13 = (P[2][1] * P[3][3]) - (P[2][3] * P[3][1]);
+        const nte_real_t c23 = (P[2][2] * P[3][3]) - (P[2][3] * P[3][2]);
+        const nte_real_t d4 =
+            ((((((s01 * c23) - (s02 * c13)) + (s03 * c12)) + (s12 * c03)) - (s13 * c02)) +
+             (s23 * c01));
+        ok = ok && (d4 > NTE_C(0.0));
+    }
+#endif
     for (size_t i = 0U; i < n; i++) {
         for (size_t j = 0U; j < n; j++) {
             ok = ok && nte_isfinite(P[i][j]);

@@ -1,5 +1,5 @@
 /*
- * Small dense EKF kernels (state dimension n <= 3): reference_py/ekf.py in C.  Every product is
+ * Small dense EKF kernels (state dimension n <= NTE_STATE_MAX, 4): reference_py/ekf.py in C.  Every product is
  * a sum in index order, accumulated left to right; covariances are computed on the upper
  * triangle and mirrored.  Internal header.
  */
@@ -8,7 +8,7 @@
 
 #include "nte_real.h"
 
-#define NTE_EKF_N_MAX 3
+#define NTE_EKF_N_MAX NTE_STATE_MAX
 
 typedef nte_real_t nte_mat3_t[NTE_EKF_N_MAX][NTE_EKF_N_MAX];
 

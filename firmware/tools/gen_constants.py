@@ -60,7 +60,8 @@ def lib_header() -> str:
     cfg = config.EstimatorConfig()
     fields = ("eps_mm_s", "beta0", "r_n2", "q_z", "q_u_default", "p0_z", "p0_u", "gate_sigma",
               "u_max", "var_floor_z", "var_floor_u", "v_still_mm_s", "dt_max_s", "depth_min_mm",
-              "depth_max_mm", "speed_max_mm_s", "force_max_n")
+              "depth_max_mm", "speed_max_mm_s", "force_max_n", "presliding_mm", "tau_fast_s",
+              "tau_slow_s")
     for f in fields:
         v = float(getattr(cfg, f))
         rows.append(pair("NTE_K_DEF_" + f.upper(), v, v))
@@ -92,6 +93,8 @@ def lib_header() -> str:
         rows.append(pair("NTE_K_NOMINAL_" + name.upper(), v, v))
     ex = params.f1_excess(p.f1, p.f2)
     rows.append(pair("NTE_K_NOMINAL_F1_EXCESS", ex, ex))
+    for name, v in params.RELAX_NOMINAL.items():
+        rows.append(pair("NTE_K_NOMINAL_" + name.upper(), v, v))
     seen: set[str] = set()
     uniq = []
     for r in rows:

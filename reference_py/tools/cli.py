@@ -2,9 +2,11 @@
 
     nte-ref simulate --preset NAME --depth MM --dwell S [--speed MM_S] [--rate HZ] [--noise N]
                      [--seed K] [--cycles C] [--accel MM_S2] --out FILE.csv
-    nte-ref estimate FILE.csv --model 1|2 [--estimator bank|robust] [--preset NAME] [--init-seed K]
-                     [--init-factor F] [--precision float64|float32] [--schedule all|rotate]
-                     [--profile default|paper] --out EST.csv [--plot EST.png]
+    nte-ref estimate FILE.csv --model 1|2|3 [--estimator bank|robust] [--preset NAME]
+                     [--init-seed K] [--init-factor F] [--precision float64|float32]
+                     [--schedule all|rotate] [--profile default|paper] [--presliding-mm MM]
+                     [--tau-fast S] [--tau-slow S] [--relax-branches 1|2] [--no-relaxation]
+                     [--no-direction-memory] --out EST.csv [--plot EST.png]
     nte-ref evaluate [--preset NAME] [--model 1|2] [--factor F] [--seeds N] [--precision P]
                      [--profile P] [--schedule S] [--estimator E] [--cycles C]
                      [--matrix | --robust-matrix]
@@ -157,8 +159,9 @@ def build_parser() -> argparse.ArgumentParser:
                                    "innovation_n, status, then every identified parameter and "
                                    "its standard deviation.")
     e.add_argument("csv", metavar="FILE.csv", help="the insertion to estimate from")
-    e.add_argument("--model", type=int, choices=(1, 2), required=True,
-                   help="force model I or II (no default)")
+    e.add_argument("--model", type=int, choices=(1, 2, 3), required=True,
+                   help="force model I, II or III (Model II with direction memory and "
+                        "relaxation; no default)")
     e.add_argument("--estimator", default="bank", choices=("bank", "robust"),
                    help="bank: the paper's three filters in switching mode; robust: the bank "
                         "plus a batch refinement after every insertion (converges from "
@@ -178,6 +181,20 @@ def build_parser() -> argparse.ArgumentParser:
                    help="all: three filters every sample; rotate: one filter per sample")
     e.add_argument("--profile", default="default", choices=("default", "paper"),
                    help="tuning: ours, or the paper's Table I mapped to scaled parameters")
+    m3 = e.add_argument_group("Model III (ignored by Models I and II)")
+    m3.add_argument("--presliding-mm", type=bounded(0.0, 1000.0, " mm", lo_open=True),
+                    default=1.5, metavar="MM",
+                    help="turn-over length of the direction state, mm")
+    m3.add_argument("--tau-fast", type=bounded(0.0, 3600.0, " s", lo_open=True), default=0.3,
+                    metavar="S", help="time constant of the fast relaxation branch, s")
+    m3.add_argument("--tau-slow", type=bounded(0.0, 3600.0, " s", lo_open=True), default=3.0,
+                    metavar="S", help="time constant of the slow relaxation branch, s")
+    m3.add_argument("--relax-branches", type=int, choices=(1, 2), default=2,
+                    help="relaxation branches: 1 fast only, 2 fast and slow")
+    m3.add_argument("--no-relaxation", action="store_true",
+                    help="no relaxation branches (default: on)")
+    m3.add_argument("--no-direction-memory", action="store_true",
+                    help="tanh(v/eps) instead of the direction state (default: on)")
     add_unit_arguments(e)
     e.add_argument("--out", required=True, metavar="EST.csv", help="the estimates to write")
     e.add_argument("--plot", metavar="EST.png", help="also draw force and parameters (PNG; default: no plot)")
@@ -262,28 +279,36 @@ def _simulate(a: argparse.Namespace) -> int:
 def _estimate(a: argparse.Namespace) -> int:
     from .csvio import Limits
     from .estimate import estimate_csv_lines, make_config, run_estimate
-    from ..params import MODEL_PARAMS
 
     preset = get_preset(a.preset)
+    overrides = model3_overrides(a)
     with Outputs() as outs:
         out = outs.add(a.out, "--out")
         png = outs.add(a.plot, "--plot") if a.plot else None
-        cfg = make_config(preset, a.model, a.profile, a.schedule)
+        cfg = make_config(preset, a.model, a.profile, a.schedule, overrides)
         trial = read_trial(a.csv, units=units_from(a), limits=Limits.from_config(cfg))
         run = run_estimate(trial, preset, a.model, a.estimator, a.precision, a.profile,
-                           a.schedule, a.init_seed, a.init_factor, progress=True)
+                           a.schedule, a.init_seed, a.init_factor, progress=True,
+                           overrides=overrides)
         outs.write_lines(out, estimate_csv_lines(run))
         if png is not None:
             from .plotting import plot_estimate
             plot_estimate(run, png)
         outs.commit()
-    print(f"{len(run.t_s)} samples, Model {'I' if a.model == 1 else 'II'}, {a.precision}; "
+    print(f"{len(run.t_s)} samples, Model {'I' * a.model}, {a.precision}; "
           f"final estimates (± 1 sd):")
-    for j, name in enumerate(MODEL_PARAMS[a.model]):
+    for j, name in enumerate(run.names):
         print(f"  {name:7s} = {float(run.params[-1, j]):.6g} ± {float(run.params_sd[-1, j]):.3g}")
     print(f"wrote {a.out}" + (f" and {a.plot}" if a.plot else ""))
     print(status_counts(run.status))
     return 0
+
+
+def model3_overrides(a: argparse.Namespace) -> dict[str, object]:
+    """Model III's configuration fields from the estimate flags."""
+    return {"presliding_mm": a.presliding_mm, "tau_fast_s": a.tau_fast, "tau_slow_s": a.tau_slow,
+            "relax_branches": a.relax_branches, "relaxation": not a.no_relaxation,
+            "direction_memory": not a.no_direction_memory}
 
 
 def status_counts(status: np.ndarray) -> str:

@@ -5,11 +5,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..bank import FilterBank
+from ..bank import FilterBank, identified_names
 from ..config import EstimatorConfig, profile_config
 from .csvio import Trial, format_real, time_us
 from ..fmath import Array, real_for
-from ..params import MODEL_PARAMS, Preset
+from ..params import Preset
 from ..starts import start_values
 
 ESTIMATORS = ("bank", "robust")
@@ -32,20 +32,23 @@ class EstimateRun:
     confidence: Array | None = None   # robust estimator only: confidence of the last refinement
 
 
-def make_config(preset: Preset, model: int, profile: str, schedule: str) -> EstimatorConfig:
+def make_config(preset: Preset, model: int, profile: str, schedule: str,
+                overrides: dict[str, object] | None = None) -> EstimatorConfig:
+    """The profile's configuration; ``overrides``: fields to change (Model III's switches and
+    constants from the command line)."""
     cfg = profile_config(profile, model, schedule)
     # Model I's fixed beta0 is the preset's beta (MODEL.md §2)
-    return replace(cfg, beta0=preset.params.beta)
+    return replace(cfg, beta0=preset.params.beta, **(overrides or {}))
 
 
 def run_estimate(trial: Trial, preset: Preset, model: int, estimator: str = "bank",
                  precision: str = "float64", profile: str = "default", schedule: str = "all",
-                 init_seed: int = 0, init_factor: float = 5.0, progress: bool = False
-                 ) -> EstimateRun:
+                 init_seed: int = 0, init_factor: float = 5.0, progress: bool = False,
+                 overrides: dict[str, object] | None = None) -> EstimateRun:
     if estimator not in ESTIMATORS:
         raise ValueError(f"unknown estimator {estimator!r} (known: {', '.join(ESTIMATORS)})")
     R = real_for(precision)
-    cfg = make_config(preset, model, profile, schedule)
+    cfg = make_config(preset, model, profile, schedule, overrides)
     nominal = start_values(preset.params.as_list(), init_seed, init_factor, model)
     if estimator == "robust":
         from ..robust import RobustEstimator
@@ -54,7 +57,7 @@ def run_estimate(trial: Trial, preset: Preset, model: int, estimator: str = "ban
         est = FilterBank(R, cfg, [nominal])
     n = len(trial.t_s)
     t_us = time_us(trial.t_s)
-    names = MODEL_PARAMS[model]
+    names = identified_names(cfg)
     fh = np.zeros(n, dtype=R.dtype)
     z = np.zeros(n, dtype=R.dtype)
     inn = np.zeros(n, dtype=R.dtype)

@@ -26,7 +26,27 @@ static nte_sample_t sample(const int64_t t_us, const double l, const double v, c
 
 /* ----------------------------------------------------------------------------------------- */
 typedef void (*spoil_fn)(nte_config_t*);
-static void spoil_model(nte_config_t* c) { c->model = 3; }
+static void spoil_model(nte_config_t* c) { c->model = 4; }
+/* Model III's fields */
+static void spoil_branches(nte_config_t* c) { c->relax_branches = 3; }
+static void spoil_presliding(nte_config_t* c) { c->presliding_mm = (nte_real_t)0; }
+static void spoil_tau_big(nte_config_t* c) { c->tau_slow_s = (nte_real_t)3601; }
+static void spoil_tau_nan(nte_config_t* c) { c->tau_fast_s = (nte_real_t)NAN; }
+static void spoil_g_sum(nte_config_t* c)
+{
+    c->model = 3;
+    c->nominal[nte_param_g_slow] = (nte_real_t)0.9;
+}
+static void spoil_g_zero(nte_config_t* c)
+{
+    c->model = 3;
+    c->nominal[nte_param_g_fast] = (nte_real_t)0;
+}
+static void spoil_m3_robust(nte_config_t* c)
+{
+    c->model = 3;
+    c->estimator = nte_estimator_robust;
+}
 static void spoil_model0(nte_config_t* c) { c->model = 0; }
 static void spoil_schedule(nte_config_t* c) { c->schedule = (nte_schedule_t)7; }
 static void spoil_substeps0(nte_config_t* c) { c->substeps = 0; }
@@ -80,6 +100,10 @@ static void test_every_error_code_leaves_instance_untouched(void** state)
         {spoil_f1_neg, nte_err_bad_f1},           {spoil_f1_nan, nte_err_bad_f1},
         {spoil_nominal_big, nte_err_bad_nominal}, {spoil_umax, nte_err_bad_range},
         {spoil_p0u, nte_err_bad_range},
+        {spoil_branches, nte_err_bad_range},      {spoil_presliding, nte_err_not_positive},
+        {spoil_tau_big, nte_err_bad_range},       {spoil_tau_nan, nte_err_not_finite},
+        {spoil_g_sum, nte_err_bad_nominal},       {spoil_g_zero, nte_err_bad_nominal},
+        {spoil_m3_robust, nte_err_bad_estimator},
     };
     static nte_t est;
     static nte_t snapshot;

@@ -14,10 +14,14 @@
 #include "nte_model.h"
 #include "model_vectors.h"
 
+/* the seven force-model parameters (Models I and II); the model functions know nothing of
+ * Model III's relaxation strengths, which follow them in nte_param_id_t */
+#define NP 7
+
 #define NOMINAL_F1 5.59e-2
 #define NOMINAL_F2 -2.11e-2
 
-static const double nominal_d[NTE_PARAM_COUNT] = {7.9e-3, 2.46, 4.14e-3, 5.59e-2,
+static const double nominal_d[NP] = {7.9e-3, 2.46, 4.14e-3, 5.59e-2,
                                                   -2.11e-2, 5.25e-2, 2.55e-2};
 
 static int same_bits(const nte_real_t a, const nte_real_t b)
@@ -27,9 +31,9 @@ static int same_bits(const nte_real_t a, const nte_real_t b)
 
 static void make_theta(nte_theta_t* th, const double* u_d)
 {
-    nte_real_t nominal[NTE_PARAM_COUNT];
-    nte_real_t u[NTE_PARAM_COUNT];
-    for (int j = 0; j < NTE_PARAM_COUNT; j++) {
+    nte_real_t nominal[NTE_PARAM_COUNT] = {0};
+    nte_real_t u[NTE_PARAM_COUNT] = {0};
+    for (int j = 0; j < NP; j++) {
         nominal[j] = (nte_real_t)nominal_d[j];
         u[j] = (nte_real_t)u_d[j];
     }
@@ -41,11 +45,11 @@ static void make_theta(nte_theta_t* th, const double* u_d)
 /* Every model quantity in the generator's order. */
 static size_t model_row(const mv_point_t* p, nte_real_t* row)
 {
-    static const uint8_t all[NTE_PARAM_COUNT] = {0, 1, 2, 3, 4, 5, 6};
+    static const uint8_t all[NP] = {0, 1, 2, 3, 4, 5, 6};
     nte_theta_t th;
     make_theta(&th, p->u);
     size_t k = 0;
-    for (int j = 0; j < NTE_PARAM_COUNT; j++) {
+    for (int j = 0; j < NP; j++) {
         row[k++] = th.v[j];
     }
     row[k++] = th.ex;
@@ -67,12 +71,12 @@ static size_t model_row(const mv_point_t* p, nte_real_t* row)
     row[k++] = o.sl;
     row[k++] = o.h;
     row[k++] = nte_model_output_dz(&th, &d, &o);
-    for (uint8_t j = 0; j < NTE_PARAM_COUNT; j++) {
+    for (uint8_t j = 0; j < NP; j++) {
         row[k++] = nte_model_output_du(&th, &d, z, &o, j);
     }
     row[k++] = nte_model_rate(&th, &d, z);
     row[k++] = nte_model_rate_dz(&d);
-    for (uint8_t j = 0; j < NTE_PARAM_COUNT; j++) {
+    for (uint8_t j = 0; j < NP; j++) {
         bool present = false;
         const nte_real_t r = nte_model_rate_du(&th, &d, z, j, &present);
         row[k++] = present ? r : (nte_real_t)0;
@@ -81,10 +85,10 @@ static size_t model_row(const mv_point_t* p, nte_real_t* row)
     nte_rk3_result_t res;
     nte_model_rk3(&res, &th, z, nte_model_clamp_depth((nte_real_t)p->l),
                   nte_model_clamp_depth((nte_real_t)p->l_b), (nte_real_t)p->dt, p->substeps, all,
-                  NTE_PARAM_COUNT);
+                  NP);
     row[k++] = res.z;
     row[k++] = res.dz_dz0;
-    for (int j = 0; j < NTE_PARAM_COUNT; j++) {
+    for (int j = 0; j < NP; j++) {
         row[k++] = res.dz_du[j];
     }
     return k;
@@ -182,9 +186,9 @@ static void check_close(const char* what, const int j, const double analytic, co
 static void test_jacobians_finite_differences(void** state)
 {
     (void)state;
-    static const uint8_t all[NTE_PARAM_COUNT] = {0, 1, 2, 3, 4, 5, 6};
+    static const uint8_t all[NP] = {0, 1, 2, 3, 4, 5, 6};
     static const fd_case_t cases[] = {{5.0, 0.3, 10.0}, {20.0, 1.2, -0.4}, {50.0, 2.5, 3.0}};
-    static const double u0[NTE_PARAM_COUNT] = {0.1, -0.2, 0.3, 0.05, -0.1, 0.2, 0.1};
+    static const double u0[NP] = {0.1, -0.2, 0.3, 0.05, -0.1, 0.2, 0.1};
 #if NTE_DOUBLE
     const double hstep = 1e-6;
 #else
@@ -207,9 +211,9 @@ static void test_jacobians_finite_differences(void** state)
         const double fd_rz = ((double)rate_at(u0, k->l, k->z + hstep) -
                               (double)rate_at(u0, k->l, k->z - hstep)) / (2.0 * hstep);
         check_close("rate (z)", -1, (double)nte_model_rate_dz(&d), fd_rz, 1e-3);
-        for (uint8_t j = 0; j < NTE_PARAM_COUNT; j++) {
-            double up[NTE_PARAM_COUNT];
-            double um[NTE_PARAM_COUNT];
+        for (uint8_t j = 0; j < NP; j++) {
+            double up[NP];
+            double um[NP];
             memcpy(up, u0, sizeof up);
             memcpy(um, u0, sizeof um);
             up[j] += hstep;
@@ -232,13 +236,13 @@ static void test_jacobians_finite_differences(void** state)
     nte_rk3_result_t res;
     make_theta(&th, u0);
     nte_model_rk3(&res, &th, (nte_real_t)z0, (nte_real_t)10.0, (nte_real_t)10.5, (nte_real_t)0.05,
-                  4, all, NTE_PARAM_COUNT);
+                  4, all, NP);
     const double fd_z = ((double)rk3_at(u0, z0 + hstep) - (double)rk3_at(u0, z0 - hstep)) /
                         (2.0 * hstep);
     check_close("rk3 (z0)", -1, (double)res.dz_dz0, fd_z, 1.0);
-    for (int j = 0; j < NTE_PARAM_COUNT; j++) {
-        double up[NTE_PARAM_COUNT];
-        double um[NTE_PARAM_COUNT];
+    for (int j = 0; j < NP; j++) {
+        double up[NP];
+        double um[NP];
         memcpy(up, u0, sizeof up);
         memcpy(um, u0, sizeof um);
         up[j] += hstep;

@@ -117,7 +117,7 @@ def test_console_script_and_module_entry_points(sim_csv, tmp_path):
                        capture_output=True, text=True)
     assert r.returncode == 0 and "--init-factor" in r.stdout
     r = subprocess.run([sys.executable, "-m", "reference_py", "estimate", str(sim_csv),
-                        "--model", "3", "--out", str(tmp_path / "o.csv")],
+                        "--model", "4", "--out", str(tmp_path / "o.csv")],
                        capture_output=True, text=True)
     assert r.returncode == 2 and "invalid choice" in r.stderr
 
@@ -145,6 +145,12 @@ FLAG_CASES = [
      "argument --init-factor: must be >= 1 and <= 100 (got inf)"),
     (["estimate", "x.csv", "--model", "2", "--init-seed", "-1"],
      "argument --init-seed: must be >= 0 and <= 9223372036854775807 (got -1)"),
+    (["estimate", "x.csv", "--model", "3", "--presliding-mm", "0"],
+     "argument --presliding-mm: must be > 0 and <= 1000 mm (got 0)"),
+    (["estimate", "x.csv", "--model", "3", "--tau-fast", "nan"],
+     "argument --tau-fast: must be > 0 and <= 3600 s (got nan)"),
+    (["estimate", "x.csv", "--model", "3", "--tau-slow", "1e9"],
+     "argument --tau-slow: must be > 0 and <= 3600 s (got 1e9)"),
 ]
 
 
@@ -205,7 +211,7 @@ def test_c_run_help_and_refusals(prog, tmp_path):
     for flag in ("-h", "--help"):
         r = _c(prog, flag)
         assert r.returncode == 0 and r.stderr == ""
-        for text in ("--model 1|2", "--estimator bank|robust  (default: bank)",
+        for text in ("--model 1|2|3", "--estimator bank|robust  (default: bank)",
                      "(default: paper-10mms)", "--profile default|paper  tuning (default: "
                      "default)", "(default: 0)", "1..100 (default: 5)", "(default: all)",
                      "--out EST.csv", "-h, --help"):
@@ -213,7 +219,17 @@ def test_c_run_help_and_refusals(prog, tmp_path):
     out = tmp_path / "o.csv"
     cases = [
         (["x.csv", "-x"], "unrecognized arguments: -x"),
-        (["x.csv", "--model", "3", "--out", str(out)], "argument --model: invalid choice: '3'"),
+        (["x.csv", "--model", "4", "--out", str(out)], "argument --model: invalid choice: '4'"),
+        (["x.csv", "--model", "3", "--out", str(out), "--presliding-mm", "0"],
+         "argument --presliding-mm: must be > 0 and <= 1000 mm (got 0)"),
+        (["x.csv", "--model", "3", "--out", str(out), "--tau-fast", "nan"],
+         "argument --tau-fast: must be > 0 and <= 3600 s (got nan)"),
+        (["x.csv", "--model", "3", "--out", str(out), "--tau-slow", "1e9"],
+         "argument --tau-slow: must be > 0 and <= 3600 s (got 1e9)"),
+        (["x.csv", "--model", "3", "--out", str(out), "--tau-slow", "x"],
+         "argument --tau-slow: not a number: 'x'"),
+        (["x.csv", "--model", "3", "--out", str(out), "--relax-branches", "3"],
+         "argument --relax-branches: invalid choice: '3'"),
         (["x.csv", "--model", "2", "--out", str(out), "--init-factor", "0.5"],
          "argument --init-factor: must be >= 1 and <= 100 (got 0.5)"),
         (["x.csv", "--model", "2", "--out", str(out), "--init-factor", "nan"],

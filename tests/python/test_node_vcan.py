@@ -1,4 +1,4 @@
-"""nte-node on a real vcan0 (host_bench/with-vcan): one user-mode kernel boot runs every case of
+"""nte-node on a real vcan0 (host_bench/with-vcan, in the session's one kernel: vcan_session.py) runs every case of
 tests/python/node_vcan_driver.py; each case starts and stops its own processes by PID.
 
 - full_rate: the paper scenario, 1 kHz depth + 200 Hz force driven by canplayer in real time:
@@ -26,12 +26,9 @@ from pathlib import Path
 
 import pytest
 
-from test_with_vcan import _available
 
 ROOT = Path(__file__).resolve().parents[2]
 CASES = ["full_rate", "bad_traffic", "cangen", "burst", "enobufs", "no_iface"]
-
-pytestmark = pytest.mark.skipif(not _available(), reason="no vcan (user-mode-linux kmod can-utils)")
 
 
 def _built(name: str) -> Path:
@@ -44,15 +41,15 @@ def _built(name: str) -> Path:
 
 
 @pytest.fixture(scope="module")
-def results(tmp_path_factory: pytest.TempPathFactory) -> dict:
+def results(tmp_path_factory: pytest.TempPathFactory, vcan_env: dict) -> dict:
     out = tmp_path_factory.mktemp("node_vcan")
     node = _built("nte-node")
     shim = _built("libnte_enobufs_shim.so")
     py = str(ROOT / ".venv/bin/python") if (ROOT / ".venv/bin/python").exists() else "python3"
-    env = dict(os.environ, TMPDIR=str(out), NTE_ENOBUFS_SHIM=str(shim), WITH_VCAN_TIMEOUT="600")
+    env = dict(vcan_env, TMPDIR=str(out), NTE_ENOBUFS_SHIM=str(shim), WITH_VCAN_TIMEOUT="1200")
     r = subprocess.run([str(ROOT / "host_bench/with-vcan"), py, "tests/python/node_vcan_driver.py",
                         str(node), str(out), *CASES], cwd=ROOT, env=env, capture_output=True,
-                       text=True, timeout=660)
+                       text=True, timeout=3600)  # includes waiting for the shared kernel
     res = {}
     for c in CASES:
         f = out / f"{c}.json"

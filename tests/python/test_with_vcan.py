@@ -1,107 +1,157 @@
-"""host_bench/with-vcan: a real SocketCAN vcan0, natively or in a user-mode-linux kernel.
+"""host_bench/with-vcan: a real SocketCAN vcan0 natively, in user-mode Linux or in QEMU.
 
-Inside it: candump captures cansend's frames, python-can's socketcan interface round-trips a
-message, a 200 Hz request/answer stream is timed; a failing command's status and output come
-back; a command that overruns the timeout is stopped, with nothing left running.
-Needs (Debian): user-mode-linux kmod can-utils iproute2 -- or a kernel with vcan.
+In the session's one kernel (vcan_session.py): candump captures cansend's frames, python-can's
+socketcan interface round-trips a message, a 200 Hz request/answer stream is answered in full; a
+failing command's status and output come back; a command that overruns its timeout is killed by
+process group inside the kernel, which serves the next command.  One-shot runs: QEMU with
+Debian's kernel boots and runs python-can inside (forced, so this path runs on every machine);
+each vehicle that cannot start gives its one-line reason and the next one is tried; none
+starting gives 125 with every reason.  Stand-in kernels, emulators and `ip` (shell scripts written by the tests) make a vehicle fail
+on purpose.
+Needs (Debian): iproute2 can-utils and user-mode-linux kmod or qemu-system-x86 linux-image-amd64
+busybox-static cpio (make test installs them).
 """
 from __future__ import annotations
 
 import json
 import os
 import re
-import shutil
 import subprocess
 import time
 from pathlib import Path
 
-import pytest
-
 ROOT = Path(__file__).resolve().parents[2]
 WITH_VCAN = ROOT / "host_bench" / "with-vcan"
+PY = str(ROOT / ".venv/bin/python") if (ROOT / ".venv/bin/python").exists() else "python3"
 
 
-def _available() -> bool:
-    if shutil.which("linux.uml") and Path("/usr/lib/uml/modules").is_dir():
-        return True
-    r = subprocess.run(["ip", "link", "add", "dev", "vcanprobe", "type", "vcan"],
-                       capture_output=True)
-    if r.returncode == 0:
-        subprocess.run(["ip", "link", "del", "dev", "vcanprobe"], capture_output=True)
-        return True
-    return False
-
-
-pytestmark = pytest.mark.skipif(
-    not _available(),
-    reason="no vcan: apt-get install -y user-mode-linux kmod can-utils iproute2")
-
-
-def run(args: list[str], tmp_path: Path, timeout: float = 150, **env: str):
-    e = dict(os.environ, TMPDIR=str(tmp_path), **env)
+def run(args: list[str], tmp_path: Path, env: dict | None = None, timeout: float = 300,
+        **extra: str) -> tuple[subprocess.CompletedProcess, float]:
+    e = dict(env if env is not None else os.environ, TMPDIR=str(tmp_path), **extra)
     t = time.monotonic()
     r = subprocess.run([str(WITH_VCAN), *args], capture_output=True, text=True, env=e,
                        timeout=timeout, cwd=ROOT)
     return r, time.monotonic() - t
 
 
-def _leftovers(marker: str) -> list[str]:
-    """Processes whose command line mentions `marker` (read-only scan of /proc)."""
-    found = []
-    for d in Path("/proc").iterdir():
-        if d.name.isdigit():
-            try:
-                cmd = (d / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
-            except OSError:
-                continue
-            if marker in cmd:
-                found.append(f"{d.name}: {cmd}")
-    return found
-
-
-def test_candump_pycan_and_200hz_round_trip(tmp_path: Path) -> None:
-    out = tmp_path / "probe.json"
-    timing = tmp_path / "timing.txt"
-    r, wall = run([".venv/bin/python" if (ROOT / ".venv/bin/python").exists() else "python3",
-                   "tests/python/vcan_probe.py", str(out), "400"], tmp_path,
-                  WITH_VCAN_TIMING=str(timing))
-    assert r.returncode == 0, r.stdout + r.stderr
+def _check_probe(out: Path, n: int) -> dict:
     res = json.loads(out.read_text())
     # candump -L: "(1700000000.123456) vcan0 123#DEADBEEF"
     frames = [line.split()[-1] for line in res["candump"]]
     assert frames == ["123#DEADBEEF", "5A1#0102", "7FF#0011223344556677"], res["candump"]
     assert all(re.match(r"^\(\d+\.\d{6}\) vcan0 ", line) for line in res["candump"])
     assert res["pycan"] == {"id": 0x321, "data": "010203fa", "dlc": 4, "ext": False}
-    # 200 Hz stream: every request answered; the median round trip (Python on both ends,
-    # measured 1.1-1.3 ms in UML on a shared 2-core machine) within one 5 ms period, and the
-    # tail (scheduling jitter of the shared machine, seen up to 14 ms) bounded.
-    assert res["answered"] == res["n"] == 400
-    assert 150.0 <= res["rate_hz"] <= 205.0
-    assert res["rtt_median_ms"] < 3.0, res
-    assert res["rtt_p99_ms"] < 30.0, res
-    m = re.match(r"boot_s=([\d.]+) cmd_s=([\d.]+) total_s=([\d.]+)", timing.read_text())
-    assert m, timing.read_text()
-    boot_s = float(m.group(1))
-    assert 0.0 <= boot_s < 30.0
-    print(f"\nwith-vcan: boot {boot_s:.2f} s, command {float(m.group(2)):.2f} s; 200 Hz round trip "
-          f"median {res['rtt_median_ms']:.3f} ms, p99 {res['rtt_p99_ms']:.3f} ms, "
+    # every request answered; the round-trip times are figures, not gates (under QEMU's TCG
+    # code runs several times slower than natively)
+    assert res["answered"] == res["n"] == n
+    return res
+
+
+def test_candump_pycan_and_200hz_round_trip(tmp_path: Path, vcan_env: dict) -> None:
+    out = tmp_path / "probe.json"
+    r, _ = run([PY, "tests/python/vcan_probe.py", str(out), "400"], tmp_path, vcan_env)
+    assert r.returncode == 0, r.stdout + r.stderr
+    res = _check_probe(out, 400)
+    import vcan_session
+    print(f"\nwith-vcan session kernel: {vcan_session.vehicle()}; 200 Hz round trip median "
+          f"{res['rtt_median_ms']:.3f} ms, p99 {res['rtt_p99_ms']:.3f} ms, "
           f"max {res['rtt_max_ms']:.3f} ms over {res['n']}")
 
 
-def test_failing_command_status_and_output(tmp_path: Path) -> None:
+def test_failing_command_status_and_output(tmp_path: Path, vcan_env: dict) -> None:
     r, _ = run(["sh", "-c", 'echo "out $PWD"; echo "err $HOME" >&2; '
                 "ip link show vcan0 | grep -q UP || exit 99; "
-                'case ":$PATH:" in *":/usr/sbin:"*) ;; *) exit 98 ;; esac; exit 7'], tmp_path)
+                'case ":$PATH:" in *":/usr/sbin:"*) ;; *) exit 98 ;; esac; exit 7'],
+               tmp_path, vcan_env)
     assert r.returncode == 7, r.stdout + r.stderr
     assert r.stdout == f"out {ROOT}\n"
     assert f"err {os.environ.get('HOME', '/root')}" in r.stderr
+
+
+def test_timeout_kills_the_command_not_the_kernel(tmp_path: Path, vcan_env: dict) -> None:
+    # a command with a child of its own (durations no other command uses): the whole process
+    # group must go
+    r, _ = run(["sh", "-c", "sleep 3011 & sleep 3012"], tmp_path, vcan_env,
+               WITH_VCAN_TIMEOUT="5")
+    assert r.returncode == 124, r.stdout + r.stderr
+    assert "the kernel stays up" in r.stderr
+    # the same kernel serves the next command; nothing of the first one is left in it
+    r, _ = run(["sh", "-c", "ps -eo args | grep -c '^sleep 301[12]$'; "
+                "ip -br link show vcan0"], tmp_path, vcan_env)
+    assert r.stdout.splitlines()[0] == "0", r.stdout + r.stderr
+    assert "vcan0" in r.stdout
+
+
+def _stand_in(tmp_path: Path, name: str, body: str) -> Path:
+    p = tmp_path / name
+    p.write_text("#!/bin/sh\n" + body + "\n")
+    p.chmod(0o755)
+    return p
+
+
+def _panicking_uml(tmp_path: Path) -> Path:
+    # what a user-mode kernel prints on an AVX-512/AMX host, then it hangs
+    return _stand_in(tmp_path, "linux.uml",
+                     'echo "userspace - ptrace set fp regs failed, errno = 14"\n'
+                     'echo "Kernel panic - not syncing: Attempted to kill init! exitcode=0x0000000b"\n'
+                     "exec sleep 120")
+
+
+def test_qemu_runs_python_can_after_a_uml_panic(tmp_path: Path) -> None:
+    """The QEMU vehicle, forced on every machine: a panicking user-mode kernel is left at once
+    and Debian's kernel under QEMU runs python-can on a real vcan0."""
+    out = tmp_path / "probe.json"
+    timing = tmp_path / "timing.txt"
+    env = dict(os.environ, WITH_VCAN_MODE="uml,qemu",
+               WITH_VCAN_UML_BIN=str(_panicking_uml(tmp_path)), WITH_VCAN_TIMING=str(timing))
+    env.pop("WITH_VCAN_CHANNEL", None)
+    r, wall = run([PY, "tests/python/vcan_probe.py", str(out), "50"], tmp_path, env,
+                  timeout=600)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "uml: kernel panic: Kernel panic - not syncing" in r.stderr, r.stderr
+    assert re.search(r"vehicle qemu \((kvm|tcg), Debian kernel ", r.stderr), r.stderr
+    _check_probe(out, 50)
+    m = re.match(r"vehicle=(qemu-\w+) boot_s=([\d.]+) cmd_s=([\d.]+) total_s=([\d.]+)",
+                 timing.read_text())
+    assert m, timing.read_text()
+    assert not list(tmp_path.glob("with-vcan.*")), "temp dir not removed"
+    print(f"\nwith-vcan one-shot {m.group(1)} after a UML panic: vcan0 up after "
+          f"{float(m.group(2)):.1f} s, command {float(m.group(3)):.1f} s")
+
+
+def test_no_vehicle_gives_125_and_every_reason(tmp_path: Path) -> None:
+    (tmp_path / "bin").mkdir()
+    # an `ip` that cannot create vcan0, as on a kernel without CAN (and no vcan0 to find)
+    fake_ip = _stand_in(tmp_path / "bin", "ip",
+                        'echo "RTNETLINK answers: Operation not supported" >&2; exit 2')
+    broken_qemu = _stand_in(tmp_path, "qemu-system-x86_64",
+                            'echo "qemu-system-x86_64: -virtfs: there is no option group" >&2; exit 1')
+    env = dict(os.environ, WITH_VCAN_MODE="auto", PATH=f"{fake_ip.parent}:{os.environ['PATH']}",
+               WITH_VCAN_UML_BIN=str(_panicking_uml(tmp_path)),
+               WITH_VCAN_QEMU_BIN=str(broken_qemu), WITH_VCAN_QEMU_ACCEL="tcg")
+    env.pop("WITH_VCAN_CHANNEL", None)
+    r, wall = run(["true"], tmp_path, env, timeout=120)
+    assert r.returncode == 125, r.stdout + r.stderr
+    lines = r.stderr.splitlines()
+    # each vehicle's one-line reason as it is left, in order, then all of them again
+    assert re.search(r"^with-vcan: native: .*(cannot create vcan0|not root)", r.stderr, re.M), lines
+    assert re.search(r"^with-vcan: uml: kernel panic: Kernel panic", r.stderr, re.M), lines
+    assert re.search(r"^with-vcan: qemu \(tcg\): the kernel exited before vcan0 was up", r.stderr,
+                     re.M), lines
+    i = lines.index("with-vcan: no vehicle could bring up vcan0:")
+    assert [ln.split(":")[0].strip() for ln in lines[i + 1:]] == ["native", "uml", "qemu (tcg)"]
+    # the panic is read from the console, not waited out (boot limit 120 s)
+    assert wall < 60.0
     assert not list(tmp_path.glob("with-vcan.*")), "temp dir not removed"
 
 
-def test_timeout_stops_everything(tmp_path: Path) -> None:
-    r, wall = run(["sleep", "300"], tmp_path, WITH_VCAN_TIMEOUT="8")
-    assert r.returncode == 124, r.stdout + r.stderr
-    assert 7.0 <= wall < 25.0
-    time.sleep(0.5)
-    assert _leftovers(str(tmp_path)) == []
-    assert not list(tmp_path.glob("with-vcan.*"))
+def test_bad_mode_and_missing_channel(tmp_path: Path) -> None:
+    env = dict(os.environ, WITH_VCAN_MODE="docker")
+    env.pop("WITH_VCAN_CHANNEL", None)
+    r, _ = run(["true"], tmp_path, env)
+    assert r.returncode == 2
+    assert r.stderr == ("with-vcan: WITH_VCAN_MODE: unknown vehicle 'docker' (auto, native, uml, "
+                        "qemu or a comma list)\n")
+    r, _ = run(["true"], tmp_path, dict(os.environ, WITH_VCAN_CHANNEL=str(tmp_path / "none")))
+    assert r.returncode == 125
+    assert "no kernel is served there" in r.stderr
