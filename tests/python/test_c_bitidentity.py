@@ -98,3 +98,35 @@ def test_whole_files_from_both_clis(precision, extra, tmp_path):
                            precision)
         pytest.fail(f"files differ, max ULP {ulp}")
     print(f"\n{precision} {' '.join(extra)}: identical files, max ULP 0")
+
+
+@pytest.fixture(scope="module")
+def model3_csv(tmp_path_factory) -> Path:
+    """A Model III truth (relaxation and direction memory) along an insertion to 30 mm, a 3 s
+    dwell and the retraction, 100 Hz, 2 mN noise (model3_truth.py)."""
+    from model3_truth import model3_record
+    path = tmp_path_factory.mktemp("m3") / "m3.csv"
+    path.write_text("\n".join(model3_record()) + "\n")
+    return path
+
+
+@pytest.mark.parametrize("precision", PRECISIONS)
+@pytest.mark.parametrize("extra", [
+    [],
+    ["--schedule", "rotate", "--relax-branches", "1", "--tau-fast", "0.5"],
+    ["--no-direction-memory", "--init-seed", "3", "--init-factor", "1.5", "--presliding-mm", "2"],
+    ["--no-relaxation", "--profile", "paper", "--tau-slow", "5"],
+], ids=["defaults", "rotate-one-branch", "no-direction-memory", "no-relaxation-paper"])
+def test_model3_whole_files_bit_identical(model3_csv, precision, extra, tmp_path):
+    """Model III through both command-line programs: identical files (0 ULP) in both
+    precisions, with every switch of the model."""
+    c_bytes, py_bytes = _cli_pair(precision, model3_csv, ["--model", "3"] + extra, tmp_path)
+    header = py_bytes.split(b"\n", 1)[0].decode()
+    assert header.startswith("t_s,force_hat_n,z,innovation_n,status,sigma0")
+    if "--no-relaxation" not in extra:
+        assert ",g_fast,g_fast_sd" in header
+    if c_bytes != py_bytes:
+        ulp = ulp_distance(c_bytes.decode().split("\n")[:-1], py_bytes.decode().split("\n")[:-1],
+                           precision)
+        pytest.fail(f"files differ, max ULP {ulp}")
+    print(f"\nModel III {precision} {' '.join(extra)}: identical files, max ULP 0")
