@@ -72,11 +72,11 @@ board-figures: venv board
 	$(PY) firmware/port/mps2-an386/figures.py
 	$(PY) firmware/port/mps2-an386/cycles.py
 
-# the whole chain: the C node on a real vcan0 (a user-mode Linux kernel when the host has no CAN),
+# the whole chain: the C node on a real vcan0 (host_bench/with-vcan boots a kernel when the host has no CAN),
 # fed by the host bench with a paper insertion, compared bit for bit with the reference
 demo: venv build
 	mkdir -p $(DEMO_DIR)
-	host_bench/with-vcan host_bench/demo.sh $(CURDIR)/$(DEMO_DIR)/can
+	host_bench/demo.sh $(CURDIR)/$(DEMO_DIR)/can
 	$(VENV)/bin/nte-ref estimate $(DEMO_DIR)/can/insertion.csv --model 2 --estimator robust \
 	  --preset paper-10mms --init-seed 7 --init-factor 5 --out $(DEMO_DIR)/robust.csv \
 	  --plot $(DEMO_DIR)/robust.png

@@ -2,6 +2,7 @@
 
     nte-bench replay FILE.csv|FILE.log --channel vcan0 [--interface socketcan|slcan]
                      [--speed X] [--depth-rate HZ] [--player python|canplayer] --out DIR
+    nte-bench check DIR [--model 1|2] [--preset NAME]
     nte-bench send FILE.csv [--channel vcan0] [--speed X] [--force-every N]
                    [--record-csv FILE] [--record-log FILE]
 
@@ -13,6 +14,9 @@ runs the reference (reference_py FilterBank, float32, the node's configuration) 
 quantised frames through host_bench.node_mirror, compares the node's Estimate and Params
 frames with it raw value for raw value, writes DIR/summary.json, DIR/force.png and
 DIR/params.png (parameters with +-3 sigma bands), and prints the final parameters.
+replay --no-check stops after recording (DIR/record.json added); check DIR then does the
+comparison and figures where no bus is needed -- on the host, when the bus lives in a slower
+virtual machine (host_bench/with-vcan).
 send sends a scenario CSV row by row (one Depth frame per row, a Force frame where force_n is
 given) at its own timestamps and records the whole bus (host_bench.replay).
 
@@ -287,9 +291,11 @@ def cmd_replay(a: argparse.Namespace) -> int:
               f"[{lo:g}, {hi:g}] clipped to it", file=sys.stderr)
     with Outputs() as outs:
         out = outs.directory(a.out, "--out")
-        names = ["input.log", "node.csv", "node.log", "summary.json"]
-        if not a.no_plot:
-            names += ["force.png", "params.png"]
+        names = ["input.log", "node.csv", "node.log", "record.json"]
+        if not a.no_check:
+            names.append("summary.json")
+            if not a.no_plot:
+                names += ["force.png", "params.png"]
         tmp = {n: outs.add(out / n, "--out") for n in names}
         write_candump(tmp["input.log"], frames, a.channel, a.speed if a.speed > 0 else 1.0)
         collector = _Collect(db, [])
@@ -313,27 +319,50 @@ def cmd_replay(a: argparse.Namespace) -> int:
             bus.shutdown()
             for w in writers:
                 w.stop()
-        wall = time.monotonic() - t_start
-        mirror = NodeMirror(preset=a.preset, model=a.model, base_id=a.base_id,
-                            depth_timeout_us=int(a.depth_timeout_ms * 1000),
-                            params_per_step=a.params_per_step)
-        mirror.feed_all(m for _, m in frames)
-        est, par, bad = node_outputs(db, collector.messages)
-        res = compare(mirror, est, par)
-        res.update({"frames_sent": len(frames), "output_frames_received": len(collector.messages),
-                    "output_e2e_errors": bad, "wall_s": round(wall, 3),
-                    "mirror_events": mirror.events, "input_values_clipped": clipped})
-        res["final_parameters"] = {k: {"value": v, "sd": s}
-                                   for k, (v, s) in final_parameters(db, collector.messages).items()}
-        if not a.no_plot:
-            plot([tmp["force.png"], tmp["params.png"]], db, mirror, collector.messages,
-                 a.params_per_step)
-            res["figures"] = [str(out / "force.png"), str(out / "params.png")]
-        outs.write_lines(tmp["summary.json"], [json.dumps(res, indent=2)])
+        record = {"frames_sent": len(frames), "wall_s": round(time.monotonic() - t_start, 3),
+                  "input_values_clipped": clipped}
+        outs.write_lines(tmp["record.json"], [json.dumps(record, indent=2)])
+        if not a.no_check:
+            res = check_against_reference(a, db, frames, collector.messages, record, tmp,
+                                          outs, out)
         outs.commit()
-    print(f"nte-bench: sent {len(frames)} frames in {wall:.1f} s; node published "
-          f"{res['estimates_node']} estimates (reference {res['estimates_reference']}), "
-          f"{res['params_node']} params frames")
+    print(f"nte-bench: sent {len(frames)} frames in {record['wall_s']:.1f} s; recorded "
+          f"{len(collector.messages)} frames from the node (Estimate, Params, Heartbeat)")
+    if a.no_check:
+        print(f"recorded in {a.out}; compare with the reference: nte-bench check {a.out}")
+        return 0
+    return report(res)
+
+
+def check_against_reference(a: argparse.Namespace, db: NteDatabase,
+                            frames: list[tuple[float, can.Message]], messages: list[can.Message],
+                            record: dict, tmp: dict[str, Path], outs: Outputs,
+                            out: Path) -> dict:
+    """The reference (host_bench.node_mirror) fed the frames that were sent, compared with what
+    the node published; summary.json and, unless --no-plot, the figures."""
+    mirror = NodeMirror(preset=a.preset, model=a.model, base_id=a.base_id,
+                        depth_timeout_us=int(a.depth_timeout_ms * 1000),
+                        params_per_step=a.params_per_step)
+    mirror.feed_all(m for _, m in frames)
+    est, par, bad = node_outputs(db, messages)
+    res = compare(mirror, est, par)
+    res.update({"frames_sent": record["frames_sent"], "output_frames_received": len(messages),
+                "output_e2e_errors": bad, "wall_s": record["wall_s"],
+                "mirror_events": mirror.events,
+                "input_values_clipped": record["input_values_clipped"]})
+    res["final_parameters"] = {k: {"value": v, "sd": s}
+                               for k, (v, s) in final_parameters(db, messages).items()}
+    if not a.no_plot:
+        plot([tmp["force.png"], tmp["params.png"]], db, mirror, messages, a.params_per_step)
+        res["figures"] = [str(out / "force.png"), str(out / "params.png")]
+    outs.write_lines(tmp["summary.json"], [json.dumps(res, indent=2)])
+    return res
+
+
+def report(res: dict) -> int:
+    """Print the agreement and the final parameters; 0 when the node equals the reference."""
+    print(f"node published {res['estimates_node']} estimates (reference "
+          f"{res['estimates_reference']}), {res['params_node']} params frames")
     print(f"agreement with the reference (same quantised inputs, float32): "
           f"{res['estimate_mismatches']} estimate mismatches, "
           f"{res['param_value_mismatches']} parameter value mismatches, "
@@ -342,13 +371,45 @@ def cmd_replay(a: argparse.Namespace) -> int:
     print("final parameters (value ± sd):")
     for k, v in res["final_parameters"].items():
         print(f"  {k:7s} {v['value']:.6g} ± {v['sd']:.3g}")
-    n_clip = sum(clipped.values())
+    n_clip = sum(res["input_values_clipped"].values())
     events = ", ".join(f"{k} {v}" for k, v in sorted(res.get("mirror_events", {}).items()))
-    print(f"frames: {len(frames)} sent, {n_clip} input values clipped to the DBC ranges; "
+    print(f"frames: {res['frames_sent']} sent, {n_clip} input values clipped to the DBC ranges; "
           f"reference node events: {events or 'none'}")
     ok = (res["estimate_mismatches"] == 0 and res["param_value_mismatches"] == 0
-          and res["estimates_node"] == res["estimates_reference"] and bad == 0)
+          and res["estimates_node"] == res["estimates_reference"]
+          and res["output_e2e_errors"] == 0)
     return 0 if ok else 1
+
+
+def cmd_check(a: argparse.Namespace) -> int:
+    """The check half of replay, on a directory that `replay --no-check` recorded: it needs no
+    bus, so it runs outside the kernel that carried the bus."""
+    d = Path(a.dir)
+    node_log = Path(a.node_log) if a.node_log else d / "node.log"
+    for f in (d / "input.log", d / "record.json", node_log):
+        if not f.is_file():
+            raise ValueError(f"{f}: missing (record it with nte-bench replay --no-check "
+                             f"--out {d})")
+    try:
+        record = json.loads((d / "record.json").read_text())
+        record["frames_sent"], record["wall_s"], record["input_values_clipped"]
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ValueError(f"{d / 'record.json'}: not a replay record ({exc})") from None
+    db = NteDatabase(base_id=a.base_id)
+    frames = log_frames(str(d / "input.log"))
+    try:
+        ids = _Collect(db, []).ids
+        messages = [m for m in can.CanutilsLogReader(str(node_log))
+                    if not m.is_error_frame and m.arbitration_id in ids]
+    except (ValueError, IndexError) as exc:
+        raise ValueError(f"{node_log}: not a candump log: {exc}") from None
+    with Outputs() as outs:
+        out = outs.directory(a.dir, "DIR")
+        names = ["summary.json"] + ([] if a.no_plot else ["force.png", "params.png"])
+        tmp = {n: outs.add(out / n, "DIR") for n in names}
+        res = check_against_reference(a, db, frames, messages, record, tmp, outs, out)
+        outs.commit()
+    return report(res)
 
 
 def cmd_send(a: argparse.Namespace) -> int:
@@ -403,6 +464,17 @@ def _base_id(text: str) -> int:
     return value
 
 
+def _node_flags(r: argparse.ArgumentParser) -> None:
+    """The node's settings the reference must share."""
+    r.add_argument("--model", type=int, choices=(1, 2), default=2, help="the node's model")
+    r.add_argument("--preset", default="paper-10mms", choices=sorted(PRESETS), metavar="NAME",
+                   help=f"the node's preset, one of {', '.join(sorted(PRESETS))}")
+    r.add_argument("--depth-timeout-ms", type=bounded(0.0, 60_000.0, " ms", lo_open=True),
+                   default=50.0, help="the node's depth timeout, ms")
+    r.add_argument("--params-per-step", type=bounded(1, 7, integer=True), default=1,
+                   help="the node's setting: Params frames per estimator step")
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = OneLineParser(prog="nte-bench", description=__doc__.split("\n\n")[0],
                       epilog=__doc__.split("\n\n", 1)[1])
@@ -418,19 +490,30 @@ def build_parser() -> argparse.ArgumentParser:
                    default=1000.0, help="depth frame rate, Hz")
     r.add_argument("--player", choices=("python", "canplayer"), default="python",
                    help="who sends: python-can, or can-utils canplayer (full rate)")
-    r.add_argument("--model", type=int, choices=(1, 2), default=2, help="the node's model")
-    r.add_argument("--preset", default="paper-10mms", choices=sorted(PRESETS), metavar="NAME",
-                   help=f"the node's preset, one of {', '.join(sorted(PRESETS))}")
-    r.add_argument("--depth-timeout-ms", type=bounded(0.0, 60_000.0, " ms", lo_open=True),
-                   default=50.0, help="the node's depth timeout, ms")
-    r.add_argument("--params-per-step", type=bounded(1, 7, integer=True), default=1,
-                   help="the node's setting: Params frames per estimator step")
+    _node_flags(r)
     add_unit_arguments(r)
     r.add_argument("--no-plot", action="store_true", help="do not draw force.png, params.png")
+    r.add_argument("--no-check", action="store_true",
+                   help="send and record only (input.log, node.log, node.csv, record.json); "
+                        "compare later, outside the bus's kernel, with nte-bench check DIR")
     r.add_argument("--no-progress", action="store_true", help="no progress bar")
     r.add_argument("--out", required=True, help="output directory (created if absent; its "
                                                 "parent must exist)")
     r.set_defaults(run=cmd_replay)
+    c = sub.add_parser("check", help="compare a recorded replay with the reference",
+                       description="Compare what `nte-bench replay --no-check --out DIR` "
+                                   "recorded with the reference fed the same frames: "
+                                   "DIR/summary.json and the figures.  Needs no bus.")
+    c.add_argument("dir", metavar="DIR", help="the directory replay --no-check wrote")
+    c.add_argument("--base-id", type=_base_id, default=None,
+                   help="the node's base CAN id (as in replay)")
+    c.add_argument("--node-log", metavar="FILE", default=None,
+                   help="the node's outputs from this candump log instead of DIR/node.log, e.g. "
+                        "the node's own record of what it sent (nte-node --record), which is "
+                        "complete even where a recorder on a loaded machine drops frames")
+    _node_flags(c)
+    c.add_argument("--no-plot", action="store_true", help="do not draw force.png, params.png")
+    c.set_defaults(run=cmd_check)
     s = sub.add_parser("send", help="send a scenario CSV row by row and record the bus",
                        description="Send a scenario CSV as Depth and Force frames of "
                                    "firmware/can/nte.dbc (E2E protected) at their timestamps, "

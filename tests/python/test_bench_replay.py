@@ -372,3 +372,20 @@ def test_candump_input_log_written_by_python_can(tmp_path):
         assert (b.arbitration_id, bytes(b.data), b.channel) == (m.arbitration_id, bytes(m.data),
                                                                 "vcan0")
         assert abs(b.timestamp - (1_000_000.0 + t / 0.5)) < 1e-6 and not b.is_rx
+
+
+def test_check_refuses_a_directory_without_a_record(tmp_path, capsys):
+    """nte-bench check (the host half of replay --no-check): a directory that holds no replay
+    record is refused in one line naming the missing file, and nothing is written there."""
+    d = tmp_path / "rec"
+    d.mkdir()
+    rc, line = _bench(["check", d], capsys)
+    assert rc == 2 and line == (f"nte-bench: error: {d / 'input.log'}: missing (record it with "
+                                f"nte-bench replay --no-check --out {d})"), line
+    (d / "input.log").write_text("(1000000.000000) vcan0 201#0000000000000000 T\n")
+    (d / "node.log").write_text("")
+    (d / "record.json").write_text('{"frames_sent": 1}')
+    rc, line = _bench(["check", d], capsys)
+    assert rc == 2 and line.startswith(f"nte-bench: error: {d / 'record.json'}: not a replay "
+                                       f"record"), line
+    assert sorted(p.name for p in d.iterdir()) == ["input.log", "node.log", "record.json"]
