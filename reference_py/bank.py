@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .config import EstimatorConfig, check_nominal
+from .contact import ContactFrontEnd
 from .ekf import Matrix, joseph_update, positive_definite, predict_covariance
 from .fmath import Array, Real
 from .model import (DepthTerms, Theta, ScaledParams, clamp_depth, depth_terms, exact_sign, output,
@@ -61,6 +62,11 @@ class StepOutput:
     status: Array        # uint32 bit set (STATUS_*)
     params: Array        # (n_identified, batch) physical estimates
     params_sd: Array     # (n_identified, batch) standard deviations
+    # the contact front end (contact.py; all 0 when it is off): the surface found (stage mm,
+    # NaN until found), the tare (N) and the state (contact.CONTACT_AIR / CONTACT_TISSUE)
+    surface_mm: Array | None = None
+    tare_n: Array | None = None
+    contact: Array | None = None
 
 
 def relax_count(cfg: EstimatorConfig) -> int:
@@ -116,6 +122,9 @@ class FilterBank:
             self._relax_nominal(R)
         self._nominal0 = ([x.copy() for x in self.scaled.nominal], self.scaled.ex_nominal.copy())
         self.c = _Constants(R, cfg)
+        # the surface and tare front end, at the start of every sample's processing
+        self.contact = (ContactFrontEnd(R, cfg.contact, cfg.r_n2, cfg.v_still_mm_s, self.batch)
+                        if cfg.contact.enabled else None)
         self.reset()
         self.initial_theta = self.th
 
@@ -140,6 +149,8 @@ class FilterBank:
         self.k = np.zeros(B, dtype=np.int64)   # accepted samples since reset (rotation index)
         self.rejects = np.zeros((3, B), dtype=np.int64)
         self.gated_run = [np.zeros(B, dtype=np.int64) for _ in self.subsets]
+        if self.contact is not None:
+            self.contact.reset()
         self.last = StepOutput(R.full(B, 0.0), R.full(B, 0.0), R.full(B, 0.0), R.full(B, 0.0),
                                np.zeros(B, dtype=np.uint32),
                                R.arr(np.zeros((len(self.identified), B))),
@@ -181,8 +192,12 @@ class FilterBank:
         y = np.asarray(force, dtype=R.dtype)
         with np.errstate(all="ignore"):
             finite = np.isfinite(l_in) & np.isfinite(v) & np.isfinite(y)
-            in_range = ((l_in >= c.depth_min) & (l_in <= c.depth_max) & (np.abs(v) <= c.speed_max)
-                        & (np.abs(y) <= c.force_max))
+            if self.contact is None:
+                in_depth = (l_in >= c.depth_min) & (l_in <= c.depth_max)
+            else:
+                # the stage position: its origin is arbitrary and the air gap is no error
+                in_depth = (l_in >= -c.depth_max) & (l_in <= c.depth_max)
+            in_range = in_depth & (np.abs(v) <= c.speed_max) & (np.abs(y) <= c.force_max)
             later = ~self.initialised | (t_us > self.t_prev)
             valid = finite & in_range & later
             self.rejects[REJECT_NONFINITE] += ~finite
@@ -190,17 +205,26 @@ class FilterBank:
             self.rejects[REJECT_TIME] += finite & in_range & ~later
             first = valid & ~self.initialised
             run = valid & self.initialised
+            if self.contact is not None:
+                # stage and raw force -> tissue depth and tare-free force (valid samples only)
+                l_in, y = self.contact.step(valid, l_in, v, y)
             # invalid samples are computed on harmless stand-ins, then discarded
             l_in = np.where(valid, l_in, self.l_prev)
             v = np.where(valid, v, R.c(0.0))
             y = np.where(valid, y, R.c(0.0))
             dt = (np.where(run, t_us - self.t_prev, 1)).astype(R.dtype) / c.us_per_s
             out = self._advance(first, run, dt, l_in, v, y)
+            self.fed = (l_in, y)   # what the bank was given (the robust estimator records it)
         status = np.where(valid, out.status, np.uint32(STATUS_REJECTED))
         status = status | np.where(first, np.uint32(STATUS_INIT), np.uint32(0))
         out = StepOutput(*(np.where(valid, new, old) if name != "status" else status
                            for name, new, old in zip(StepOutput.__dataclass_fields__,
                                                      _fields(out), _fields(self.last))))
+        if self.contact is not None:
+            out.surface_mm, out.tare_n, out.contact = self.contact.published()
+        else:
+            out.surface_mm, out.tare_n = R.full(self.batch, 0.0), R.full(self.batch, 0.0)
+            out.contact = np.zeros(self.batch, dtype=np.uint32)
         self.t_prev = np.where(valid, t_us, self.t_prev)
         self.l_prev = np.where(valid, l_in, self.l_prev)
         self.initialised = self.initialised | valid

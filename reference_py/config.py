@@ -69,6 +69,55 @@ ROBUST_INT_RANGES: dict[str, tuple[int, int]] = {
 #: the robust estimator's real fields that must be finite and > 0
 ROBUST_POSITIVE_FIELDS = ("restart_p0_u", "lm_lambda0", "converged_confidence",
                           "converged_change")
+#: the contact front end's (contact.py) integer fields, inclusive (min, max); learn_samples
+#: must also be at most tare_samples (the count of learned samples saturates there)
+CONTACT_INT_RANGES: dict[str, tuple[int, int]] = {
+    "run_samples": (1, 1000),
+    "tare_samples": (1, 100_000),
+    "learn_samples": (1, 100_000),
+}
+#: the contact front end's real fields that must be finite and > 0, each with its upper bound
+CONTACT_POSITIVE_BOUNDS: dict[str, float] = {
+    "k_sigma": 100.0,
+    "learn_gate_sigma": 1000.0,
+    "cusum_drift_sigma": 100.0,
+}
+#: ... that must be finite and >= 0, with its upper bound (N)
+CONTACT_NONNEGATIVE_BOUNDS: dict[str, float] = {"floor_n": 50.0}
+
+
+@dataclass(frozen=True)
+class ContactConfig:
+    """The surface and tare front end (contact.py; nte.h nte_contact_config_t)."""
+    enabled: bool = False              # off: the depth column is the tissue depth (Models I, II)
+    surface_mm: float = math.nan       # known surface, stage position mm; NaN: detect it
+    k_sigma: float = 5.0               # contact threshold, noise standard deviations, (0, 100]
+    floor_n: float = 0.01              # absolute floor of the threshold, N, [0, 50]
+    run_samples: int = 5               # consecutive samples above the threshold, 1..1000
+    tare_samples: int = 200            # tare and noise averaging length, samples, 1..100000
+    learn_samples: int = 20            # samples learned before contact can be seen, 1..tare_samples
+    learn_gate_sigma: float = 2.0      # learning pauses while the CUSUM is above, sd, (0, 1000]
+    cusum_drift_sigma: float = 0.5     # the CUSUM's drift (reference value), sd, (0, 100]
+
+    def validate(self, depth_max_mm: float) -> None:
+        """Raise ValueError naming the first invalid field."""
+        if not isinstance(self.enabled, bool):
+            raise ValueError(f"config field contact.enabled must be a bool (got {self.enabled!r})")
+        s = self.surface_mm
+        if not (math.isnan(s) or (math.isfinite(s) and abs(s) <= depth_max_mm)):
+            raise ValueError(f"config field contact.surface_mm must be NaN (detect) or finite "
+                             f"with |surface_mm| <= depth_max_mm (got {s!r})")
+        for name, (lo, hi) in CONTACT_INT_RANGES.items():
+            if not lo <= getattr(self, name) <= hi:
+                raise ValueError(f"config field contact.{name} must be in {lo}..{hi}")
+        if self.learn_samples > self.tare_samples:
+            raise ValueError("config field contact.learn_samples must be <= tare_samples")
+        for table, lo_ok in ((CONTACT_POSITIVE_BOUNDS, False), (CONTACT_NONNEGATIVE_BOUNDS, True)):
+            for name, hi in table.items():
+                v = getattr(self, name)
+                if not (math.isfinite(v) and (v >= 0 if lo_ok else v > 0) and v <= hi):
+                    raise ValueError(f"config field contact.{name} must be finite, "
+                                     f"{'>=' if lo_ok else '>'} 0 and <= {hi:g} (got {v!r})")
 
 
 @dataclass(frozen=True)
@@ -103,6 +152,9 @@ class EstimatorConfig:
     relax_branches: int = 2            # 1: the fast branch only; 2: fast and slow
     tau_fast_s: float = 0.3            # time constant of the fast branch, s, > 0, <= 3600
     tau_slow_s: float = 3.0            # of the slow branch, s, > 0, <= 3600
+    # the surface and tare front end (contact.py); off by default.  On, the depth column is the
+    # stage position, accepted within [-depth_max_mm, depth_max_mm] (depth_min_mm unused)
+    contact: ContactConfig = field(default_factory=ContactConfig)
 
     def q_for(self, name: str) -> float:
         return self.q_u.get(name, self.q_u_default)
@@ -132,6 +184,8 @@ class EstimatorConfig:
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0):
                 raise ValueError(f"config field {name} must be finite and >= 0 (got {v!r})")
+        if self.contact.enabled:   # checked when on, as nte_config_check does
+            self.contact.validate(self.depth_max_mm)
         for name, v in self.q_u.items():
             if name not in ALL_NAMES or not (math.isfinite(v) and v >= 0):
                 raise ValueError(f"config field q_u[{name!r}] invalid ({v!r})")

@@ -120,6 +120,9 @@ class RobustEstimator:
         R = self.R
         out = self.bank.step(t_us, depth, velocity, force)
         valid = (out.status & np.uint32(STATUS_REJECTED)) == 0
+        if self.bank.contact is not None:
+            # the record holds what the bank was given: tissue depth, tare-free force
+            depth, force = self.bank.fed
         l = R.arr(depth)
         at_surface = valid & ~(l > R.c(0.0))
         entering = valid & (l > R.c(0.0)) & ~self.inside
@@ -141,10 +144,11 @@ class RobustEstimator:
         if np.any(refined):
             out = StepOutput(out.force_hat, out.z, out.innovation, out.nis, status,
                              np.where(refined[None, :], params, out.params),
-                             np.where(refined[None, :], sds, out.params_sd))
+                             np.where(refined[None, :], sds, out.params_sd),
+                             out.surface_mm, out.tare_n, out.contact)
         else:
             out = StepOutput(out.force_hat, out.z, out.innovation, out.nis, status, out.params,
-                             out.params_sd)
+                             out.params_sd, out.surface_mm, out.tare_n, out.contact)
         self.bank.last = out
         return out
 

@@ -6,7 +6,8 @@
  *   nte-run FILE.csv --model 1|2|3 [--estimator bank|robust] [--preset NAME]
  *           [--profile default|paper] [--init-seed K] [--init-factor F] [--schedule all|rotate]
  *           [--precision P] [--presliding-mm MM] [--tau-fast S] [--tau-slow S]
- *           [--relax-branches 1|2] [--no-relaxation] [--no-direction-memory] --out EST.csv
+ *           [--relax-branches 1|2] [--no-relaxation] [--no-direction-memory]
+ *           [--contact on|off] [--surface MM] --out EST.csv
  *
  * -h/--help lists every flag and its default.  Exit status 0 on success, 2 on bad input: one
  * line on stderr ("FILE:LINE: column 'NAME': reason" or "argument --flag: why").
@@ -54,6 +55,8 @@ typedef struct args_t {
     int relax_branches;
     int relaxation;
     int direction_memory;
+    int contact;    /* the contact front end: -1 not asked, 0 off, 1 on */
+    double surface; /* --surface MM, NaN: find it */
 } args_t;
 
 /* A refusal: one line on stderr, exit status 2 (the Python tools' form). */
@@ -70,7 +73,8 @@ static void help(void)
            "       [--profile default|paper] [--init-seed K] [--init-factor F]\n"
            "       [--schedule all|rotate] [--precision " PRECISION "]\n"
            "       [--presliding-mm MM] [--tau-fast S] [--tau-slow S] [--relax-branches 1|2]\n"
-           "       [--no-relaxation] [--no-direction-memory] --out EST.csv\n"
+           "       [--no-relaxation] [--no-direction-memory] [--contact on|off]\n"
+           "       [--surface MM] --out EST.csv\n"
            "\n"
            "Run the estimator (C library, " PRECISION ") over a CSV of t_s, depth_mm, force_n\n"
            "(velocity_mm_s optional, else central differences of depth) and write one row per\n"
@@ -99,6 +103,11 @@ static void help(void)
            "  --no-relaxation        Model III: no relaxation branches (default: on)\n"
            "  --no-direction-memory  Model III: tanh(v/eps) instead of the direction state\n"
            "                         (default: on)\n"
+           "  --contact on|off       the surface and tare front end (default: off): depth is\n"
+           "                         the stage position, the needle starts in the air; adds\n"
+           "                         the columns surface_mm, tare_n, contact (0 air, 1 tissue)\n"
+           "  --surface MM           a known surface (stage position, -500..500 mm) instead of\n"
+           "                         finding it; turns the front end on\n"
            "  --out EST.csv          the estimates to write (no default)\n"
            "  -h, --help             this help\n"
            "\n"
@@ -126,6 +135,8 @@ static int parse_args(int argc, char** argv, args_t* a)
     a->relax_branches = 2;
     a->relaxation = 1;
     a->direction_memory = 1;
+    a->contact = -1;
+    a->surface = NAN;
     for (int i = 1; i < argc; i++) {
         if ((strcmp(argv[i], "--help") == 0) || (strcmp(argv[i], "-h") == 0)) {
             help();
@@ -256,6 +267,21 @@ static int parse_args(int argc, char** argv, args_t* a)
                 return usage(msg);
             }
             a->relax_branches = atoi(val);
+        } else if (strcmp(name, "--contact") == 0) {
+            if ((strcmp(val, "on") != 0) && (strcmp(val, "off") != 0)) {
+                (void)snprintf(msg, sizeof msg, "argument --contact: invalid choice: '%s'", val);
+                return usage(msg);
+            }
+            a->contact = (strcmp(val, "on") == 0) ? 1 : 0;
+        } else if (strcmp(name, "--surface") == 0) {
+            a->surface = strtod(val, &end);
+            if ((end == val) || (*end != '\0') || !((a->surface >= -500.0) &&
+                                                    (a->surface <= 500.0))) { /* also NaN */
+                (void)snprintf(msg, sizeof msg,
+                               "argument --surface: must be a number >= -500 and <= 500 "
+                               "(got %s)", val);
+                return usage(msg);
+            }
         } else if (strcmp(name, "--out") == 0) {
             a->out = val;
         } else {
@@ -271,6 +297,13 @@ static int parse_args(int argc, char** argv, args_t* a)
     }
     if (a->out == NULL) {
         return usage("the following arguments are required: --out");
+    }
+    if (!isnan(a->surface)) {
+        if (a->contact == 0) {
+            return usage("argument --surface: a known surface needs the front end "
+                         "(--contact on)");
+        }
+        a->contact = 1;
     }
     return 0;
 }
@@ -405,7 +438,8 @@ static int run(const args_t* a, const out_t* out, const nte_trial_t* tr, nte_t* 
     for (size_t j = 0U; j < np; j++) {
         fprintf(fh, ",%s,%s_sd", nte_param_name(pe[j].id), nte_param_name(pe[j].id));
     }
-    fprintf(fh, "%s\n", (a->robust != 0) ? ",confidence" : "");
+    fprintf(fh, "%s%s\n", (a->robust != 0) ? ",confidence" : "",
+            (a->contact == 1) ? ",surface_mm,tare_n,contact" : "");
     for (size_t k = 0U; k < tr->n; k++) {
         nte_sample_t s;
         nte_output_t o;
@@ -425,6 +459,10 @@ static int run(const args_t* a, const out_t* out, const nte_trial_t* tr, nte_t* 
         }
         if (a->robust != 0) {
             fprintf(fh, "," REAL_FMT, (double)o.confidence);
+        }
+        if (a->contact == 1) {
+            fprintf(fh, "," REAL_FMT "," REAL_FMT ",%d", (double)o.surface_mm, (double)o.tare_n,
+                    (int)o.contact);
         }
         fprintf(fh, "\n");
     }
@@ -501,6 +539,8 @@ int main(int argc, char** argv)
     }
     cfg.f1_excess = (nte_real_t)excess;
     cfg.estimator = (a.robust != 0) ? nte_estimator_robust : nte_estimator_bank;
+    cfg.contact.enabled = (a.contact == 1);
+    cfg.contact.surface_mm = (nte_real_t)a.surface;
     static nte_t est;
     const nte_err_t err = nte_init(&est, &cfg);
     if (err != nte_err_ok) {

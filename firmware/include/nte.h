@@ -42,6 +42,8 @@
  *                       predict, measure,         _measure, _update_and_guard, _guard)
  *                       update_and_guard, guard
  *   src/nte_robust.c/.h the robust estimator      robust.py RobustEstimator, ldlt_solve
+ *   src/nte_contact.c/.h the surface and tare     contact.py ContactFrontEnd
+ *                       front end
  *   src/nte_model.c/.h  the model, its partials   model.py, rk3.py
  *                       and the RK3 step
  *   src/nte_ekf.c/.h    covariance prediction,    ekf.py
@@ -50,13 +52,14 @@
  *   src/nte_real.h      precision, exp, tanh      fmath.py
  *   src/nte_constants.h generated constants and   firmware/tools/gen_constants.py
  *                       configuration ranges
- *   Layers: nte.c uses nte_bank.h and nte_robust.h; nte_robust.c uses nte_bank.h; the bank
+ *   Layers: nte.c uses nte_bank.h, nte_contact.h and nte_robust.h; nte_robust.c uses nte_bank.h; the bank
  *   uses nte_model.h and nte_ekf.h; everything uses nte_real.h.  No circle.
  *
  * MEMORY MODEL
  *   The caller owns every instance (static, stack or pool).  sizeof(nte_t) on x86-64:
- *   504 bytes (float) / 936 (double) with NTE_ROBUST_BUFFER_LEN = 0 (the bank alone); with
- *   the default 96: 2504 (float, +2000) / 4896 (double, +3960), of which the buffer of
+ *   616 bytes (float) / 1120 (double) with NTE_ROBUST_BUFFER_LEN = 0 (the bank and the
+ *   contact front end, whose state is 52 / 88 bytes); with
+ *   the default 96: 2616 (float, +2000) / 5080 (double, +3960), of which the buffer of
  *   96 x 4 reals is 1536 / 3072 and the LM workspace (J^T J and J^T r at the current and the
  *   trial point, both parameter vectors) 384 / 768.  The refinement's deepest stack frame
  *   (nte_step -> refinement -> lm -> simulate -> rk3) adds about 1.2 KiB (float) / 1.9 KiB
@@ -100,6 +103,35 @@
  *     1710 output evaluations.  The refinement runs inside the nte_step call of the sample
  *     that leaves the tissue: call nte_step from a context that tolerates that latency once
  *     per insertion (measure it on the target).
+ *
+ * THE CONTACT FRONT END (cfg.contact.enabled; reference_py/contact.py)
+ *   Records as measured start with the needle in the air: the depth column is the STAGE
+ *   position (its origin anywhere, the tissue touched somewhere along the stroke) and the
+ *   force carries a small tare and noise.  With the front end on, sample.depth_mm is that
+ *   stage position (accepted within +-depth_max_mm: the air gap is not an error and
+ *   depth_min_mm is not used) and sample.force_n the raw force; before the bank sees a sample
+ *   the front end turns them into the depth below the surface, max(0, stage - surface), 0 in
+ *   the air, and the force less the tare.  Off (the default, Models I and II), nothing
+ *   changes: depth_mm is the tissue depth and the outputs are bit for bit those without it.
+ *   In the air it learns the tare (running mean of the force, weight 1/min(n, tare_samples))
+ *   and the noise sigma (running RMS about the tare, never below sqrt(r_n2)); a one-sided
+ *   CUSUM of (f - tare)/sigma less cusum_drift_sigma pauses that learning while it is above
+ *   learn_gate_sigma, so a slow onset is not learned as tare or noise.
+ *   Contact: after learn_samples learned samples, f - tare above max(k_sigma sigma, floor_n)
+ *   for run_samples consecutive samples while the stage moves inward (velocity >
+ *   v_still_mm_s).  The surface is back-extrapolated: a straight line is fitted (least
+ *   squares) to the force over stage position along the onset segment, the inward samples
+ *   above the tare that end at the detection, and the surface is where it crosses the tare
+ *   (kept within one segment length before the segment and not deeper than the detection;
+ *   the segment's start if the fit does not rise).  On the phantom: within 0.1 mm of the
+ *   truth at the median, 0.25 mm at worst, at 1-3 mm/s and 75-200 Hz.
+ *   In contact the tare and noise are held.  Contact ends at a sample with the stage back at
+ *   or above the surface and |f - tare| within the threshold; everything is re-armed then
+ *   (a new tare learned in the air, a new surface found at the next insertion).
+ *   A known surface (cfg.contact.surface_mm finite) replaces the detection: contact while
+ *   the stage is beyond it.  Published in nte_output_t: surface_mm, tare_n, contact.
+ *   Cost per sample: about 30 flops, 1 sqrt and 2 divisions (4 more at the sample that
+ *   finds the surface); memory: nte_contact_t in the instance.
  */
 #ifndef NTE_H
 #define NTE_H
@@ -202,7 +234,9 @@ typedef enum nte_err_t {
     nte_err_bad_f1 = -10,         /**< nominal f1 does not exceed -f2 (g(0) must be > 0) */
     nte_err_bad_estimator = -11,  /**< estimator is not a nte_estimator_t value, or robust
                                        while NTE_ROBUST_BUFFER_LEN is 0 */
-    nte_err_bad_robust = -12      /**< a cfg.robust field is outside its range */
+    nte_err_bad_robust = -12,     /**< a cfg.robust field is outside its range */
+    nte_err_bad_contact = -13     /**< a cfg.contact field is outside its range (checked
+                                       when cfg.contact.enabled) */
 } nte_err_t;
 
 /* Status bits of one sample (same values as reference_py/bank.py STATUS_*). */
@@ -280,6 +314,32 @@ typedef struct nte_robust_config_t {
     nte_real_t converged_change;     /**< [0.05] and a relative change <= this, > 0 */
 } nte_robust_config_t;
 
+/** The contact state published in nte_output_t.contact. */
+typedef enum nte_contact_state_t {
+    nte_contact_air = 0,   /**< out of contact (always, when the front end is off) */
+    nte_contact_tissue = 1 /**< the needle touches the tissue */
+} nte_contact_state_t;
+
+/** Tuning of the surface and tare front end (reference_py/config.py ContactConfig; defaults in
+ *  brackets; see THE CONTACT FRONT END at the top).  Checked by nte_init only when enabled. */
+typedef struct nte_contact_config_t {
+    bool enabled;                 /**< [false] on: sample.depth_mm is the stage position */
+    nte_real_t surface_mm;        /**< [NaN] known surface, stage position in mm, finite with
+                                       |x| <= depth_max_mm; NaN: find it from the force */
+    nte_real_t k_sigma;           /**< [5] contact threshold, noise standard deviations,
+                                       > 0, <= 100 */
+    nte_real_t floor_n;           /**< [0.01] absolute floor of the threshold, N, 0..50 */
+    int32_t run_samples;          /**< [5] consecutive samples above it, 1..1000 */
+    int32_t tare_samples;         /**< [200] tare and noise averaging length, samples,
+                                       1..100000 */
+    int32_t learn_samples;        /**< [20] samples learned in the air before contact can be
+                                       seen, 1..tare_samples */
+    nte_real_t learn_gate_sigma;  /**< [2] learning pauses while the onset CUSUM is above
+                                       this, noise standard deviations, > 0, <= 1000 */
+    nte_real_t cusum_drift_sigma; /**< [0.5] the CUSUM's reference value, noise standard
+                                       deviations, > 0, <= 100 */
+} nte_contact_config_t;
+
 /** q_u entry meaning "use q_u_default" (any negative value means the same). */
 #define NTE_Q_U_USE_DEFAULT (-1)
 
@@ -339,6 +399,7 @@ typedef struct nte_config_t {
     nte_real_t f1_excess;
     nte_estimator_t estimator;  /**< [nte_estimator_bank] or nte_estimator_robust */
     nte_robust_config_t robust; /**< [see above] the robust estimator's tuning */
+    nte_contact_config_t contact; /**< [see above; off] the surface and tare front end */
 } nte_config_t;
 
 /** The project's tuning (reference "default" profile); nominal = preset paper-10mms.
@@ -358,7 +419,8 @@ nte_err_t nte_config_check(const nte_config_t* cfg);
 /** One synchronous measurement. */
 typedef struct nte_sample_t {
     int64_t t_us;             /**< time stamp, integer microseconds, strictly increasing */
-    nte_real_t depth_mm;      /**< insertion depth, mm (<= 0: out of tissue) */
+    nte_real_t depth_mm;      /**< insertion depth, mm (<= 0: out of tissue); with
+                                   cfg.contact.enabled the stage position, mm */
     nte_real_t velocity_mm_s; /**< insertion velocity, mm/s (negative while retracting) */
     nte_real_t force_n;       /**< measured axial force, N */
 } nte_sample_t;
@@ -373,6 +435,13 @@ typedef struct nte_output_t {
     nte_real_t confidence;   /**< robust estimator: confidence of the last refinement,
                                   sqrt(r_n2) / max(rms residual, sqrt(r_n2)) in (0, 1];
                                   0 before the first refinement and for the bank */
+    /* The contact front end (all 0 / nte_contact_air when cfg.contact.enabled is false). */
+    nte_real_t surface_mm;       /**< the surface in use, stage position mm: the one found at
+                                      the latest contact (or the known cfg.contact.surface_mm
+                                      once touched); NaN until the first contact */
+    nte_real_t tare_n;           /**< the tare subtracted from the force, N (learned in the
+                                      air, held in contact) */
+    nte_contact_state_t contact; /**< air or tissue */
 } nte_output_t;
 
 /* ---------------------------------------------------------------------------------------- */
@@ -411,6 +480,20 @@ typedef struct nte_robust_t {
 } nte_robust_t;
 #endif
 
+/** The contact front end's state (internal; reference_py/contact.py ContactFrontEnd). */
+typedef struct nte_contact_t {
+    bool in_contact;
+    int32_t n;      /**< samples learned since the last re-arm (at most tare_samples) */
+    int32_t run;    /**< consecutive samples above the threshold */
+    int32_t seg_n;  /**< samples in the onset segment */
+    nte_real_t tare;
+    nte_real_t ms;    /**< mean square of the force about the tare, N^2 */
+    nte_real_t cusum; /**< one-sided CUSUM, noise standard deviations */
+    nte_real_t x0;    /**< the onset segment: its first stage position, mm ... */
+    nte_real_t sh, se, shh, she; /**< ... and its sums of h, e, h^2, h e (h = x - x0) */
+    nte_real_t surface;          /**< stage position, mm; NaN until found */
+} nte_contact_t;
+
 /**
  * One estimator.  Allocate it anywhere; initialise with nte_init.  Every field except
  * `counters` is private: read results through nte_step's output and nte_get_params.
@@ -444,6 +527,7 @@ typedef struct nte_t {
 #if NTE_ROBUST_BUFFER_LEN > 0
     nte_robust_t robust;
 #endif
+    nte_contact_t contact;
 } nte_t;
 
 /**

@@ -1,11 +1,14 @@
 /*
  * The public API of nte.h: nte_init, nte_reset, nte_step (sample validation and dispatch to
  * the estimator), nte_get_params, nte_param_name.  The reference composes the same way:
- * FilterBank.step validates and advances the bank (nte_bank.c); RobustEstimator.step runs
- * the bank's step, then its own (nte_robust.c).  This file uses both components; the bank
- * knows nothing of the robust estimator.
+ * FilterBank.step validates the sample, passes it through the contact front end when it is
+ * on (nte_contact.c: stage -> tissue depth, force -> force - tare) and advances the bank
+ * (nte_bank.c); RobustEstimator.step runs the bank's step, then its own (nte_robust.c) on
+ * what the bank was given.  This file uses the three components; the bank knows nothing of
+ * the other two.
  */
 #include "nte_bank.h"
+#include "nte_contact.h"
 #include "nte_robust.h"
 
 static const char* const param_names[NTE_PARAM_COUNT] = {
@@ -17,9 +20,23 @@ const char* nte_param_name(const nte_param_id_t id)
     return ((i >= 0) && (i < NTE_PARAM_COUNT)) ? param_names[i] : "?";
 }
 
+/* The contact front end's published fields: its state, or zeros when it is off. */
+static void publish_contact(nte_t* self)
+{
+    if (self->cfg.contact.enabled) {
+        nte_contact_publish(self, &self->last);
+    } else {
+        self->last.surface_mm = NTE_C(0.0);
+        self->last.tare_n = NTE_C(0.0);
+        self->last.contact = nte_contact_air;
+    }
+}
+
 static void start(nte_t* self)
 {
     nte_bank_start(self);
+    nte_contact_start(self);
+    publish_contact(self);
 #if NTE_ROBUST_BUFFER_LEN > 0
     nte_robust_start(self);
 #endif
@@ -63,8 +80,12 @@ nte_err_t nte_step(nte_t* self, const nte_sample_t* sample, nte_output_t* out)
     const nte_real_t v = sample->velocity_mm_s;
     const nte_real_t y = sample->force_n;
     const bool finite = nte_isfinite(l_in) && nte_isfinite(v) && nte_isfinite(y);
-    const bool in_range = (l_in >= cfg->depth_min_mm) && (l_in <= cfg->depth_max_mm) &&
+    /* with the contact front end the depth is the stage position: its origin is arbitrary and
+     * the air gap is no error, so it is accepted within +-depth_max_mm */
+    const nte_real_t l_min = cfg->contact.enabled ? -cfg->depth_max_mm : cfg->depth_min_mm;
+    const bool in_range = (l_in >= l_min) && (l_in <= cfg->depth_max_mm) &&
                           (nte_abs(v) <= cfg->speed_max_mm_s) && (nte_abs(y) <= cfg->force_max_n);
+    nte_sample_t fed = *sample; /* what the bank (and the robust estimator) is given */
     const bool later = (!self->initialised) || (sample->t_us > self->t_prev_us);
     const bool valid = finite && in_range && later;
     if (!finite) {
@@ -77,23 +98,28 @@ nte_err_t nte_step(nte_t* self, const nte_sample_t* sample, nte_output_t* out)
         const bool first = !self->initialised;
         const int64_t dt_us = first ? 1 : (sample->t_us - self->t_prev_us);
         const nte_real_t dt = (nte_real_t)dt_us / NTE_C(1.0e6);
-        nte_bank_advance(self, first, dt, l_in, v, y, &self->last);
+        if (cfg->contact.enabled) {
+            /* stage and raw force -> tissue depth and tare-free force */
+            nte_contact_step(self, l_in, v, y, &fed.depth_mm, &fed.force_n);
+        }
+        nte_bank_advance(self, first, dt, fed.depth_mm, v, fed.force_n, &self->last);
         if (first) {
             self->last.status |= NTE_STATUS_INIT;
         } else {
             self->k_mod3 = (uint8_t)((self->k_mod3 + 1U) % 3U);
         }
         self->t_prev_us = sample->t_us;
-        self->l_prev = l_in;
+        self->l_prev = fed.depth_mm;
         self->initialised = true;
     }
     if (!valid) {
         self->last.status = NTE_STATUS_REJECTED;
     }
+    publish_contact(self);
 #if NTE_ROBUST_BUFFER_LEN > 0
     if (cfg->estimator == nte_estimator_robust) {
         /* RobustEstimator.step: after the bank's step of the same sample */
-        self->last.status |= nte_robust_step(self, sample, valid);
+        self->last.status |= nte_robust_step(self, &fed, valid);
         self->last.confidence = self->robust.confidence;
     }
 #endif

@@ -57,6 +57,15 @@ static void set_common(nte_config_t* cfg, const int32_t model, const nte_schedul
     cfg->robust.lm_lambda0 = NTE_K_ROB_LM_LAMBDA0;
     cfg->robust.converged_confidence = NTE_K_ROB_CONVERGED_CONFIDENCE;
     cfg->robust.converged_change = NTE_K_ROB_CONVERGED_CHANGE;
+    cfg->contact.enabled = false;
+    cfg->contact.surface_mm = (nte_real_t)NAN; /* detect the surface */
+    cfg->contact.k_sigma = NTE_K_CON_K_SIGMA;
+    cfg->contact.floor_n = NTE_K_CON_FLOOR_N;
+    cfg->contact.run_samples = NTE_CON_DEF_RUN_SAMPLES;
+    cfg->contact.tare_samples = NTE_CON_DEF_TARE_SAMPLES;
+    cfg->contact.learn_samples = NTE_CON_DEF_LEARN_SAMPLES;
+    cfg->contact.learn_gate_sigma = NTE_K_CON_LEARN_GATE_SIGMA;
+    cfg->contact.cusum_drift_sigma = NTE_K_CON_CUSUM_DRIFT_SIGMA;
 }
 
 void nte_config_default(nte_config_t* cfg, const int32_t model, const nte_schedule_t schedule)
@@ -141,6 +150,42 @@ static nte_err_t check_robust(const nte_robust_config_t* rc)
     return nte_err_ok;
 }
 #endif
+
+/* The contact front end's fields (checked only when it is on): ContactConfig.validate, ranges
+ * generated from reference_py/config.py into nte_constants.h. */
+static nte_err_t check_contact(const nte_contact_config_t* cc, const nte_real_t depth_max_mm)
+{
+    /* NaN asks for detection; a known surface must be a stage position the range accepts */
+    const nte_real_t s = cc->surface_mm;
+    if (!isnan(s) && !(nte_isfinite(s) && (nte_abs(s) <= depth_max_mm))) {
+        return nte_err_bad_contact;
+    }
+    if ((cc->run_samples < NTE_RANGE_CON_RUN_SAMPLES_MIN) ||
+        (cc->run_samples > NTE_RANGE_CON_RUN_SAMPLES_MAX) ||
+        (cc->tare_samples < NTE_RANGE_CON_TARE_SAMPLES_MIN) ||
+        (cc->tare_samples > NTE_RANGE_CON_TARE_SAMPLES_MAX) ||
+        (cc->learn_samples < NTE_RANGE_CON_LEARN_SAMPLES_MIN) ||
+        (cc->learn_samples > NTE_RANGE_CON_LEARN_SAMPLES_MAX) ||
+        (cc->learn_samples > cc->tare_samples)) {
+        return nte_err_bad_contact;
+    }
+    const nte_real_t positive[] = {NTE_CONTACT_POSITIVE_FIELDS(cc)};
+    const nte_real_t positive_max[] = {NTE_CONTACT_POSITIVE_MAX};
+    for (size_t i = 0U; i < (sizeof positive / sizeof positive[0]); i++) {
+        if ((check_positive(positive[i]) != nte_err_ok) || (positive[i] > positive_max[i])) {
+            return nte_err_bad_contact;
+        }
+    }
+    const nte_real_t nonnegative[] = {NTE_CONTACT_NONNEGATIVE_FIELDS(cc)};
+    const nte_real_t nonnegative_max[] = {NTE_CONTACT_NONNEGATIVE_MAX};
+    for (size_t i = 0U; i < (sizeof nonnegative / sizeof nonnegative[0]); i++) {
+        if ((check_nonnegative(nonnegative[i]) != nte_err_ok) ||
+            (nonnegative[i] > nonnegative_max[i])) {
+            return nte_err_bad_contact;
+        }
+    }
+    return nte_err_ok;
+}
 
 nte_err_t nte_config_check(const nte_config_t* cfg)
 {
@@ -235,6 +280,12 @@ nte_err_t nte_config_check(const nte_config_t* cfg)
         /* the refinement's batch fit simulates Models I and II only (nte.h, THE ROBUST
          * ESTIMATOR) */
         return nte_err_bad_estimator;
+    }
+    if (cfg->contact.enabled) {
+        const nte_err_t e = check_contact(&cfg->contact, cfg->depth_max_mm);
+        if (e != nte_err_ok) {
+            return e;
+        }
     }
     if (cfg->estimator == nte_estimator_robust) {
 #if NTE_ROBUST_BUFFER_LEN > 0

@@ -83,6 +83,14 @@ def lib_header() -> str:
     for f, hi in {**config.UPPER_BOUNDS, **config.ROBUST_UPPER_BOUNDS}.items():
         rows.append(pair("NTE_K_RANGE_" + f.upper() + "_MAX", hi, hi))
     rows.append(pair("NTE_K_RANGE_NOMINAL_ABS_MAX", config.NOMINAL_ABS_MAX, config.NOMINAL_ABS_MAX))
+    # the contact front end (reference_py/contact.py): ContactConfig's real defaults and the
+    # upper bounds of its real fields (the default surface, NaN, is written by nte_config.c)
+    cc = config.ContactConfig()
+    for f in (*config.CONTACT_POSITIVE_BOUNDS, *config.CONTACT_NONNEGATIVE_BOUNDS):
+        v = float(getattr(cc, f))
+        rows.append(pair("NTE_K_CON_" + f.upper(), v, v))
+    for f, hi in {**config.CONTACT_POSITIVE_BOUNDS, **config.CONTACT_NONNEGATIVE_BOUNDS}.items():
+        rows.append(pair("NTE_K_RANGE_CON_" + f.upper() + "_MAX", hi, hi))
     rows.append(pair("NTE_K_ROB_COST_HUGE", robust.COST_HUGE, robust.COST_HUGE))
     rows.append(pair("NTE_K_ROB_SURE", 0.99, 0.99))
     rows.append(pair("NTE_K_ROB_LAMBDA_MIN", 1e-7, 1e-7))
@@ -125,7 +133,8 @@ def range_lines() -> list[str]:
            "/* NONNEGATIVE_FIELDS, ROBUST_INT_RANGES, ROBUST_POSITIVE_FIELDS; the real */",
            "/* upper bounds are the NTE_K_RANGE_* constants above). */"]
     for prefix, table in (("NTE_RANGE_", config.INT_RANGES),
-                          ("NTE_RANGE_ROB_", config.ROBUST_INT_RANGES)):
+                          ("NTE_RANGE_ROB_", config.ROBUST_INT_RANGES),
+                          ("NTE_RANGE_CON_", config.CONTACT_INT_RANGES)):
         for name, (lo, hi) in table.items():
             out.append(f"#define {prefix}{name.upper()}_MIN {lo}")
             out.append(f"#define {prefix}{name.upper()}_MAX {hi}")
@@ -135,6 +144,16 @@ def range_lines() -> list[str]:
                                 config.ROBUST_POSITIVE_FIELDS)):
         body = ", ".join(f"({arg})->{f}" for f in fields)
         out.append(f"#define {macro}({arg}) {body}")
+    # the contact front end: integer defaults, and its real fields beside their upper bounds
+    # (CONTACT_POSITIVE_BOUNDS, CONTACT_NONNEGATIVE_BOUNDS; the bounds are NTE_K_RANGE_CON_*)
+    cc = config.ContactConfig()
+    for name in config.CONTACT_INT_RANGES:
+        out.append(f"#define NTE_CON_DEF_{name.upper()} {getattr(cc, name)}")
+    for macro, table in (("NTE_CONTACT_POSITIVE", config.CONTACT_POSITIVE_BOUNDS),
+                         ("NTE_CONTACT_NONNEGATIVE", config.CONTACT_NONNEGATIVE_BOUNDS)):
+        out.append(f"#define {macro}_FIELDS(k) " + ", ".join(f"(k)->{f}" for f in table))
+        out.append(f"#define {macro}_MAX " +
+                   ", ".join(f"NTE_K_RANGE_CON_{f.upper()}_MAX" for f in table))
     return out
 
 

@@ -196,6 +196,15 @@ def build_parser() -> argparse.ArgumentParser:
     m3.add_argument("--no-direction-memory", action="store_true",
                     help="tanh(v/eps) instead of the direction state (default: on)")
     add_unit_arguments(e)
+    e.add_argument("--contact", choices=("on", "off"), default=None,
+                   help="the surface and tare front end (default: off): the depth column is "
+                        "the stage position, the needle starts in the air; the tare is learned "
+                        "there, contact is found from the force onset and the bank gets the "
+                        "depth below the surface found; adds the columns surface_mm, tare_n, "
+                        "contact (0 air, 1 tissue)")
+    e.add_argument("--surface", type=bounded(-500.0, 500.0, " mm"), metavar="MM",
+                   help="a known surface (stage position, -500..500 mm) instead of finding it; "
+                        "turns the front end on (default: none, found from the force)")
     e.add_argument("--out", required=True, metavar="EST.csv", help="the estimates to write")
     e.add_argument("--plot", metavar="EST.png", help="also draw force and parameters (PNG; default: no plot)")
 
@@ -276,6 +285,17 @@ def _simulate(a: argparse.Namespace) -> int:
     return 0
 
 
+def _contact_config(a: argparse.Namespace) -> "ContactConfig | None":
+    """The front end asked for by --contact / --surface (None: off)."""
+    from ..config import ContactConfig
+    if a.surface is not None and a.contact == "off":
+        raise ValueError("argument --surface: a known surface needs the front end (--contact on)")
+    if a.contact != "on" and a.surface is None:
+        return None
+    return ContactConfig(enabled=True,
+                         surface_mm=math.nan if a.surface is None else float(a.surface))
+
+
 def _estimate(a: argparse.Namespace) -> int:
     from .csvio import Limits
     from .estimate import estimate_csv_lines, make_config, run_estimate
@@ -286,10 +306,16 @@ def _estimate(a: argparse.Namespace) -> int:
         out = outs.add(a.out, "--out")
         png = outs.add(a.plot, "--plot") if a.plot else None
         cfg = make_config(preset, a.model, a.profile, a.schedule, overrides)
-        trial = read_trial(a.csv, units=units_from(a), limits=Limits.from_config(cfg))
+        from dataclasses import replace
+        contact = _contact_config(a)
+        limits = Limits.from_config(cfg)
+        if contact is not None:
+            # the stage position may lie anywhere in +-depth_max_mm (the air gap is no error)
+            limits = replace(limits, depth_min_mm=-limits.depth_max_mm)
+        trial = read_trial(a.csv, units=units_from(a), limits=limits)
         run = run_estimate(trial, preset, a.model, a.estimator, a.precision, a.profile,
                            a.schedule, a.init_seed, a.init_factor, progress=True,
-                           overrides=overrides)
+                           overrides=overrides, contact=contact)
         outs.write_lines(out, estimate_csv_lines(run))
         if png is not None:
             from .plotting import plot_estimate

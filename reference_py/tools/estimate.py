@@ -6,7 +6,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..bank import FilterBank, identified_names
-from ..config import EstimatorConfig, profile_config
+from ..config import ContactConfig, EstimatorConfig, profile_config
 from .csvio import Trial, format_real, time_us
 from ..fmath import Array, real_for
 from ..params import Preset
@@ -30,6 +30,8 @@ class EstimateRun:
     params_sd: Array
     names: tuple[str, ...]
     confidence: Array | None = None   # robust estimator only: confidence of the last refinement
+    # the contact front end, when on: surface_mm (stage mm, NaN until found), tare_n (N), state
+    contact: tuple[Array, Array, Array] | None = None
 
 
 def make_config(preset: Preset, model: int, profile: str, schedule: str,
@@ -44,11 +46,14 @@ def make_config(preset: Preset, model: int, profile: str, schedule: str,
 def run_estimate(trial: Trial, preset: Preset, model: int, estimator: str = "bank",
                  precision: str = "float64", profile: str = "default", schedule: str = "all",
                  init_seed: int = 0, init_factor: float = 5.0, progress: bool = False,
-                 overrides: dict[str, object] | None = None) -> EstimateRun:
+                 overrides: dict[str, object] | None = None,
+                 contact: ContactConfig | None = None) -> EstimateRun:
     if estimator not in ESTIMATORS:
         raise ValueError(f"unknown estimator {estimator!r} (known: {', '.join(ESTIMATORS)})")
     R = real_for(precision)
     cfg = make_config(preset, model, profile, schedule, overrides)
+    if contact is not None:
+        cfg = replace(cfg, contact=contact)
     nominal = start_values(preset.params.as_list(), init_seed, init_factor, model)
     if estimator == "robust":
         from ..robust import RobustEstimator
@@ -65,6 +70,8 @@ def run_estimate(trial: Trial, preset: Preset, model: int, estimator: str = "ban
     pars = np.zeros((n, len(names)), dtype=R.dtype)
     sds = np.zeros((n, len(names)), dtype=R.dtype)
     conf = np.zeros(n, dtype=R.dtype) if estimator == "robust" else None
+    cont = ((np.zeros(n, dtype=R.dtype), np.zeros(n, dtype=R.dtype), np.zeros(n, dtype=np.uint32))
+            if cfg.contact.enabled else None)
     it = range(n)
     if progress:
         from tqdm import tqdm
@@ -78,8 +85,10 @@ def run_estimate(trial: Trial, preset: Preset, model: int, estimator: str = "ban
         pars[k], sds[k] = o.params[:, 0], o.params_sd[:, 0]
         if conf is not None:
             conf[k] = est.confidence[0]  # type: ignore[union-attr]
+        if cont is not None:
+            cont[0][k], cont[1][k], cont[2][k] = o.surface_mm[0], o.tare_n[0], o.contact[0]
     return EstimateRun(precision, model, trial.t_s, trial.depth_mm, trial.force_n, fh, z, inn, st,
-                       pars, sds, names, conf)
+                       pars, sds, names, conf, cont)
 
 
 def estimate_csv_lines(run: EstimateRun) -> list[str]:
@@ -89,6 +98,8 @@ def estimate_csv_lines(run: EstimateRun) -> list[str]:
         header += [name, name + "_sd"]
     if run.confidence is not None:
         header.append("confidence")
+    if run.contact is not None:
+        header += ["surface_mm", "tare_n", "contact"]
     lines = [",".join(header)]
     p = run.precision
     for k in range(len(run.t_s)):
@@ -99,6 +110,9 @@ def estimate_csv_lines(run: EstimateRun) -> list[str]:
             cells += [format_real(run.params[k, j], p), format_real(run.params_sd[k, j], p)]
         if run.confidence is not None:
             cells.append(format_real(run.confidence[k], p))
+        if run.contact is not None:
+            cells += [format_real(run.contact[0][k], p), format_real(run.contact[1][k], p),
+                      "%d" % int(run.contact[2][k])]
         lines.append(",".join(cells))
     return lines
 
