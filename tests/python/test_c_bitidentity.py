@@ -7,7 +7,8 @@ equals the float32 reference's and the double build's the float64 reference's, c
 character (every real is printed with enough digits to round-trip, so equal text is equal bits);
 the largest ULP distance is printed and must be 0.  Two more runs compare whole files written
 by both command-line programs (`nte-ref estimate` and nte-run), on an input without a velocity
-column (central differences) and with the paper tuning profile.
+column (central differences) and with the paper tuning profile; two more with the contact
+front end on, on a measured-like phantom record that starts in the air.
 """
 from __future__ import annotations
 
@@ -130,3 +131,25 @@ def test_model3_whole_files_bit_identical(model3_csv, precision, extra, tmp_path
                            precision)
         pytest.fail(f"files differ, max ULP {ulp}")
     print(f"\nModel III {precision} {' '.join(extra)}: identical files, max ULP 0")
+
+
+@pytest.mark.parametrize("precision,extra", [
+    ("float32", ["--model", "2", "--contact", "on"]),
+    ("float64", ["--model", "1", "--contact", "on", "--schedule", "rotate"]),
+])
+def test_whole_files_with_the_contact_front_end(precision, extra, tmp_path):
+    # a measured-like record (phantom lab seed 11, 3 mm/s, 75 Hz): the stage starts in the
+    # air 3 mm before its zero, a tare, noise; the front end finds the surface and the bank
+    # runs on the depth below it (tests/python/test_contact.py checks what it finds)
+    from reference_py.tools.phantom import LAB, simulate_phantom, write_phantom
+    from dataclasses import replace
+    rec = simulate_phantom(LAB, seed=11, rate_hz=75.0, speeds_mm_s=(3.0,))
+    csv = tmp_path / "air.csv"
+    write_phantom(csv, replace(rec, depth_mm=rec.depth_mm - 3.0))
+    c_bytes, py_bytes = _cli_pair(precision, csv, extra, tmp_path)
+    assert c_bytes.split(b"\n")[0].endswith(b",surface_mm,tare_n,contact")
+    if c_bytes != py_bytes:
+        ulp = ulp_distance(c_bytes.decode().split("\n")[:-1], py_bytes.decode().split("\n")[:-1],
+                           precision)
+        pytest.fail(f"files differ, max ULP {ulp}")
+    print(f"\n{precision} {' '.join(extra)} (front end on): identical files, max ULP 0")
