@@ -262,15 +262,29 @@ static nte_real_t relax_terms(const nte_t* self, const step_ctx_t* c, const size
     return (nr == 1U) ? (g[0] * mp[0]) : ((g[0] * mp[0]) + (g[1] * mp[1]));
 }
 
-/* bank._direction: the direction state after the depth step l - l_prev, ds/dl =
- * (1 - s sign(dl)) / delta integrated exactly: s' = sigma + (s - sigma) exp(-|dl| / delta),
- * sigma = sign(dl) (s held when dl = 0). */
-static nte_real_t direction(const nte_t* self, const nte_real_t l, const nte_real_t l_prev)
+/* Model III's exponentials of a sample (bank._direction, bank._advance): e[0] =
+ * exp(-|dl| / delta) for the direction state, e[1], e[2] = exp(-dt / tau_i) for the relaxation
+ * branches, only those in use.  One call site of the inline nte_exp keeps the code small. */
+static void model3_exps(const nte_t* self, const bool dir, const size_t nr, const nte_real_t dl,
+                        const nte_real_t dt, nte_real_t e[3])
 {
-    const nte_real_t dl = l - l_prev;
+    const nte_real_t den[3] = {self->cfg.presliding_mm, self->cfg.tau_fast_s,
+                               self->cfg.tau_slow_s};
+    for (size_t i = 0U; i < 3U; i++) {
+        e[i] = NTE_C(0.0);
+        if ((i == 0U) ? dir : (i <= nr)) {
+            e[i] = nte_exp(-(((i == 0U) ? nte_abs(dl) : dt) / den[i]));
+        }
+    }
+}
+
+/* bank._direction: the direction state after the depth step dl, ds/dl = (1 - s sign(dl)) /
+ * delta integrated exactly: s' = sigma + (s - sigma) exp(-|dl| / delta), sigma = sign(dl)
+ * (s held when dl = 0); E = exp(-|dl| / delta). */
+static nte_real_t direction(const nte_t* self, const nte_real_t dl, const nte_real_t E)
+{
     const nte_real_t sig =
         (dl > NTE_C(0.0)) ? NTE_C(1.0) : ((dl < NTE_C(0.0)) ? NTE_C(-1.0) : NTE_C(0.0));
-    const nte_real_t E = nte_exp(-(nte_abs(dl) / self->cfg.presliding_mm));
     return sig + ((self->sdir - sig) * E);
 }
 
@@ -481,16 +495,20 @@ void nte_bank_advance(nte_t* self, const bool first, const nte_real_t dt, const 
     c.gap = (!first) && (dt > self->cfg.dt_max_s);
     const bool m3 = self->cfg.model == 3;
     const size_t nr = relax_count(self);
+    /* 0 at the surface and at the first sample, like z */
+    const bool dir = m3 && self->cfg.direction_memory && !(c.surface || first);
+    const nte_real_t dl = c.l - c.l_prev;
+    nte_real_t e3[3];
+    model3_exps(self, dir, nr, dl, dt, e3);
     if (m3 && self->cfg.direction_memory) {
-        /* 0 at the surface and at the first sample, like z */
-        c.s = (c.surface || first) ? NTE_C(0.0) : direction(self, c.l, c.l_prev);
+        c.s = dir ? direction(self, dl, e3[0]) : NTE_C(0.0);
     } else {
         c.s = nte_model_smooth_sign(v, self->cfg.eps_mm_s);
     }
     /* each relaxation branch's decay over this sample: exact for an input held over the
      * sample, stable at every rate */
-    c.a_rel[0] = (nr > 0U) ? nte_exp(-(dt / self->cfg.tau_fast_s)) : NTE_C(0.0);
-    c.a_rel[1] = (nr > 1U) ? nte_exp(-(dt / self->cfg.tau_slow_s)) : NTE_C(0.0);
+    c.a_rel[0] = e3[1];
+    c.a_rel[1] = e3[2];
     c.z_prev = self->z;
     c.rotate = self->cfg.schedule == nte_schedule_rotate;
     uint32_t status = c.surface ? NTE_STATUS_OUT_OF_TISSUE : 0U;
@@ -557,8 +575,7 @@ void nte_bank_advance(nte_t* self, const bool first, const nte_real_t dt, const 
     }
     if (nr > 0U) {
         /* commit the memories with the posterior elastic force (0 out of tissue and at the
-         * first sample, like z) */
-        (void)relax_terms(self, &c, nr, fe, g, mp);
+         * first sample, like z): mp holds them for the final fe (the last relax_terms) */
         for (size_t k = 0U; k < nr; k++) {
             self->mrel[k] = (first || c.surface) ? NTE_C(0.0) : mp[k];
         }
