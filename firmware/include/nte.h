@@ -123,8 +123,9 @@
  *   squares) to the force over stage position along the onset segment, the inward samples
  *   above the tare that end at the detection, and the surface is where it crosses the tare
  *   (kept within one segment length before the segment and not deeper than the detection;
- *   the segment's start if the fit does not rise).  On the phantom: within 0.1 mm of the
- *   truth at the median, 0.25 mm at worst, at 1-3 mm/s and 75-200 Hz.
+ *   the segment's start if the fit does not rise).  On the phantom (held-out seeds, 1-3
+ *   mm/s, 75-200 Hz): 0.01-0.03 mm from the truth at the median, 0.26 mm at worst
+ *   (tests/python/test_contact.py prints the figures).
  *   In contact the tare and noise are held.  Contact ends at a sample with the stage back at
  *   or above the surface and |f - tare| within the threshold; everything is re-armed then
  *   (a new tare learned in the air, a new surface found at the next insertion).
