@@ -11,7 +11,17 @@
  *
  *   with depth l in mm, velocity v in mm/s, force f in N, z dimensionless and the smooth sign
  *   s(v) = tanh(v / eps).  Each sample feeds the paper's bank of three joint state-parameter
- *   extended Kalman filters in switching mode (Model I or Model II, paper Table I).  Parameters
+ *   extended Kalman filters in switching mode (Model I or Model II, paper Table I).
+ *
+ *   Model III (cfg.model = 3; reference_py/MODEL.md §3b) is Model II plus two parts, each
+ *   switchable: a direction state s driven by the travelled depth (Dahl: ds/dl =
+ *   (1 - s sign(dl)) / presliding_mm, integrated exactly per sample) replaces tanh(v/eps), so
+ *   the friction holds in a dwell and turns over within a few mm at a reversal; and one or
+ *   two relaxation branches (time constants tau_fast_s, tau_slow_s) keep memories
+ *   m_i <- a_i m_i + (1 - a_i) f_e of the elastic force f_e, a_i = exp(-dt / tau_i), and publish
+ *   f = f_e - sum g_i m_i: a held force decays by sum g_i and recovers after an unloading.  The
+ *   strengths g_fast, g_slow are identified (as odds, g_i = G_i / (1 + sum G) < 1) by filter 1
+ *   with sigma0; the memories are treated as known inputs (JACOBIANS.md §7).  Parameters
  *   are identified in log form relative to nominal values, theta = nominal exp(u), so every
  *   state stays O(1) in float32.  The derivations of the Jacobians are in
  *   reference_py/JACOBIANS.md; the model reading (sign of the velocity, z reset at the surface)
@@ -39,8 +49,10 @@
  *   src/nte.c           init, step: validation    bank.py FilterBank.step, robust.py
  *                       and dispatch              RobustEstimator.step
  *   src/nte_bank.c/.h   the bank of three EKFs:   bank.py FilterBank (_advance; _predict,
- *                       predict, measure,         _measure, _update_and_guard, _guard)
- *                       update_and_guard, guard
+ *                       predict, measure,         _measure, _update_and_guard, _guard;
+ *                       update_and_guard, guard;  Model III: _direction, _relax_terms,
+ *                       Model III's direction     _relax_output, _relax_fractions,
+ *                       state and relaxation      _relax_nominal)
  *   src/nte_robust.c/.h the robust estimator      robust.py RobustEstimator, ldlt_solve
  *   src/nte_contact.c/.h the surface and tare     contact.py ContactFrontEnd
  *                       front end
@@ -67,6 +79,11 @@
  *   The library never allocates, has no global or static mutable state and no recursion; all
  *   working memory is the instance plus a fixed, small stack frame (measure it with
  *   -fstack-usage).  Several instances may coexist.
+ *   Model III's share of these sizes: NTE_STATE_MAX = 4 (three 4 x 4 covariances instead of
+ *   3 x 3: +84 / +168 bytes), nine parameters instead of seven in the config and the model
+ *   (+48 / +96), its config fields, direction state and two memories (+28 / +40), and the LM
+ *   workspace sized for NTE_IDENTIFIED_MAX = 7 (+120 / +240): without the contact front end
+ *   680 / 1264 bytes for the bank alone and 2808 / 5480 with the default buffer.
  *
  * THREAD SAFETY
  *   None.  An instance must not be used from two contexts at once; different instances are
@@ -76,7 +93,12 @@
  *   Schedule "all": 3 filters x (RK3 with sensitivities: 3n+1 exp + 3n div, 3x3 covariance
  *   prediction, scalar Joseph update: 1 div per state) + up to 3 exp to refresh parameters;
  *   roughly 700 flops and 17 exp for n = 1.  Schedule "rotate" costs about half.  Bounded: no
- *   loop depends on the data.
+ *   loop depends on the data.  Model III: filter 1's covariance is 4 x 4 (prediction and
+ *   Joseph update about 2.4x those of Model II's 2 x 2 filter 1), plus per sample 1 exp and
+ *   1 div for the direction state (instead of tanh), 1 exp and 1 div per relaxation branch,
+ *   and per filter about 10 flops and 1 div for the memories and the Jacobian's scaling, up
+ *   to 2 exp more to refresh the strengths; with two branches roughly 1.3x Model II's
+ *   flops and 20 exp.
  *
  * THE ROBUST ESTIMATOR (cfg.estimator = nte_estimator_robust; reference_py/robust.py)
  *   The bank above, plus a batch output-error refinement once per insertion.  While the needle
@@ -89,6 +111,10 @@
  *   the nominal), keeps the better, and restarts the bank from it (u = 0 around the refined
  *   values, var(u) = restart_p0_u, z and the time line carry on).  That sample is flagged
  *   NTE_STATUS_REFINED; nte_output_t.confidence holds the fit's confidence.
+ *   Model III: refused (nte_init returns nte_err_bad_estimator).  The refinement's batch fit
+ *   simulates Models I and II only; Model III would need the direction state and both
+ *   relaxation memories in that simulation, their sensitivities to the nine-parameter fit
+ *   (g_fast, g_slow as odds) and a 7 x 7 normal-equation solve.
  *   Cost on top of the bank, per sample: buffer bookkeeping only (a few integer operations,
  *   one int64 -> real conversion and one division; a compaction of buffer_len/2 x 4 copies
  *   at most once per buffer_len/2 kept samples).  Cost of one refinement (at the sample that
@@ -234,7 +260,8 @@ typedef enum nte_err_t {
     nte_err_bad_nominal = -9,     /**< a nominal parameter is NaN, infinite or |x| > 1000 */
     nte_err_bad_f1 = -10,         /**< nominal f1 does not exceed -f2 (g(0) must be > 0) */
     nte_err_bad_estimator = -11,  /**< estimator is not a nte_estimator_t value, or robust
-                                       while NTE_ROBUST_BUFFER_LEN is 0 */
+                                       while NTE_ROBUST_BUFFER_LEN is 0, or robust with
+                                       Model III (not supported) */
     nte_err_bad_robust = -12,     /**< a cfg.robust field is outside its range */
     nte_err_bad_contact = -13     /**< a cfg.contact field is outside its range (checked
                                        when cfg.contact.enabled) */
@@ -552,7 +579,9 @@ nte_err_t nte_step(nte_t* self, const nte_sample_t* sample, nte_output_t* out);
 
 /**
  * The identified parameters (Model I: sigma0, sigma1, sigma2, f1, f2, alpha; Model II: sigma0,
- * sigma1, sigma2, f1, beta — reference MODEL_PARAMS order) with their standard deviations.
+ * sigma1, sigma2, f1, beta; Model III: Model II's, then g_fast and g_slow for the relaxation
+ * branches in use — reference bank.identified_names order) with their standard deviations
+ * (the strengths as fractions g, sd |g (1 - g)| sd(u)).
  * Writes at most `capacity` entries and returns how many the model identifies.  Before the
  * first accepted sample every value and sd is 0 (as the reference reports).  Cost: one sqrt
  * per parameter.
