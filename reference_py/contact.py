@@ -40,6 +40,10 @@ and the force back near the tare (|e| <= thr).  The learning then starts again f
 A known surface (surface_mm finite, e.g. a robot registered to the tissue) replaces the
 detection: CONTACT while x > surface_mm, AIR otherwise; the tare is learned in the air as above.
 
+Limits: a record must start in the air (what is learned first is the tare), contact is looked
+for only while the stage moves inward, and a record whose stage never returns to the surface
+stays in contact.
+
 Everything is element-wise on a batch axis, like the bank.
 """
 from __future__ import annotations

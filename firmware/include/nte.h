@@ -157,6 +157,10 @@
  *   (a new tare learned in the air, a new surface found at the next insertion).
  *   A known surface (cfg.contact.surface_mm finite) replaces the detection: contact while
  *   the stage is beyond it.  Published in nte_output_t: surface_mm, tare_n, contact.
+ *   Limits: a record must start in the air with at least learn_samples samples before the
+ *   tissue (what it learns first is taken as the tare); contact is looked for only while the
+ *   stage moves inward; a record whose stage never comes back to the surface stays in
+ *   contact.
  *   Cost per sample: about 30 flops, 1 sqrt and 2 divisions (4 more at the sample that
  *   finds the surface); memory: nte_contact_t in the instance.
  */
