@@ -121,6 +121,15 @@ def test_surface_at_each_speed(speed):
           [simulate_phantom(LAB, seed=s, speeds_mm_s=(speed,)) for s in range(201, 216)])
 
 
+@pytest.mark.parametrize("label,overrides", [
+    ("50 mN noise at 1 mm/s", {"noise_n": 0.05, "speeds_mm_s": (1.0,)}),
+    ("timestamp jitter 0.2 and two gaps", {"jitter": 0.2, "gaps": 2}),
+])
+def test_surface_on_harder_sensors(label, overrides):
+    check(f"lab seeds 201-215, {label}",
+          [simulate_phantom(LAB, seed=s, **overrides) for s in range(201, 216)])
+
+
 def test_two_insertions_in_one_file_are_each_found():
     # two cycles (1 and 3 mm/s) per record, each entering from the air: two surfaces, two tares
     records = [simulate_phantom(LAB, seed=s, speeds_mm_s=(1.0, 3.0)) for s in range(201, 211)]
@@ -250,6 +259,8 @@ def _both(precision: str, csv: Path, extra: list[str], tmp: Path) -> tuple[str, 
     ("float32", ["--model", "1", "--contact", "on", "--estimator", "robust",
                  "--init-seed", "3"]),
     ("float64", ["--model", "2", "--surface", "1.5", "--schedule", "rotate"]),
+    ("float32", ["--model", "3", "--contact", "on"]),
+    ("float64", ["--model", "3", "--contact", "on", "--relax-branches", "1"]),
 ])
 def test_c_equals_the_reference_with_the_front_end_on(air_file, precision, extra, tmp_path):
     c_text, py_text = _both(precision, air_file, extra, tmp_path)
