@@ -549,11 +549,12 @@ void nte_bank_advance(nte_t* self, const bool first, const nte_real_t dt, const 
     nte_model_depth_terms(&d, &self->th, c.l);
     nte_model_output(&o, &self->th, &d, self->z, c.s);
     nte_real_t force = o.h;
-    nte_real_t fe = o.h; /* Model III: the elastic force the relaxation memories follow */
+    /* Model III: the branches take their share off the elastic force o.h; mp holds the
+     * memories for the elastic force finally published (committed below) */
     nte_real_t g[2];
-    nte_real_t mp[2];
+    nte_real_t mp[2] = {NTE_C(0.0), NTE_C(0.0)};
     if (nr > 0U) {
-        force = fe - relax_terms(self, &c, nr, fe, g, mp);
+        force = o.h - relax_terms(self, &c, nr, o.h, g, mp);
     }
     if (!in_range(self, &d, self->z, force)) {
         /* never publish a force or z outside their range: z to its steady state, and if the
@@ -564,7 +565,6 @@ void nte_bank_advance(nte_t* self, const bool first, const nte_real_t dt, const 
         const nte_real_t fmax = self->cfg.force_max_n;
         force = o.h;
         if (nr > 0U) {
-            fe = o.h;
             force = o.h - relax_terms(self, &c, nr, o.h, g, mp);
         }
         if (!(nte_abs(force) <= fmax)) {
@@ -575,7 +575,7 @@ void nte_bank_advance(nte_t* self, const bool first, const nte_real_t dt, const 
     }
     if (nr > 0U) {
         /* commit the memories with the posterior elastic force (0 out of tissue and at the
-         * first sample, like z): mp holds them for the final fe (the last relax_terms) */
+         * first sample, like z) */
         for (size_t k = 0U; k < nr; k++) {
             self->mrel[k] = (first || c.surface) ? NTE_C(0.0) : mp[k];
         }
