@@ -147,7 +147,8 @@ class EstimatorConfig:
     force_max_n: float = 50.0          # accepted |force|, N
     # Model III (MODEL.md §3b); Models I and II ignore these fields
     direction_memory: bool = True      # the direction state s (Dahl) replaces tanh(v / eps)
-    presliding_mm: float = 1.5         # its turn-over length delta, mm, > 0, <= 1000
+    presliding_mm: float = 2.5         # its turn-over length delta, mm, > 0, <= 1000 (2.5:
+    #                                    tuned on phantom seeds 1-5; crosses 0 after 1.7 mm)
     relaxation: bool = True            # Maxwell branches take g_i m_i off the elastic force
     relax_branches: int = 2            # 1: the fast branch only; 2: fast and slow
     tau_fast_s: float = 0.3            # time constant of the fast branch, s, > 0, <= 3600

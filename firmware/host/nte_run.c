@@ -94,7 +94,7 @@ static void help(void)
            "  --precision " PRECISION "    the only precision of this binary\n"
            "                         (default: " PRECISION ")\n"
            "  --presliding-mm MM     Model III: turn-over length of the direction state,\n"
-           "                         > 0 and <= 1000 (default: 1.5)\n"
+           "                         > 0 and <= 1000 (default: 2.5)\n"
            "  --tau-fast S           Model III: fast relaxation time constant, s,\n"
            "                         > 0 and <= 3600 (default: 0.3)\n"
            "  --tau-slow S           Model III: slow relaxation time constant, s,\n"
@@ -129,7 +129,7 @@ static int parse_args(int argc, char** argv, args_t* a)
     a->robust = 0;
     a->seed = 0;
     a->factor = 5.0;
-    a->presliding_mm = 1.5;
+    a->presliding_mm = 2.5;
     a->tau_fast_s = 0.3;
     a->tau_slow_s = 3.0;
     a->relax_branches = 2;

@@ -417,7 +417,7 @@ typedef struct nte_config_t {
     bool relaxation;            /**< [true] relaxation branches take sum g_i m_i off the
                                      elastic force */
     int32_t relax_branches;     /**< [2] 1: the fast branch only; 2: fast and slow, 1..2 */
-    nte_real_t presliding_mm;   /**< [1.5] turn-over length delta of s, mm, > 0, <= 1000 */
+    nte_real_t presliding_mm;   /**< [2.5] turn-over length delta of s, mm, > 0, <= 1000 */
     nte_real_t tau_fast_s;      /**< [0.3] time constant of the fast branch, s, > 0, <= 3600 */
     nte_real_t tau_slow_s;      /**< [3] time constant of the slow branch, s, > 0, <= 3600 */
     /** [preset paper-10mms; g_fast 0.15, g_slow 0.25] Nominal (starting) physical values,

@@ -183,7 +183,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="tuning: ours, or the paper's Table I mapped to scaled parameters")
     m3 = e.add_argument_group("Model III (ignored by Models I and II)")
     m3.add_argument("--presliding-mm", type=bounded(0.0, 1000.0, " mm", lo_open=True),
-                    default=1.5, metavar="MM",
+                    default=2.5, metavar="MM",
                     help="turn-over length of the direction state, mm")
     m3.add_argument("--tau-fast", type=bounded(0.0, 3600.0, " s", lo_open=True), default=0.3,
                     metavar="S", help="time constant of the fast relaxation branch, s")
