@@ -207,6 +207,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "turns the front end on (default: none, found from the force)")
     e.add_argument("--out", required=True, metavar="EST.csv", help="the estimates to write")
     e.add_argument("--plot", metavar="EST.png", help="also draw force and parameters (PNG; default: no plot)")
+    e.add_argument("--export-config", metavar="FILE.json",
+                   help="also write what the estimator identified (the final parameters, "
+                        "their sd, Model III's constants) as an estimator configuration, "
+                        "schema nte-estimator-config/1 (default: none)")
 
     v = sub.add_parser("evaluate", help="estimation quality over many seeds (printed table)",
                        description="Simulate the quality scenario (LSPB to 50 mm, 1 s dwell, "
@@ -305,6 +309,7 @@ def _estimate(a: argparse.Namespace) -> int:
     with Outputs() as outs:
         out = outs.add(a.out, "--out")
         png = outs.add(a.plot, "--plot") if a.plot else None
+        exported = outs.add(a.export_config, "--export-config") if a.export_config else None
         cfg = make_config(preset, a.model, a.profile, a.schedule, overrides)
         from dataclasses import replace
         contact = _contact_config(a)
@@ -320,12 +325,18 @@ def _estimate(a: argparse.Namespace) -> int:
         if png is not None:
             from .plotting import plot_estimate
             plot_estimate(run, png)
+        if exported is not None:
+            import json
+            from .estimate import export_config
+            outs.write_text(exported, json.dumps(export_config(run, cfg, preset), indent=2)
+                            + "\n")
         outs.commit()
     print(f"{len(run.t_s)} samples, Model {'I' * a.model}, {a.precision}; "
           f"final estimates (± 1 sd):")
     for j, name in enumerate(run.names):
         print(f"  {name:7s} = {float(run.params[-1, j]):.6g} ± {float(run.params_sd[-1, j]):.3g}")
-    print(f"wrote {a.out}" + (f" and {a.plot}" if a.plot else ""))
+    print(f"wrote {a.out}" + (f" and {a.plot}" if a.plot else "")
+          + (f" and {a.export_config}" if a.export_config else ""))
     print(status_counts(run.status))
     return 0
 

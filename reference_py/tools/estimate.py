@@ -91,6 +91,41 @@ def run_estimate(trial: Trial, preset: Preset, model: int, estimator: str = "ban
                        pars, sds, names, conf, cont)
 
 
+#: the estimator configuration files' schema (the discrepancy workflow writes the same one)
+CONFIG_SCHEMA = "nte-estimator-config/1"
+
+
+def export_config(run: EstimateRun, cfg: EstimatorConfig, preset: Preset) -> dict[str, object]:
+    """What the estimator identified, as an estimator configuration (``--export-config``): the
+    seven force-model parameters (the final estimates of the identified ones, the preset's
+    values of the fixed ones; Model I's beta is its fixed beta0), their standard deviations
+    (0 for the fixed ones), the noise variance and, for Model III, its switches, constants and
+    identified strengths; with the contact front end on, the surface and tare it ended with."""
+    import math
+    from ..params import PARAM_NAMES, RELAX_NAMES
+    final = {nm: float(run.params[-1, j]) for j, nm in enumerate(run.names)}
+    sd = {nm: float(run.params_sd[-1, j]) for j, nm in enumerate(run.names)}
+    params = {nm: final.get(nm, float(getattr(preset.params, nm))) for nm in PARAM_NAMES}
+    if run.model == 1:
+        params["beta"] = float(cfg.beta0)
+    out: dict[str, object] = {
+        "schema": CONFIG_SCHEMA, "source": "nte-ref estimate", "model": run.model,
+        "params": params, "params_sd": {nm: sd.get(nm, 0.0) for nm in PARAM_NAMES},
+        "r_n2": float(cfg.r_n2), "samples": len(run.t_s)}
+    if run.model == 3:
+        out["model3"] = {
+            "direction_memory": cfg.direction_memory, "presliding_mm": cfg.presliding_mm,
+            "relaxation": cfg.relaxation, "relax_branches": cfg.relax_branches,
+            "tau_fast_s": cfg.tau_fast_s, "tau_slow_s": cfg.tau_slow_s,
+            "strengths": {nm: final[nm] for nm in RELAX_NAMES if nm in final},
+            "strengths_sd": {nm: sd[nm] for nm in RELAX_NAMES if nm in sd}}
+    if run.contact is not None:
+        surface = float(run.contact[0][-1])
+        out["surface_mm"] = surface if math.isfinite(surface) else None
+        out["tare_n"] = float(run.contact[1][-1])
+    return out
+
+
 def estimate_csv_lines(run: EstimateRun) -> list[str]:
     """The estimate file, line by line: the same text the C host program writes."""
     header = ["t_s", "force_hat_n", "z", "innovation_n", "status"]
@@ -117,4 +152,5 @@ def estimate_csv_lines(run: EstimateRun) -> list[str]:
     return lines
 
 
-__all__ = ["EstimateRun", "run_estimate", "estimate_csv_lines", "make_config"]
+__all__ = ["EstimateRun", "run_estimate", "estimate_csv_lines", "make_config", "export_config",
+           "CONFIG_SCHEMA"]

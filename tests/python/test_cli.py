@@ -296,3 +296,30 @@ def test_c_run_writes_by_the_safe_writer_rules(sim_csv, tmp_path):
     assert stat.S_IMODE(os.stat(real).st_mode) == 0o640
     n = len(real.read_text().splitlines()) - 1
     assert r.stdout.splitlines()[-1] == f"samples: {n}; rejected 0, gated 0, clipped 0"
+
+
+def test_estimate_exports_what_it_identified(sim_csv, tmp_path, capsys):
+    """--export-config: the final estimates of the identified parameters (the estimate file's
+    last row), the fixed ones at the preset, Model III's constants and strengths."""
+    import json
+    from reference_py.params import PARAM_NAMES, PRESETS
+    out, js = tmp_path / "e.csv", tmp_path / "cfg.json"
+    assert main(["estimate", str(sim_csv), "--model", "3", "--tau-slow", "4", "--out", str(out),
+                 "--export-config", str(js)]) == 0
+    cfg = json.loads(js.read_text())
+    assert cfg["schema"] == "nte-estimator-config/1" and cfg["model"] == 3
+    assert list(cfg["params"]) == list(PARAM_NAMES)
+    header, *rows = out.read_text().splitlines()
+    last = dict(zip(header.split(","), rows[-1].split(",")))
+    for name in ("sigma0", "sigma1", "sigma2", "f1", "beta", "g_fast", "g_slow"):
+        got = cfg["params"].get(name, cfg["model3"]["strengths"].get(name))
+        assert got == float(last[name]), name
+    assert cfg["params"]["alpha"] == PRESETS["paper-10mms"].params.alpha
+    assert cfg["params_sd"]["f2"] == 0.0
+    g = cfg["model3"]["strengths"]
+    assert 0 < g["g_fast"] < 1 and 0 < g["g_slow"] < 1 and g["g_fast"] + g["g_slow"] < 1
+    assert cfg["model3"]["tau_slow_s"] == 4.0 and cfg["model3"]["relax_branches"] == 2
+    # an unwritable place is refused before anything is written
+    assert main(["estimate", str(sim_csv), "--model", "2", "--out", str(tmp_path / "o.csv"),
+                 "--export-config", str(tmp_path / "no" / "c.json")]) == 2
+    assert not (tmp_path / "o.csv").exists()
