@@ -1,0 +1,146 @@
+#!/usr/bin/env bash
+# node_vcan_bus.sh NODE OUT CASE...: the bus half of test_node_vcan.py, run inside the session's
+# kernel by host_bench/with-vcan.  Only what needs AF_CAN runs here -- nte-node, canplayer,
+# candump, cangen -- so a kernel under QEMU's TCG costs seconds; the input logs were written on
+# the host beforehand (node_vcan_driver.py prepare) and the analysis runs on the host afterwards
+# (node_vcan_driver.py analyse).  Every process is started here and stopped by its PID, also
+# when a case fails.  Each case leaves OUT/<case>.done (or OUT/<case>.failed with the reason).
+# Environment: NTE_ENOBUFS_SHIM = the LD_PRELOAD library of the enobufs case.
+set -uo pipefail
+NODE="$1"; OUT="$2"; shift 2
+FRAME_DEPTH=$(cat "$OUT/ids/depth"); OUT_FILTER=$(cat "$OUT/ids/outputs")
+
+pids=()
+started() { pids+=("$1"); }
+stop() {  # PID -> its exit status on stdout
+    local pid="$1" _
+    if kill -0 "$pid" 2>/dev/null; then
+        kill -TERM "$pid" 2>/dev/null
+        for _ in $(seq 1 200); do kill -0 "$pid" 2>/dev/null || break; sleep 0.05; done
+        kill -KILL "$pid" 2>/dev/null
+    fi
+    wait "$pid" 2>/dev/null
+    echo $?
+}
+stop_all() {
+    local i
+    for (( i = ${#pids[@]} - 1; i >= 0; i-- )); do stop "${pids[i]}" >/dev/null; done
+    pids=()
+}
+trap stop_all EXIT
+
+# start_node TAG [ARGS...]: the node on vcan0 with the paper preset; $node_pid; fails if it does
+# not say it is ready within 60 s (a kernel under TCG starts processes slowly)
+start_node() {
+    local tag="$1"; shift
+    rm -f "$OUT/$tag.ready"
+    "$NODE" --iface vcan0 --model 2 --preset paper-10mms --ready "$OUT/$tag.ready" \
+        --stats "$OUT/$tag.stats.json" "$@" 2>"$OUT/$tag.node.err" &
+    node_pid=$!; started "$node_pid"
+    local _
+    for _ in $(seq 1 1200); do
+        [[ -f "$OUT/$tag.ready" ]] && return 0
+        kill -0 "$node_pid" 2>/dev/null || break
+        sleep 0.05
+    done
+    echo "node did not start: $(cat "$OUT/$tag.node.err")" >&2
+    return 1
+}
+
+# start_candump FILE FORMAT [FILTER]: candump of vcan0 (optionally filtered); $dump_pid
+start_candump() {
+    local iface="vcan0${3:+,$3}"
+    candump "$2" -r 16000000 "$iface" >"$1" 2>/dev/null &
+    dump_pid=$!; started "$dump_pid"
+    sleep 0.3
+}
+
+play() { canplayer -I "$1"; }
+
+case_full_rate() {
+    # the outputs from the node's own record of what it sent (a candump of the outputs in a
+    # loaded kernel dropped frames); the input ids recorded with candump -l for the session replay
+    start_node full --record "$OUT/full.sent.log" || return 1
+    rm -rf "$OUT/session"; mkdir -p "$OUT/session"
+    (cd "$OUT/session" && exec candump -l -r 16000000 "vcan0,$FRAME_DEPTH:7FC" 2>/dev/null) &
+    local rec=$!; started "$rec"
+    sleep 0.3
+    play "$OUT/full_in.log" || return 1
+    sleep 0.5
+    stop "$rec" >/dev/null
+    stop "$node_pid" >"$OUT/full.exit"
+    local session; session="$(ls "$OUT"/session/candump-*.log | head -n 1)"
+    start_node again --record "$OUT/again.sent.log" || return 1
+    play "$session" || return 1
+    sleep 0.5
+    stop "$node_pid" >/dev/null
+}
+
+case_bad_traffic() {
+    start_node bad --no-kernel-filter || return 1
+    start_candump "$OUT/bad_cap.log" -L
+    play "$OUT/bad_in.log" || return 1
+    sleep 0.5
+    stop "$dump_pid" >/dev/null
+    stop "$node_pid" >/dev/null
+}
+
+case_cangen() {
+    start_node gen --record "$OUT/gen.sent.log" --received "$OUT/gen.recv.log" || return 1
+    local t0=$EPOCHREALTIME
+    cangen vcan0 -g 2 -I r -L r -D r >/dev/null 2>&1 &
+    local gen=$!; started "$gen"
+    play "$OUT/gen_in.log" || return 1
+    # 60 s of random traffic in all
+    local left; left=$(awk -v a="$t0" -v b="$EPOCHREALTIME" 'BEGIN { d = 60 - (b - a); print (d > 0 ? d : 0) }')
+    sleep "$left"
+    stop "$gen" >/dev/null
+    awk -v a="$t0" -v b="$EPOCHREALTIME" 'BEGIN { printf "%.3f\n", b - a }' >"$OUT/gen.cangen_s"
+    sleep 0.5
+    stop "$node_pid" >/dev/null
+}
+
+case_burst() {
+    start_node burst --record "$OUT/burst.sent.log" --received "$OUT/burst.recv.log" || return 1
+    play "$OUT/burst_in.log" || return 1
+    sleep 0.5
+    stop "$node_pid" >/dev/null
+}
+
+case_enobufs() {
+    # send() fails with ENOBUFS (LD_PRELOAD shim) while OUT/enobufs.flag exists: 1 s mid-replay
+    local flag="$OUT/enobufs.flag"
+    rm -f "$flag"
+    LD_PRELOAD="$NTE_ENOBUFS_SHIM" NTE_ENOBUFS_FILE="$flag" start_node nobuf || return 1
+    start_candump "$OUT/nobuf_cap.log" -L "$OUT_FILTER"
+    canplayer -I "$OUT/nobuf_in.log" &
+    local p=$!; started "$p"
+    sleep 3.0
+    echo 1 >"$flag"
+    sleep 1.0
+    rm -f "$flag"
+    wait "$p" || return 1
+    sleep 0.5
+    stop "$dump_pid" >/dev/null
+    if kill -0 "$node_pid" 2>/dev/null; then echo 1; else echo 0; fi >"$OUT/nobuf.alive"
+    stop "$node_pid" >/dev/null
+}
+
+case_no_iface() {
+    "$NODE" --iface vcan9 2>"$OUT/noif.err"
+    echo $? >"$OUT/noif.exit"
+}
+
+status=0
+for c in "$@"; do
+    rm -f "$OUT/$c.done" "$OUT/$c.failed"
+    t=$EPOCHREALTIME
+    if "case_$c" 2>"$OUT/$c.stderr"; then
+        awk -v a="$t" -v b="$EPOCHREALTIME" 'BEGIN { printf "%.2f\n", b - a }' >"$OUT/$c.done"
+    else
+        { echo "case $c failed:"; cat "$OUT/$c.stderr"; } >"$OUT/$c.failed"
+        status=1
+    fi
+    stop_all
+done
+exit $status
