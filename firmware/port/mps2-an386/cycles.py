@@ -5,7 +5,7 @@ under QEMU, which logs every translated block (-d in_asm) and every block it exe
 exact instruction mix, branches taken or not, which the Cortex-M4 timing table below turns into
 a lower-upper cycle range.  Prints cycles per step and the CPU load at 200 Hz on a 168 MHz
 part for each configuration of the self-test (Model I bank; Model II bank, every filter every
-sample and rotating; the robust estimator's normal samples and its refinement).
+sample and rotating; the robust estimator's normal samples and its refinement; Model III bank).
 
     python3 firmware/port/mps2-an386/cycles.py [--build build/m4] [--json FILE]
 
@@ -318,7 +318,7 @@ def model(elf: pathlib.Path) -> dict:
     for r, header in enumerate(runs):
         f = dict(kv.split("=") for kv in header.split()[2:])
         sl = per_step[r * per_run:(r + 1) * per_run]
-        label = (f"Model {'I' if f['model'] == '1' else 'II'} "
+        label = (f"Model {'I' * int(f['model'])} "
                  f"{f['estimator']}" + ("" if f["estimator"] == "robust"
                                         else f", {f['schedule']}"))
         med = statistics.median(s["insns"] for s in sl)

@@ -24,6 +24,7 @@ static const run_spec_t RUNS[] = {
     {2, nte_estimator_bank, nte_schedule_rotate},
     {2, nte_estimator_robust, nte_schedule_all},
     {2, nte_estimator_bank, nte_schedule_all},
+    {3, nte_estimator_bank, nte_schedule_all},
 };
 
 char* nte_selftest_put_str(char* p, const char* s)
