@@ -137,7 +137,7 @@ def test_rotate_updates_one_filter_per_sample(scenario):
 
 def test_invalid_config_is_refused():
     from dataclasses import replace
-    for bad in (dict(eps_mm_s=0.0), dict(r_n2=-1.0), dict(model=3), dict(schedule="x"),
+    for bad in (dict(eps_mm_s=0.0), dict(r_n2=-1.0), dict(model=4), dict(schedule="x"),
                 dict(p0_u=float("nan")), dict(substeps=0), dict(q_u={"sigma0": -1.0})):
         with pytest.raises(ValueError):
             B.FilterBank(F64, replace(default_config(), **bad), [PRESET.params.as_list()])

@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from reference_py.params import IDX, MODEL_PARAMS, PRESETS
+from reference_py.params import IDX, MODEL_PARAMS, PARAM_NAMES, PRESETS
 from reference_py.starts import splitmix64, start_values, uniform_draws
 
 
@@ -22,14 +22,14 @@ def test_uniform_draws_in_unit_interval():
     assert abs(np.mean(d) - 0.5) < 0.01
 
 
-@pytest.mark.parametrize("model", [1, 2])
+@pytest.mark.parametrize("model", [1, 2, 3])
 @pytest.mark.parametrize("preset", list(PRESETS))
 def test_starts_stay_within_factor_and_keep_g_positive(model, preset):
     truth = PRESETS[preset].params.as_list()
     for seed in range(1, 300):
         s = start_values(truth, seed, 5.0, model)
         assert s[IDX["f1"]] + min(s[IDX["f2"]], 0.0) > 0.0          # g(0) > 0
-        for name, j in IDX.items():
+        for j, name in enumerate(PARAM_NAMES):   # the seven a start moves (not Model III's g)
             if name == "f1":
                 continue
             ratio = s[j] / truth[j]
