@@ -183,7 +183,9 @@ static int estimator_config(nte_config_t* cfg, int32_t model, const nte_preset_t
 {
     nte_config_default(cfg, model, nte_schedule_all);
     cfg->beta0 = (nte_real_t)p->values[6];
-    for (size_t j = 0u; j < (size_t)NTE_PARAM_COUNT; j++) {
+    /* a preset holds the seven force-model parameters; Model III's relaxation strengths keep
+     * the configuration's nominal values */
+    for (size_t j = 0u; j < 7u; j++) {
         cfg->nominal[j] = (nte_real_t)p->values[j];
     }
     const double kappa = (p->values[4] < 0.0) ? 1.0 : 0.0;
