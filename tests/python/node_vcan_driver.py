@@ -32,7 +32,6 @@ def capture(path: Path) -> list[can.Message]:
 
 
 OUTPUT_IDS = {DB.frame_id(n) for n in ("Estimate", "Params", "Heartbeat")}
-OUT_FILTER = f"{DB.frame_id('Estimate'):03X}:7FC"     # candump filter: the node's outputs
 
 
 def _result(out: Path, cap: list[can.Message], tag: str, inputs: list | None = None,
@@ -69,7 +68,6 @@ def prepare(out: Path) -> None:
     bus half filters on."""
     (out / "ids").mkdir(exist_ok=True)
     (out / "ids" / "depth").write_text(f"{DB.frame_id('Depth'):03X}\n")
-    (out / "ids" / "outputs").write_text(OUT_FILTER + "\n")
     paper = paper_frames(out)
     write_candump(out / "full_in.log", paper, "vcan0", 1.0)
     write_candump(out / "nobuf_in.log", paper, "vcan0", 1.0)
@@ -256,7 +254,7 @@ def burst_case(out: Path) -> dict:
 def enobufs(out: Path) -> dict:
     """send() failed with ENOBUFS (LD_PRELOAD shim) for 1 s in the middle of a replay."""
     frames = paper_frames(out)
-    cap = capture(out / "nobuf_cap.log")
+    cap = capture(out / "nobuf.sent.log")
     res = _result(out, cap, "nobuf", [m for _, m in frames])
     res["alive_after"] = (out / "nobuf.alive").read_text().strip() == "1"
     # the frames that did go out still follow the reference; counters cannot align the node's

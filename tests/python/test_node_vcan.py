@@ -166,6 +166,7 @@ def test_enobufs_on_send_counted(results: dict) -> None:
     assert st["events"]["send_failed"] > 100
     assert st["send_enobufs"] == st["events"]["send_failed"]
     assert r["estimates_reference"] - r["estimates_node"] > 0     # those were lost
+    assert st["tx"]["estimate"] == r["estimates_node"]            # the record is the node's
     assert r["tail_equal"]
 
 
