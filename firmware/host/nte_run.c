@@ -136,7 +136,7 @@ static int parse_args(int argc, char** argv, args_t* a)
     a->relaxation = 1;
     a->direction_memory = 1;
     a->contact = -1;
-    a->surface = NAN;
+    a->surface = (double)NAN; /* NAN is a float: said explicitly for -Wdouble-promotion */
     for (int i = 1; i < argc; i++) {
         if ((strcmp(argv[i], "--help") == 0) || (strcmp(argv[i], "-h") == 0)) {
             help();
