@@ -268,6 +268,9 @@ class FilterBank:
                 pred = rk3_step(R, self.th, z_prev, l_prev, l, dt, cfg.substeps,
                                 _dynamic(names))
                 active = run
+            if cfg.predict_only:
+                # the model alone: no filter updates (z is filter 0's prior, below)
+                active = run & False
             d = depth_terms(R, self.th, l)
             x, P_pred, z_ss = self._predict(i, names, pred, d, gap | surface, surface)
             innovation, hrow, r_eff, in_range, st = self._measure(names, d, x[0], s, v, y,
@@ -277,6 +280,8 @@ class FilterBank:
                                                   active, run, in_range, z_ss)
             status |= st
             z_post = np.where(active, z_i, z_post)
+            if cfg.predict_only and i == 0:
+                z_post = np.where(run, z_i, z_post)   # the prior, guarded: no update ran
             if rotate or i == 0:
                 # a diverged prior's innovation is not published (it may not be finite)
                 innovation0 = np.where(active, np.where(in_range, innovation, R.c(0.0)),

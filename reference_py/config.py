@@ -139,6 +139,8 @@ class EstimatorConfig:
     var_floor_z: float = 1.0e-12       # lower bound of var(z), > 0
     var_floor_u: float = 1.0e-10       # lower bound of var(u), > 0
     sign_inflation: bool = True        # inflate R where the smooth sign may be wrong (|s| < 1)
+    predict_only: bool = False         # the model alone (sensorless prediction): no filter
+    #                                    updates, z and memories propagate, force ignored
     v_still_mm_s: float = 1.0e-3       # |v| below this is a dwell: the direction is known to be none
     dt_max_s: float = 0.5              # a longer gap between samples restarts z at steady state
     depth_min_mm: float = -1.0         # accepted depth range, mm (depth <= 0 is out of tissue)

@@ -390,6 +390,13 @@ typedef struct nte_config_t {
     int32_t substeps;           /**< [1] RK3 sub-steps per sample, 1..16 (cost linear) */
     int32_t gate_reopen_after;  /**< [10] after this many gated updates accept one, 1..1000 */
     bool sign_inflation;        /**< [true] inflate R where the smooth sign may be wrong */
+    bool predict_only;          /**< [false] the model alone (sensorless prediction, the
+                                     paper's atlas): every filter predicts, none updates,
+                                     z and the memories propagate, the parameters stay at
+                                     nominal and the force input is ignored (give 0);
+                                     innovation_n is 0.  Bank only (the robust
+                                     estimator's refinement would move the parameters).
+                                     Sits in sign_inflation's padding: no size change */
     nte_real_t eps_mm_s;        /**< [0.5] smooth-sign width, s(v) = tanh(v/eps), mm/s, > 0 */
     nte_real_t beta0;           /**< [0.0255] Model I's fixed beta, > 0 (Model II ignores it) */
     nte_real_t r_n2;            /**< [4e-6] measurement noise variance, N^2, > 0 */

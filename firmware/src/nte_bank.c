@@ -473,6 +473,8 @@ static uint32_t run_filter(nte_t* self, const step_ctx_t* c, const size_t i,
         pred = &own;
         fo->active = true;
     }
+    /* predict_only: the model alone, no filter updates (z is filter 0's prior, guarded) */
+    fo->active = fo->active && !self->cfg.predict_only;
     nte_depth_terms_t d;
     nte_model_depth_terms(&d, &self->th, c->l);
     predict(self, c, i, pred, &d, &w);
@@ -533,7 +535,7 @@ void nte_bank_advance(nte_t* self, const bool first, const nte_real_t dt, const 
         for (size_t i = 0U; i < NTE_FILTER_COUNT; i++) {
             filter_out_t fo;
             status |= run_filter(self, &c, i, &shared, &fo);
-            if (fo.active) {
+            if (fo.active || (self->cfg.predict_only && (i == 0U))) {
                 z_post = fo.z_post;
                 if (c.rotate || (i == 0U)) {
                     innovation0 = fo.innovation;

@@ -12,6 +12,7 @@ static void set_common(nte_config_t* cfg, const int32_t model, const nte_schedul
     cfg->substeps = 1;
     cfg->gate_reopen_after = 10;
     cfg->sign_inflation = true;
+    cfg->predict_only = false;
     cfg->eps_mm_s = NTE_K_DEF_EPS_MM_S;
     cfg->beta0 = NTE_K_DEF_BETA0;
     cfg->r_n2 = NTE_K_DEF_R_N2;

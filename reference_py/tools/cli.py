@@ -34,6 +34,9 @@ from ..params import PRESETS, get_preset
 
 if TYPE_CHECKING:
     from .csvio import Units
+    from .estconfig import FileConfig
+    from ..config import ContactConfig
+    from ..params import Preset
 
 EXIT_BAD_INPUT = 2
 MAX_SIMULATED_SAMPLES = 10_000_000    #: simulate refuses longer records (≈ 0.4 GB of CSV)
@@ -159,16 +162,17 @@ def build_parser() -> argparse.ArgumentParser:
                                    "innovation_n, status, then every identified parameter and "
                                    "its standard deviation.")
     e.add_argument("csv", metavar="FILE.csv", help="the insertion to estimate from")
-    e.add_argument("--model", type=int, choices=(1, 2, 3), required=True,
+    e.add_argument("--model", type=int, choices=(1, 2, 3),
                    help="force model I, II or III (Model II with direction memory and "
-                        "relaxation; no default)")
+                        "relaxation; no default: this flag or --config's model)")
     e.add_argument("--estimator", default="bank", choices=("bank", "robust"),
                    help="bank: the paper's three filters in switching mode; robust: the bank "
                         "plus a batch refinement after every insertion (converges from "
                         "factor-5 starts; adds a 'confidence' column)")
-    e.add_argument("--preset", default="paper-10mms",
+    e.add_argument("--preset",
                    help="starting (nominal) parameters; Model II also takes its fixed f2 and "
-                        "alpha from it, Model I its beta0")
+                        "alpha from it, Model I its beta0 (default: paper-10mms, or --config's "
+                        "params)")
     e.add_argument("--init-seed", type=bounded(0, 2**63 - 1, integer=True), default=0,
                    metavar="K",
                    help="0: start at the preset; K > 0: multiply each identified parameter by "
@@ -182,15 +186,20 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--profile", default="default", choices=("default", "paper"),
                    help="tuning: ours, or the paper's Table I mapped to scaled parameters")
     m3 = e.add_argument_group("Model III (ignored by Models I and II)")
+    # no argparse defaults here: a flag given overrides --config, one not given does not
     m3.add_argument("--presliding-mm", type=bounded(0.0, 1000.0, " mm", lo_open=True),
-                    default=2.5, metavar="MM",
-                    help="turn-over length of the direction state, mm")
-    m3.add_argument("--tau-fast", type=bounded(0.0, 3600.0, " s", lo_open=True), default=0.3,
-                    metavar="S", help="time constant of the fast relaxation branch, s")
-    m3.add_argument("--tau-slow", type=bounded(0.0, 3600.0, " s", lo_open=True), default=3.0,
-                    metavar="S", help="time constant of the slow relaxation branch, s")
-    m3.add_argument("--relax-branches", type=int, choices=(1, 2), default=2,
-                    help="relaxation branches: 1 fast only, 2 fast and slow")
+                    metavar="MM",
+                    help="turn-over length of the direction state, mm (default: 2.5, or "
+                         "--config's)")
+    m3.add_argument("--tau-fast", type=bounded(0.0, 3600.0, " s", lo_open=True),
+                    metavar="S", help="time constant of the fast relaxation branch, s "
+                                      "(default: 0.3, or --config's)")
+    m3.add_argument("--tau-slow", type=bounded(0.0, 3600.0, " s", lo_open=True),
+                    metavar="S", help="time constant of the slow relaxation branch, s "
+                                      "(default: 3, or --config's)")
+    m3.add_argument("--relax-branches", type=int, choices=(1, 2),
+                    help="relaxation branches: 1 fast only, 2 fast and slow (default: 2, or "
+                         "--config's)")
     m3.add_argument("--no-relaxation", action="store_true",
                     help="no relaxation branches (default: on)")
     m3.add_argument("--no-direction-memory", action="store_true",
@@ -207,6 +216,15 @@ def build_parser() -> argparse.ArgumentParser:
                         "turns the front end on (default: none, found from the force)")
     e.add_argument("--out", required=True, metavar="EST.csv", help="the estimates to write")
     e.add_argument("--plot", metavar="EST.png", help="also draw force and parameters (PNG; default: no plot)")
+    e.add_argument("--config", metavar="FILE.json",
+                   help="read an estimator configuration (schema nte-estimator-config/1: the "
+                        "discrepancy workflow's estimator_config.json or an --export-config "
+                        "file): model, nominal parameters, r_n2, Model III's constants, the "
+                        "surface; flags given override it (default: none)")
+    e.add_argument("--predict-only", action="store_true",
+                   help="with --config: the model alone on the depth, parameters held at the "
+                        "config's, no filter update, the force column ignored; force_hat_n is "
+                        "the prediction; the surface is --surface or the config's (default: off)")
     e.add_argument("--export-config", metavar="FILE.json",
                    help="also write what the estimator identified (the final parameters, "
                         "their sd, Model III's constants) as an estimator configuration, "
@@ -304,8 +322,8 @@ def _estimate(a: argparse.Namespace) -> int:
     from .csvio import Limits
     from .estimate import estimate_csv_lines, make_config, run_estimate
 
-    preset = get_preset(a.preset)
-    overrides = model3_overrides(a)
+    fc, preset = _file_config(a)
+    overrides = model3_overrides(a, fc)
     with Outputs() as outs:
         out = outs.add(a.out, "--out")
         png = outs.add(a.plot, "--plot") if a.plot else None
@@ -318,9 +336,13 @@ def _estimate(a: argparse.Namespace) -> int:
             # the stage position may lie anywhere in +-depth_max_mm (the air gap is no error)
             limits = replace(limits, depth_min_mm=-limits.depth_max_mm)
         trial = read_trial(a.csv, units=units_from(a), limits=limits)
+        if a.predict_only:
+            # the force is ignored: the bank is fed 0 N (never rejected, never learned)
+            trial = replace(trial, force_n=np.zeros_like(trial.force_n))
         run = run_estimate(trial, preset, a.model, a.estimator, a.precision, a.profile,
                            a.schedule, a.init_seed, a.init_factor, progress=True,
-                           overrides=overrides, contact=contact)
+                           overrides=overrides, contact=contact,
+                           strengths=fc.strengths if fc is not None else None)
         outs.write_lines(out, estimate_csv_lines(run))
         if png is not None:
             from .plotting import plot_estimate
@@ -341,11 +363,58 @@ def _estimate(a: argparse.Namespace) -> int:
     return 0
 
 
-def model3_overrides(a: argparse.Namespace) -> dict[str, object]:
-    """Model III's configuration fields from the estimate flags."""
-    return {"presliding_mm": a.presliding_mm, "tau_fast_s": a.tau_fast, "tau_slow_s": a.tau_slow,
-            "relax_branches": a.relax_branches, "relaxation": not a.no_relaxation,
-            "direction_memory": not a.no_direction_memory}
+def model3_overrides(a: argparse.Namespace, fc: "FileConfig | None" = None) -> dict[str, object]:
+    """Model III's configuration fields (and r_n2, predict_only) from the configuration file
+    ``fc`` and the estimate flags: the defaults, then the file, then the flags given."""
+    out: dict[str, object] = {"presliding_mm": 2.5, "tau_fast_s": 0.3, "tau_slow_s": 3.0,
+                              "relax_branches": 2, "relaxation": True, "direction_memory": True}
+    if fc is not None:
+        out.update(fc.m3)
+        if fc.r_n2 is not None:
+            out["r_n2"] = fc.r_n2
+    for key, flag in (("presliding_mm", a.presliding_mm), ("tau_fast_s", a.tau_fast),
+                      ("tau_slow_s", a.tau_slow), ("relax_branches", a.relax_branches)):
+        if flag is not None:
+            out[key] = flag
+    if a.no_relaxation:
+        out["relaxation"] = False
+    if a.no_direction_memory:
+        out["direction_memory"] = False
+    if getattr(a, "predict_only", False):
+        out["predict_only"] = True
+    return out
+
+
+def _file_config(a: argparse.Namespace) -> "tuple[FileConfig | None, Preset]":
+    """--config read and merged into the flags (a.model, a.surface, a.contact); the preset
+    whose values start the filters (the config's params unless --preset is given)."""
+    from ..params import ParamSet, Preset
+    from .estconfig import read_config_file
+    fc = read_config_file(a.config) if a.config else None
+    if a.predict_only and fc is None:
+        raise ValueError("argument --predict-only: needs --config FILE (the parameters to "
+                         "predict with)")
+    if a.predict_only and a.estimator == "robust":
+        raise ValueError("argument --predict-only: the bank only (the robust estimator's "
+                         "refinement would move the parameters)")
+    if a.model is None:
+        if fc is None:
+            raise ValueError("the following arguments are required: --model (or --config)")
+        a.model = fc.model
+    if fc is not None and a.surface is None and a.contact != "off":
+        if fc.surface_mm is not None:
+            a.surface = fc.surface_mm
+        elif fc.surface_list:
+            if a.predict_only:
+                raise ValueError(f"{a.config}: key 'surface_mm': per-trial surfaces give no "
+                                 f"surface to predict with; give --surface MM")
+            a.contact = "on"
+    if a.predict_only and a.contact == "on" and a.surface is None:
+        raise ValueError("argument --predict-only: the front end finds the surface from the "
+                         "force; give --surface MM")
+    if a.preset is not None or fc is None:
+        return fc, get_preset(a.preset or "paper-10mms")
+    return fc, Preset(f"config {a.config}", ParamSet(*fc.params), 0.0, "from --config")
 
 
 def status_counts(status: np.ndarray) -> str:

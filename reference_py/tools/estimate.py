@@ -47,7 +47,8 @@ def run_estimate(trial: Trial, preset: Preset, model: int, estimator: str = "ban
                  precision: str = "float64", profile: str = "default", schedule: str = "all",
                  init_seed: int = 0, init_factor: float = 5.0, progress: bool = False,
                  overrides: dict[str, object] | None = None,
-                 contact: ContactConfig | None = None) -> EstimateRun:
+                 contact: ContactConfig | None = None,
+                 strengths: dict[str, float] | None = None) -> EstimateRun:
     if estimator not in ESTIMATORS:
         raise ValueError(f"unknown estimator {estimator!r} (known: {', '.join(ESTIMATORS)})")
     R = real_for(precision)
@@ -55,6 +56,11 @@ def run_estimate(trial: Trial, preset: Preset, model: int, estimator: str = "ban
     if contact is not None:
         cfg = replace(cfg, contact=contact)
     nominal = start_values(preset.params.as_list(), init_seed, init_factor, model)
+    if strengths:
+        # Model III's nominal relaxation strengths from --config (the bank appends its
+        # defaults to seven values)
+        from ..params import RELAX_NAMES
+        nominal = nominal + [float(strengths[nm]) for nm in RELAX_NAMES]
     if estimator == "robust":
         from ..robust import RobustEstimator
         est = RobustEstimator(R, cfg, [nominal])
