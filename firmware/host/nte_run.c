@@ -7,11 +7,13 @@
  *           [--profile default|paper] [--init-seed K] [--init-factor F] [--schedule all|rotate]
  *           [--precision P] [--presliding-mm MM] [--tau-fast S] [--tau-slow S]
  *           [--relax-branches 1|2] [--no-relaxation] [--no-direction-memory]
- *           [--contact on|off] [--surface MM] --out EST.csv
+ *           [--contact on|off] [--surface MM] [--config FILE.json] [--predict-only]
+ *           [--export-config FILE.json] --out EST.csv
  *
  * -h/--help lists every flag and its default.  Exit status 0 on success, 2 on bad input: one
  * line on stderr ("FILE:LINE: column 'NAME': reason" or "argument --flag: why").
  */
+#include "config_file.h"
 #include "csv_in.h"
 #include "nte.h"
 #include "nte_presets.h"
@@ -57,6 +59,15 @@ typedef struct args_t {
     int direction_memory;
     int contact;    /* the contact front end: -1 not asked, 0 off, 1 on */
     double surface; /* --surface MM, NaN: find it */
+    /* --config: a flag given overrides the file, one not given does not */
+    const char* config;
+    const char* export_config;
+    int predict_only;
+    int given_preset;
+    int given_presliding;
+    int given_tau_fast;
+    int given_tau_slow;
+    int given_relax_branches;
 } args_t;
 
 /* A refusal: one line on stderr, exit status 2 (the Python tools' form). */
@@ -74,7 +85,8 @@ static void help(void)
            "       [--schedule all|rotate] [--precision " PRECISION "]\n"
            "       [--presliding-mm MM] [--tau-fast S] [--tau-slow S] [--relax-branches 1|2]\n"
            "       [--no-relaxation] [--no-direction-memory] [--contact on|off]\n"
-           "       [--surface MM] --out EST.csv\n"
+           "       [--surface MM] [--config FILE.json] [--predict-only]\n"
+           "       [--export-config FILE.json] --out EST.csv\n"
            "\n"
            "Run the estimator (C library, " PRECISION ") over a CSV of t_s, depth_mm, force_n\n"
            "(velocity_mm_s optional, else central differences of depth) and write one row per\n"
@@ -82,10 +94,10 @@ static void help(void)
            "its sd (the robust estimator adds confidence). The C twin of nte-ref estimate.\n"
            "\n"
            "  FILE.csv               the insertion (no default)\n"
-           "  --model 1|2|3          force model (no default); 3: Model II with direction\n"
-           "                         memory and relaxation\n"
+           "  --model 1|2|3          force model (no default: this flag or --config's);\n"
+           "                         3: Model II with direction memory and relaxation\n"
            "  --estimator bank|robust  (default: bank)\n"
-           "  --preset NAME          starting parameters (default: %s)\n"
+           "  --preset NAME          starting parameters (default: %s, or --config's)\n"
            "  --profile default|paper  tuning (default: default)\n"
            "  --init-seed K          0: start at the preset; K > 0: factors drawn with seed K,\n"
            "                         0..9223372036854775807 (default: 0)\n"
@@ -94,12 +106,13 @@ static void help(void)
            "  --precision " PRECISION "    the only precision of this binary\n"
            "                         (default: " PRECISION ")\n"
            "  --presliding-mm MM     Model III: turn-over length of the direction state,\n"
-           "                         > 0 and <= 1000 (default: 2.5)\n"
+           "                         > 0 and <= 1000 (default: 2.5, or --config's)\n"
            "  --tau-fast S           Model III: fast relaxation time constant, s,\n"
-           "                         > 0 and <= 3600 (default: 0.3)\n"
+           "                         > 0 and <= 3600 (default: 0.3, or --config's)\n"
            "  --tau-slow S           Model III: slow relaxation time constant, s,\n"
-           "                         > 0 and <= 3600 (default: 3)\n"
-           "  --relax-branches 1|2   Model III: relaxation branches (default: 2)\n"
+           "                         > 0 and <= 3600 (default: 3, or --config's)\n"
+           "  --relax-branches 1|2   Model III: relaxation branches (default: 2, or\n"
+           "                         --config's)\n"
            "  --no-relaxation        Model III: no relaxation branches (default: on)\n"
            "  --no-direction-memory  Model III: tanh(v/eps) instead of the direction state\n"
            "                         (default: on)\n"
@@ -108,6 +121,14 @@ static void help(void)
            "                         the columns surface_mm, tare_n, contact (0 air, 1 tissue)\n"
            "  --surface MM           a known surface (stage position, -500..500 mm) instead of\n"
            "                         finding it; turns the front end on\n"
+           "  --config FILE.json     an estimator configuration (nte-estimator-config/1: the\n"
+           "                         discrepancy workflow's or --export-config's): model,\n"
+           "                         nominal parameters, r_n2, Model III's constants, the\n"
+           "                         surface; flags given override it (default: none)\n"
+           "  --predict-only         with --config: the model alone on the depth, parameters\n"
+           "                         held, no filter update, the force ignored (default: off)\n"
+           "  --export-config FILE.json  also write what was identified as a configuration\n"
+           "                         (default: none)\n"
            "  --out EST.csv          the estimates to write (no default)\n"
            "  -h, --help             this help\n"
            "\n"
@@ -136,7 +157,15 @@ static int parse_args(int argc, char** argv, args_t* a)
     a->relaxation = 1;
     a->direction_memory = 1;
     a->contact = -1;
-    a->surface = (double)NAN; /* NAN is a float: said explicitly for -Wdouble-promotion */
+    a->surface = (double)NAN;
+    a->config = NULL;
+    a->export_config = NULL;
+    a->predict_only = 0;
+    a->given_preset = 0;
+    a->given_presliding = 0;
+    a->given_tau_fast = 0;
+    a->given_tau_slow = 0;
+    a->given_relax_branches = 0; /* NAN is a float: said explicitly for -Wdouble-promotion */
     for (int i = 1; i < argc; i++) {
         if ((strcmp(argv[i], "--help") == 0) || (strcmp(argv[i], "-h") == 0)) {
             help();
@@ -155,6 +184,10 @@ static int parse_args(int argc, char** argv, args_t* a)
         }
         if (strcmp(opt, "--no-direction-memory") == 0) {
             a->direction_memory = 0;
+            continue;
+        }
+        if (strcmp(opt, "--predict-only") == 0) {
+            a->predict_only = 1;
             continue;
         }
         if (strncmp(opt, "--", 2) != 0) {
@@ -197,6 +230,11 @@ static int parse_args(int argc, char** argv, args_t* a)
             a->robust = (strcmp(val, "robust") == 0) ? 1 : 0;
         } else if (strcmp(name, "--preset") == 0) {
             a->preset = val;
+            a->given_preset = 1;
+        } else if (strcmp(name, "--config") == 0) {
+            a->config = val;
+        } else if (strcmp(name, "--export-config") == 0) {
+            a->export_config = val;
         } else if (strcmp(name, "--profile") == 0) {
             if ((strcmp(val, "default") != 0) && (strcmp(val, "paper") != 0)) {
                 (void)snprintf(msg, sizeof msg, "argument --profile: invalid choice: '%s'", val);
@@ -255,10 +293,13 @@ static int parse_args(int argc, char** argv, args_t* a)
             }
             if (mm) {
                 a->presliding_mm = x;
+                a->given_presliding = 1;
             } else if (strcmp(name, "--tau-fast") == 0) {
                 a->tau_fast_s = x;
+                a->given_tau_fast = 1;
             } else {
                 a->tau_slow_s = x;
+                a->given_tau_slow = 1;
             }
         } else if (strcmp(name, "--relax-branches") == 0) {
             if ((strcmp(val, "1") != 0) && (strcmp(val, "2") != 0)) {
@@ -267,6 +308,7 @@ static int parse_args(int argc, char** argv, args_t* a)
                 return usage(msg);
             }
             a->relax_branches = atoi(val);
+            a->given_relax_branches = 1;
         } else if (strcmp(name, "--contact") == 0) {
             if ((strcmp(val, "on") != 0) && (strcmp(val, "off") != 0)) {
                 (void)snprintf(msg, sizeof msg, "argument --contact: invalid choice: '%s'", val);
@@ -292,8 +334,8 @@ static int parse_args(int argc, char** argv, args_t* a)
     if (a->csv == NULL) {
         return usage("the following arguments are required: FILE.csv");
     }
-    if (a->model == 0) {
-        return usage("the following arguments are required: --model");
+    if ((a->model == 0) && (a->config == NULL)) {
+        return usage("the following arguments are required: --model (or --config)");
     }
     if (a->out == NULL) {
         return usage("the following arguments are required: --out");
@@ -446,7 +488,8 @@ static int run(const args_t* a, const out_t* out, const nte_trial_t* tr, nte_t* 
         s.t_us = (int64_t)floor((tr->t_s[k] * 1e6) + 0.5);
         s.depth_mm = (nte_real_t)tr->depth_mm[k];
         s.velocity_mm_s = (nte_real_t)tr->velocity_mm_s[k];
-        s.force_n = (nte_real_t)tr->force_n[k];
+        /* --predict-only: the force is ignored, the bank fed 0 N (never rejected) */
+        s.force_n = (a->predict_only != 0) ? (nte_real_t)0 : (nte_real_t)tr->force_n[k];
         (void)nte_step(est, &s, &o);
         counts->rejected += ((o.status & NTE_STATUS_REJECTED) != 0U) ? 1U : 0U;
         counts->gated += ((o.status & NTE_STATUS_GATED) != 0U) ? 1U : 0U;
@@ -482,6 +525,53 @@ int main(int argc, char** argv)
     if (pr != 0) {
         return pr;
     }
+    /* --config: read and merged into the flags as nte-ref estimate does (tools/cli.py
+     * _file_config, model3_overrides): defaults, then the file, then the flags given */
+    nte_file_config_t fc;
+    (void)memset(&fc, 0, sizeof fc);
+    const int have_fc = a.config != NULL;
+    if (have_fc && (nte_config_file_read(a.config, &fc, msg, sizeof msg) != 0)) {
+        return bad(msg);
+    }
+    if (a.predict_only && !have_fc) {
+        return bad("argument --predict-only: needs --config FILE (the parameters to predict "
+                   "with)");
+    }
+    if (a.predict_only && (a.robust != 0)) {
+        return bad("argument --predict-only: the bank only (the robust estimator's refinement "
+                   "would move the parameters)");
+    }
+    if (have_fc) {
+        a.model = (a.model == 0) ? fc.model : a.model;
+        if (isnan(a.surface) && (a.contact != 0)) {
+            if (fc.has_surface) {
+                a.surface = fc.surface_mm;
+                a.contact = 1;
+            } else if (fc.surface_list) {
+                if (a.predict_only) {
+                    (void)snprintf(msg, sizeof msg, "%s: key 'surface_mm': per-trial surfaces "
+                                   "give no surface to predict with; give --surface MM",
+                                   a.config);
+                    return bad(msg);
+                }
+                a.contact = 1;
+            }
+        }
+        a.presliding_mm = (fc.has_presliding && !a.given_presliding) ? fc.presliding_mm
+                                                                     : a.presliding_mm;
+        a.tau_fast_s = (fc.has_tau_fast && !a.given_tau_fast) ? fc.tau_fast_s : a.tau_fast_s;
+        a.tau_slow_s = (fc.has_tau_slow && !a.given_tau_slow) ? fc.tau_slow_s : a.tau_slow_s;
+        a.relax_branches = (fc.has_relax_branches && !a.given_relax_branches)
+                               ? fc.relax_branches : a.relax_branches;
+        /* the flags can only switch these off */
+        a.relaxation = (fc.has_relaxation && a.relaxation) ? fc.relaxation : a.relaxation;
+        a.direction_memory = (fc.has_direction_memory && a.direction_memory)
+                                 ? fc.direction_memory : a.direction_memory;
+    }
+    if (a.predict_only && (a.contact == 1) && isnan(a.surface)) {
+        return bad("argument --predict-only: the front end finds the surface from the force; "
+                   "give --surface MM");
+    }
     const nte_preset_t* preset = find_preset(a.preset);
     if (preset == NULL) {
         size_t o = (size_t)snprintf(msg, sizeof msg, "unknown preset '%s' (known: ", a.preset);
@@ -503,8 +593,10 @@ int main(int argc, char** argv)
     if (nte_trial_read(a.csv, &tr, msg, sizeof msg) != 0) {
         return bad(msg);
     }
+    /* the config's params are the new nominal values unless --preset is given */
+    const double* values = (have_fc && !a.given_preset) ? fc.params : preset->values;
     double start[7];
-    if (nte_start_values(preset->values, (uint64_t)a.seed, a.factor, a.model, start) != 0) {
+    if (nte_start_values(values, (uint64_t)a.seed, a.factor, a.model, start) != 0) {
         nte_trial_free(&tr);
         (void)snprintf(msg, sizeof msg, "init factor must be >= 1 (got %g)", a.factor);
         return bad(msg);
@@ -518,12 +610,20 @@ int main(int argc, char** argv)
         nte_config_default(&cfg, a.model, sch);
     }
     /* Model I's fixed beta0 is the preset's beta (reference_py/MODEL.md §2) */
-    cfg.beta0 = (nte_real_t)preset->values[6];
+    cfg.beta0 = (nte_real_t)values[6];
     /* the seven force-model parameters; Model III's relaxation strengths keep the
      * configuration's nominal values (the starts move only the seven) */
     for (size_t j = 0U; j < 7U; j++) {
         cfg.nominal[j] = (nte_real_t)start[j];
     }
+    if (have_fc && fc.has_strengths) {
+        cfg.nominal[7] = (nte_real_t)fc.g[0];
+        cfg.nominal[8] = (nte_real_t)fc.g[1];
+    }
+    if (have_fc && fc.has_r_n2) {
+        cfg.r_n2 = (nte_real_t)fc.r_n2;
+    }
+    cfg.predict_only = a.predict_only != 0;
     cfg.presliding_mm = (nte_real_t)a.presliding_mm;
     cfg.tau_fast_s = (nte_real_t)a.tau_fast_s;
     cfg.tau_slow_s = (nte_real_t)a.tau_slow_s;

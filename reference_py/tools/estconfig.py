@@ -63,7 +63,18 @@ class FileConfig:
 
 
 def _is_num(v: object) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+    """A finite JSON number (an integer too large for a double is not finite: C reads inf)."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return False
+    try:
+        return math.isfinite(float(v))
+    except OverflowError:
+        return False
+
+
+def _no_constants(name: str) -> object:
+    # NaN and Infinity are not JSON (cJSON refuses them too)
+    raise ValueError(name)
 
 
 def read_config_file(path: str) -> FileConfig:
@@ -74,7 +85,7 @@ def read_config_file(path: str) -> FileConfig:
     except OSError as e:
         raise ConfigFileError(f"{path}: cannot read: {os.strerror(e.errno or 0)}") from None
     try:
-        doc = json.loads(raw.decode("utf-8"))
+        doc = json.loads(raw.decode("utf-8"), parse_constant=_no_constants)
     except (UnicodeDecodeError, ValueError):
         raise ConfigFileError(f"{path}: not valid JSON") from None
     if not isinstance(doc, dict):
@@ -92,7 +103,8 @@ def read_config_file(path: str) -> FileConfig:
         v = obj[key]
         low = "> " if lo_open else ">= "
         if not _is_num(v) or not ((v > lo) if lo_open else (v >= lo)) or v > hi:
-            raise fail(name, f"must be a number {low}{lo:g} and <= {hi:g}")
+            upper = f" and <= {hi:g}" if math.isfinite(hi) else ""
+            raise fail(name, f"must be a number {low}{lo:g}{upper}")
         return float(v)  # type: ignore[arg-type]
 
     def section(obj: dict[str, object], key: str, name: str) -> dict[str, object] | None:
