@@ -13,7 +13,7 @@ BUILD := build/host
 DEMO_DIR := out/demo
 
 # Debian packages the build and the tests need
-APT_PACKAGES := python3 python3-venv python3-dev gcc make cmake libcmocka-dev cppcheck \
+APT_PACKAGES := python3 python3-venv python3-dev gcc make cmake libcmocka-dev libcjson-dev cppcheck \
                 user-mode-linux kmod can-utils iproute2 \
                 qemu-system-x86 linux-image-amd64 busybox-static cpio \
                 gcc-arm-none-eabi libnewlib-arm-none-eabi qemu-system-arm \
