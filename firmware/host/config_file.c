@@ -362,3 +362,139 @@ int nte_config_file_read(const char* path, nte_file_config_t* out, char* msg, si
     cJSON_Delete(doc);
     return rc;
 }
+
+/* ------------------------------------------------------------------------------------------ */
+/* --export-config: JSON as the reference's json.dumps(indent=2) writes it                    */
+/* ------------------------------------------------------------------------------------------ */
+
+/* Python's repr of a finite double: the shortest digit string that reads back to x (the
+ * correctly rounded one of that length, which is also the closest), fixed notation for
+ * decimal exponents -4..15, else d.ddde+XX; a whole number keeps ".0". */
+static void py_repr(double x, char* out, size_t cap)
+{
+    char e[40];
+    int p = 1;
+    for (; p < 17; p++) {
+        (void)snprintf(e, sizeof e, "%.*e", p - 1, x);
+        if (!(strtod(e, NULL) < x) && !(strtod(e, NULL) > x)) {
+            break;
+        }
+    }
+    (void)snprintf(e, sizeof e, "%.*e", p - 1, x);
+    const char* s = e;
+    const int neg = (*s == '-');
+    s += neg;
+    char dig[24];
+    size_t nd = 0U;
+    for (; (*s != 'e') && (*s != '\0'); s++) {
+        if ((*s >= '0') && (*s <= '9') && (nd < (sizeof dig - 1U))) {
+            dig[nd++] = *s;
+        }
+    }
+    const int e10 = (*s == 'e') ? atoi(s + 1) : 0;
+    while ((nd > 1U) && (dig[nd - 1U] == '0')) {
+        nd--;
+    }
+    dig[nd] = '\0';
+    if ((nd == 1U) && (dig[0] == '0')) { /* zero (either sign) */
+        (void)snprintf(out, cap, "%s0.0", neg ? "-" : "");
+        return;
+    }
+    const int decpt = e10 + 1;
+    if ((e10 >= -4) && (e10 < 16)) {
+        if (decpt <= 0) {
+            (void)snprintf(out, cap, "%s0.%0*d%s", neg ? "-" : "", -decpt, 0, dig);
+            if (decpt == 0) { /* "%0*d" with width 0 still printed one 0 */
+                (void)snprintf(out, cap, "%s0.%s", neg ? "-" : "", dig);
+            }
+        } else if ((size_t)decpt >= nd) {
+            (void)snprintf(out, cap, "%s%s%0*d.0", neg ? "-" : "", dig, decpt - (int)nd, 0);
+            if ((size_t)decpt == nd) {
+                (void)snprintf(out, cap, "%s%s.0", neg ? "-" : "", dig);
+            }
+        } else {
+            (void)snprintf(out, cap, "%s%.*s.%s", neg ? "-" : "", decpt, dig, dig + decpt);
+        }
+    } else {
+        (void)snprintf(out, cap, "%s%c%s%s%se%c%02d", neg ? "-" : "", dig[0],
+                       (nd > 1U) ? "." : "", dig + 1, "", (e10 < 0) ? '-' : '+',
+                       (e10 < 0) ? -e10 : e10);
+    }
+}
+
+typedef struct text_t {
+    char* buf;
+    size_t cap;
+    size_t len;
+    int overflow;
+} text_t;
+
+static void put(text_t* t, const char* fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    const int n = vsnprintf(t->buf + t->len, t->cap - t->len, fmt, ap);
+    va_end(ap);
+    if ((n < 0) || ((size_t)n >= (t->cap - t->len))) {
+        t->overflow = 1;
+        return;
+    }
+    t->len += (size_t)n;
+}
+
+static void put_real(text_t* t, const char* indent, const char* key, double x, int last)
+{
+    char r[40];
+    if (isfinite(x)) {
+        py_repr(x, r, sizeof r);
+    } else {
+        (void)snprintf(r, sizeof r, "null");
+    }
+    put(t, "%s\"%s\": %s%s\n", indent, key, r, last ? "" : ",");
+}
+
+int nte_config_file_export_text(const nte_export_t* e, char* buf, size_t cap)
+{
+    text_t t = {buf, cap, 0U, 0};
+    put(&t, "{\n  \"schema\": \"" SCHEMA "\",\n  \"source\": \"%s\",\n  \"model\": %d,\n",
+        e->source, e->model);
+    for (int block = 0; block < 2; block++) {
+        put(&t, "  \"%s\": {\n", (block == 0) ? "params" : "params_sd");
+        for (size_t j = 0U; j < 7U; j++) {
+            put_real(&t, "    ", param_names[j], (block == 0) ? e->params[j] : e->sd[j],
+                     j == 6U);
+        }
+        put(&t, "  },\n");
+    }
+    put_real(&t, "  ", "r_n2", e->r_n2, 0);
+    put(&t, "  \"samples\": %zu%s\n", e->samples, ((e->model == 3) || e->contact) ? "," : "");
+    if (e->model == 3) {
+        put(&t, "  \"model3\": {\n    \"direction_memory\": %s,\n",
+            e->direction_memory ? "true" : "false");
+        put_real(&t, "    ", "presliding_mm", e->presliding_mm, 0);
+        put(&t, "    \"relaxation\": %s,\n    \"relax_branches\": %d,\n",
+            e->relaxation ? "true" : "false", e->relax_branches);
+        put_real(&t, "    ", "tau_fast_s", e->tau_fast_s, 0);
+        put_real(&t, "    ", "tau_slow_s", e->tau_slow_s, 0);
+        for (int block = 0; block < 2; block++) {
+            put(&t, "    \"%s\": ", (block == 0) ? "strengths" : "strengths_sd");
+            if (e->n_g == 0U) {
+                put(&t, "{}%s\n", (block == 0) ? "," : "");
+                continue;
+            }
+            put(&t, "{\n");
+            for (size_t k = 0U; k < e->n_g; k++) {
+                put_real(&t, "      ", e->g_name[k], (block == 0) ? e->g[k] : e->g_sd[k],
+                         k + 1U == e->n_g);
+            }
+            put(&t, "    }%s\n", (block == 0) ? "," : "");
+        }
+        put(&t, "  }%s\n", e->contact ? "," : "");
+    }
+    if (e->contact) {
+        put_real(&t, "  ", "surface_mm", e->surface_mm, 0);
+        put_real(&t, "  ", "tare_n", e->tare_n, 1);
+    }
+    put(&t, "}\n");
+    return t.overflow ? -1 : (int)t.len;
+}

@@ -41,4 +41,36 @@ typedef struct nte_file_config_t {
  */
 int nte_config_file_read(const char* path, nte_file_config_t* out, char* msg, size_t cap);
 
+/** What --export-config writes (reference_py/tools/estimate.py export_config). */
+typedef struct nte_export_t {
+    const char* source;  /**< "nte-run" */
+    int model;
+    double params[7];    /**< the final estimates, the fixed ones at their nominal */
+    double sd[7];        /**< 0 for the fixed ones */
+    double r_n2;
+    size_t samples;
+    /* Model III */
+    int direction_memory;
+    double presliding_mm;
+    int relaxation;
+    int relax_branches;
+    double tau_fast_s;
+    double tau_slow_s;
+    size_t n_g;          /**< strengths identified (the branches in use) */
+    const char* g_name[2];
+    double g[2];
+    double g_sd[2];
+    /* the contact front end */
+    int contact;
+    double surface_mm;   /**< NaN: not found (null) */
+    double tare_n;
+} nte_export_t;
+
+/**
+ * The configuration as JSON text, byte for byte what the reference's json.dumps(..., indent=2)
+ * writes for the same values (floats in Python's shortest round-trip form).  Returns the
+ * length, or -1 when cap is too small.
+ */
+int nte_config_file_export_text(const nte_export_t* e, char* buf, size_t cap);
+
 #endif /* NTE_HOST_CONFIG_FILE_H */

@@ -451,7 +451,7 @@ typedef struct counts_t {
 /* Write every row to a temporary file beside the target, then rename it into place.
  * Returns 0, EXIT_BAD_INPUT (the place cannot be written) or 1 (a write failed). */
 static int run(const args_t* a, const out_t* out, const nte_trial_t* tr, nte_t* est,
-               counts_t* counts)
+               counts_t* counts, nte_output_t* last)
 {
     char tmp[sizeof out->target + 16U];
     const char* slash = strrchr(out->target, '/');
@@ -491,6 +491,7 @@ static int run(const args_t* a, const out_t* out, const nte_trial_t* tr, nte_t* 
         /* --predict-only: the force is ignored, the bank fed 0 N (never rejected) */
         s.force_n = (a->predict_only != 0) ? (nte_real_t)0 : (nte_real_t)tr->force_n[k];
         (void)nte_step(est, &s, &o);
+        *last = o;
         counts->rejected += ((o.status & NTE_STATUS_REJECTED) != 0U) ? 1U : 0U;
         counts->gated += ((o.status & NTE_STATUS_GATED) != 0U) ? 1U : 0U;
         counts->clipped += ((o.status & NTE_STATUS_CLIPPED) != 0U) ? 1U : 0U;
@@ -511,6 +512,69 @@ static int run(const args_t* a, const out_t* out, const nte_trial_t* tr, nte_t* 
     }
     if ((fclose(fh) != 0) || (rename(tmp, out->target) != 0)) {
         fprintf(stderr, PROG ": error: --out %s: cannot write: %s\n", a->out, strerror(errno));
+        (void)unlink(tmp);
+        return 1;
+    }
+    return 0;
+}
+
+/* --export-config: what was identified, as tools/estimate.py export_config writes it (the
+ * double build writes the reference's bytes but for "source"); temporary file, then rename */
+static int export_config(const args_t* a, const out_t* out, const nte_t* est,
+                         const nte_config_t* cfg, const double values[7], size_t samples,
+                         const nte_output_t* last, double r_n2)
+{
+    nte_export_t e;
+    (void)memset(&e, 0, sizeof e);
+    e.source = "nte-run";
+    e.model = a->model;
+    for (size_t j = 0U; j < 7U; j++) {
+        e.params[j] = values[j];
+    }
+    nte_param_estimate_t pe[NTE_IDENTIFIED_MAX];
+    const size_t np = nte_get_params(est, pe, NTE_IDENTIFIED_MAX);
+    for (size_t j = 0U; (j < np) && (j < NTE_IDENTIFIED_MAX); j++) {
+        const size_t id = (size_t)pe[j].id;
+        if (id < 7U) {
+            e.params[id] = (double)pe[j].value;
+            e.sd[id] = (double)pe[j].sd;
+        } else if (e.n_g < 2U) {
+            e.g_name[e.n_g] = nte_param_name(pe[j].id);
+            e.g[e.n_g] = (double)pe[j].value;
+            e.g_sd[e.n_g] = (double)pe[j].sd;
+            e.n_g++;
+        }
+    }
+    if (a->model == 1) { /* Model I's beta is its fixed beta0 */
+        e.params[6] = values[6];
+    }
+    e.r_n2 = r_n2;
+    e.samples = samples;
+    e.direction_memory = cfg->direction_memory ? 1 : 0;
+    e.presliding_mm = a->presliding_mm;
+    e.relaxation = cfg->relaxation ? 1 : 0;
+    e.relax_branches = a->relax_branches;
+    e.tau_fast_s = a->tau_fast_s;
+    e.tau_slow_s = a->tau_slow_s;
+    e.contact = a->contact == 1;
+    e.surface_mm = (double)last->surface_mm;
+    e.tare_n = (double)last->tare_n;
+    char text[8192];
+    const int n = nte_config_file_export_text(&e, text, sizeof text);
+    char tmp[sizeof out->target + 16U];
+    const char* slash = strrchr(out->target, '/');
+    const int dir_len = (slash != NULL) ? (int)(slash - out->target + 1) : 0;
+    (void)snprintf(tmp, sizeof tmp, "%.*s.%s.XXXXXX", dir_len, out->target,
+                   (slash != NULL) ? (slash + 1) : out->target);
+    const int fd = (n > 0) ? mkstemp(tmp) : -1;
+    FILE* fh = ((fd >= 0) && (fchmod(fd, out->mode) == 0)) ? fdopen(fd, "w") : NULL;
+    if ((fh == NULL) || (fwrite(text, 1U, (size_t)n, fh) != (size_t)n) || (fclose(fh) != 0) ||
+        (rename(tmp, out->target) != 0)) {
+        fprintf(stderr, PROG ": error: --export-config %s: cannot write: %s\n",
+                a->export_config, strerror(errno));
+        if ((fh == NULL) && (fd >= 0)) {
+            (void)close(fd);
+        }
         (void)unlink(tmp);
         return 1;
     }
@@ -589,6 +653,11 @@ int main(int argc, char** argv)
     if (check_out(a.out, &out, msg, sizeof msg) != 0) {
         return bad(msg);
     }
+    out_t exp_out;
+    (void)memset(&exp_out, 0, sizeof exp_out);
+    if ((a.export_config != NULL) && (check_out(a.export_config, &exp_out, msg, sizeof msg) != 0)) {
+        return bad(msg);
+    }
     nte_trial_t tr;
     if (nte_trial_read(a.csv, &tr, msg, sizeof msg) != 0) {
         return bad(msg);
@@ -649,7 +718,14 @@ int main(int argc, char** argv)
         return bad(msg);
     }
     counts_t counts;
-    const int rc = run(&a, &out, &tr, &est, &counts);
+    nte_output_t last;
+    (void)memset(&last, 0, sizeof last);
+    last.surface_mm = (nte_real_t)NAN;
+    int rc = run(&a, &out, &tr, &est, &counts, &last);
+    if ((rc == 0) && (a.export_config != NULL)) {
+        rc = export_config(&a, &exp_out, &est, &cfg, values, tr.n, &last,
+                           (have_fc && fc.has_r_n2) ? fc.r_n2 : (double)cfg.r_n2);
+    }
     if (rc == 0) {
         printf("%zu samples, Model %s, " PRECISION "; wrote %s\n", tr.n,
                (a.model == 1) ? "I" : ((a.model == 2) ? "II" : "III"), a.out);

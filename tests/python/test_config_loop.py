@@ -277,3 +277,27 @@ def test_predict_only_needs_a_config_and_a_surface(loop):
     assert r.returncode == c.returncode == 2
     assert r.stderr.split(": error: ", 1)[1] == c.stderr.split(": error: ", 1)[1]
     assert "key 'surface_mm'" in r.stderr and not (d / "n.csv").exists()
+
+
+@pytest.mark.parametrize("args", [["--model", "2", "--contact", "on"],
+                                  ["--model", "3", "--contact", "on", "--tau-slow", "4"],
+                                  ["--model", "3", "--no-relaxation"],
+                                  ["--model", "1", "--init-seed", "3"]],
+                         ids=["m2-contact", "m3-contact", "m3-norelax", "m1-seed3"])
+def test_export_same_bytes_from_both_twins(loop, args):
+    """--export-config from nte-ref estimate and nte-run-double on the same run: the same
+    bytes but for "source" (floats in Python's shortest round-trip form from both); the
+    export is accepted by both readers."""
+    d = loop["dir"]
+    tag = "_".join(args).replace("-", "")
+    rx, cx = d / f"rx{tag}.json", d / f"cx{tag}.json"
+    r = ref(str(loop["p3"]), *args, "--out", str(d / "rx.csv"), "--export-config", str(rx))
+    assert r.returncode == 0, r.stderr
+    c = crun(str(loop["p3"]), *args, "--out", str(d / "cx.csv"), "--export-config", str(cx))
+    assert c.returncode == 0, c.stderr
+    assert json.loads(cx.read_text())["source"] == "nte-run"
+    assert rx.read_text().replace('"source": "nte-ref estimate"', '"source": "nte-run"') == \
+        cx.read_text()
+    for exe in (ref, crun):
+        assert exe(str(loop["p1"]), "--config", str(cx), "--out",
+                   str(d / "re.csv")).returncode == 0

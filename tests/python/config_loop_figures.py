@@ -1,0 +1,106 @@
+"""The loop's figures on the phantom (issue 21), printed; run after `make build`:
+
+    .venv/bin/python tests/python/config_loop_figures.py [PRESET]
+
+1. The workflow's config: `nte-discrepancy` on the tuning seeds' records (1-5) writes
+   estimator_config.json; on each held-out record (seeds 101-110, files as recorded: air gap,
+   tare) the one-step innovation RMS of the estimator with `--config` against Model II's
+   default (`--model 2`, no config).
+2. The atlas: identify on one record with `--model M --contact on --export-config`, predict
+   the next record of the same condition (a different seed; the pairs cycle through the group)
+   with `--config --predict-only --surface` (the record's true surface, as a robot registered
+   to the tissue knows it): RMSE to the noise-free force, over its peak; Model II and Model III.
+
+The estimator runs are nte-run-double's (bit for bit the reference's: test_config_loop.py), for
+speed.  Tuning seeds 1-5, held-out seeds 101-110.
+"""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[2]
+C = ROOT / "build" / "host" / "bin" / "nte-run-double"
+VENV = Path(sys.executable).parent
+TUNING = (1, 2, 3, 4, 5)
+HELD_OUT = tuple(range(101, 111))
+
+
+def phantom(d: Path, preset: str, seed: int) -> Path:
+    f = d / f"{preset}_{seed}.csv"
+    if not f.exists():
+        subprocess.run([str(VENV / "nte-ref"), "phantom", preset, "--seed", str(seed),
+                        "--out", str(f)], check=True, capture_output=True)
+    return f
+
+
+def run(*args: str) -> None:
+    r = subprocess.run([str(C), *args], capture_output=True, text=True)
+    if r.returncode != 0:
+        raise SystemExit(r.stderr)
+
+
+def column(f: Path, name: str) -> np.ndarray:
+    return np.genfromtxt(f, delimiter=",", names=True)[name]
+
+
+def innovation_rms(f: Path) -> float:
+    return float(np.sqrt(np.mean(column(f, "innovation_n") ** 2)))
+
+
+def atlas(d: Path, preset: str, seeds: tuple[int, ...], model: int) -> list[tuple[float, float]]:
+    """(RMSE N, peak N) of each prediction of seeds[i + 1] from seeds[i]'s identification."""
+    out = []
+    for i, s in enumerate(seeds):
+        t = seeds[(i + 1) % len(seeds)]
+        src, dst = phantom(d, preset, s), phantom(d, preset, t)
+        cfg = d / f"x{model}_{s}.json"
+        run(str(src), "--model", str(model), "--contact", "on", "--out", str(d / "id.csv"),
+            "--export-config", str(cfg))
+        surface = json.loads(dst.with_suffix(".truth.json").read_text())["surface_mm"]
+        run(str(dst), "--config", str(cfg), "--predict-only", "--surface", str(surface),
+            "--out", str(d / "pr.csv"))
+        truth = column(dst, "force_true_n")
+        err = column(d / "pr.csv", "force_hat_n") - truth
+        out.append((float(np.sqrt(np.mean(err ** 2))), float(np.max(np.abs(truth)))))
+    return out
+
+
+def main(preset: str = "skin-on-muscle") -> None:
+    if not C.exists():
+        raise SystemExit(f"{C} missing: make build")
+    with tempfile.TemporaryDirectory() as tmp:
+        d = Path(tmp)
+        tune = [str(phantom(d, preset, s)) for s in TUNING]
+        subprocess.run([str(VENV / "nte-discrepancy"), *tune, "--out", str(d / "disc"),
+                        "--no-figures"], check=True, capture_output=True)
+        cfg = d / "disc" / "estimator_config.json"
+        ratios = []
+        print(f"1. innovation RMS (N), {preset}, held-out seeds {HELD_OUT[0]}-{HELD_OUT[-1]}, "
+              f"as recorded: Model II default | --config (workflow on seeds 1-5)")
+        for s in HELD_OUT:
+            f = phantom(d, preset, s)
+            run(str(f), "--model", "2", "--out", str(d / "def.csv"))
+            run(str(f), "--config", str(cfg), "--out", str(d / "cfg.csv"))
+            a, b = innovation_rms(d / "def.csv"), innovation_rms(d / "cfg.csv")
+            ratios.append(b / a)
+            print(f"   seed {s}: {a:.4f} | {b:.4f}  ({b / a:.2f}x)")
+        print(f"   median ratio {np.median(ratios):.2f}, worst {np.max(ratios):.2f}")
+        print("2. atlas: identify on seed k, predict seed k+1 (cyclic) from depth alone; "
+              "RMSE / peak, median (worst)")
+        for label, seeds in (("tuning 1-5", TUNING), ("held-out 101-110", HELD_OUT)):
+            for model in (2, 3):
+                res = atlas(d, preset, seeds, model)
+                rel = [100.0 * e / p for e, p in res]
+                print(f"   {label:17s} Model {'I' * model:3s}: RMSE {np.median([e for e, _ in res]):.3f} N, "
+                      f"peak {np.median([p for _, p in res]):.3f} N, "
+                      f"RMSE/peak {np.median(rel):.0f} % ({np.max(rel):.0f} %)")
+
+
+if __name__ == "__main__":
+    main(*sys.argv[1:2])
