@@ -323,3 +323,42 @@ def test_estimate_exports_what_it_identified(sim_csv, tmp_path, capsys):
     assert main(["estimate", str(sim_csv), "--model", "2", "--out", str(tmp_path / "o.csv"),
                  "--export-config", str(tmp_path / "no" / "c.json")]) == 2
     assert not (tmp_path / "o.csv").exists()
+
+
+def test_estimate_config_flags_override_the_file(sim_csv, tmp_path, capsys):
+    """--config: the file's model and Model III constants apply unless a flag says otherwise;
+    --model may come from the file alone; --help shows the new flags and their defaults."""
+    import json
+    cfg = tmp_path / "cfg.json"
+    cfg.write_text(json.dumps({
+        "schema": "nte-estimator-config/1", "model": 3,
+        "params": {"sigma0": 7.9e-3, "sigma1": 2.46, "sigma2": 4.14e-3, "f1": 5.59e-2,
+                   "f2": -2.11e-2, "alpha": 5.25e-2, "beta": 2.55e-2},
+        "r_n2": 1e-5, "effects": {"dwell_relaxation": {"tau_slow_s": 5.0}},
+        "model3": {"presliding_mm": 1.5}}))
+    out, js = tmp_path / "e.csv", tmp_path / "x.json"
+    assert main(["estimate", str(sim_csv), "--config", str(cfg), "--tau-fast", "0.2",
+                 "--out", str(out), "--export-config", str(js)]) == 0
+    x = json.loads(js.read_text())
+    assert x["model"] == 3 and x["r_n2"] == 1e-5
+    m3 = x["model3"]
+    assert (m3["tau_slow_s"], m3["presliding_mm"], m3["tau_fast_s"]) == (5.0, 1.5, 0.2)
+    assert main(["estimate", str(sim_csv), "--config", str(cfg), "--model", "2",
+                 "--tau-slow", "2", "--out", str(out), "--export-config", str(js)]) == 0
+    assert json.loads(js.read_text())["model"] == 2
+    # neither --model nor --config: one line, exit 2
+    capsys.readouterr()
+    assert main(["estimate", str(sim_csv), "--out", str(out)]) == 2
+    assert "--model (or --config)" in capsys.readouterr().err
+    from reference_py.tools.cli import build_parser
+    text = build_parser()._subparsers._group_actions[0].choices["estimate"].format_help()
+    for flag in ("--config", "--predict-only", "--export-config"):
+        assert flag in text
+    assert "(default: 2.5, or --config's)" in " ".join(text.split())
+
+
+def test_c_run_help_shows_the_config_flags():
+    r = _c("nte-run", "--help")
+    assert r.returncode == 0
+    for flag in ("--config FILE.json", "--predict-only", "--export-config FILE.json"):
+        assert flag in r.stdout
