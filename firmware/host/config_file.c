@@ -4,6 +4,7 @@
  * order, with the same text: a file is accepted or refused alike by nte-ref and nte-run.
  */
 #include "config_file.h"
+#include "csv_in.h"
 
 #include <cjson/cJSON.h>
 
@@ -367,61 +368,6 @@ int nte_config_file_read(const char* path, nte_file_config_t* out, char* msg, si
 /* --export-config: JSON as the reference's json.dumps(indent=2) writes it                    */
 /* ------------------------------------------------------------------------------------------ */
 
-/* Python's repr of a finite double: the shortest digit string that reads back to x (the
- * correctly rounded one of that length, which is also the closest), fixed notation for
- * decimal exponents -4..15, else d.ddde+XX; a whole number keeps ".0". */
-static void py_repr(double x, char* out, size_t cap)
-{
-    char e[40];
-    int p = 1;
-    for (; p < 17; p++) {
-        (void)snprintf(e, sizeof e, "%.*e", p - 1, x);
-        if (!(strtod(e, NULL) < x) && !(strtod(e, NULL) > x)) {
-            break;
-        }
-    }
-    (void)snprintf(e, sizeof e, "%.*e", p - 1, x);
-    const char* s = e;
-    const int neg = (*s == '-');
-    s += neg;
-    char dig[24];
-    size_t nd = 0U;
-    for (; (*s != 'e') && (*s != '\0'); s++) {
-        if ((*s >= '0') && (*s <= '9') && (nd < (sizeof dig - 1U))) {
-            dig[nd++] = *s;
-        }
-    }
-    const int e10 = (*s == 'e') ? atoi(s + 1) : 0;
-    while ((nd > 1U) && (dig[nd - 1U] == '0')) {
-        nd--;
-    }
-    dig[nd] = '\0';
-    if ((nd == 1U) && (dig[0] == '0')) { /* zero (either sign) */
-        (void)snprintf(out, cap, "%s0.0", neg ? "-" : "");
-        return;
-    }
-    const int decpt = e10 + 1;
-    if ((e10 >= -4) && (e10 < 16)) {
-        if (decpt <= 0) {
-            (void)snprintf(out, cap, "%s0.%0*d%s", neg ? "-" : "", -decpt, 0, dig);
-            if (decpt == 0) { /* "%0*d" with width 0 still printed one 0 */
-                (void)snprintf(out, cap, "%s0.%s", neg ? "-" : "", dig);
-            }
-        } else if ((size_t)decpt >= nd) {
-            (void)snprintf(out, cap, "%s%s%0*d.0", neg ? "-" : "", dig, decpt - (int)nd, 0);
-            if ((size_t)decpt == nd) {
-                (void)snprintf(out, cap, "%s%s.0", neg ? "-" : "", dig);
-            }
-        } else {
-            (void)snprintf(out, cap, "%s%.*s.%s", neg ? "-" : "", decpt, dig, dig + decpt);
-        }
-    } else {
-        (void)snprintf(out, cap, "%s%c%s%s%se%c%02d", neg ? "-" : "", dig[0],
-                       (nd > 1U) ? "." : "", dig + 1, "", (e10 < 0) ? '-' : '+',
-                       (e10 < 0) ? -e10 : e10);
-    }
-}
-
 typedef struct text_t {
     char* buf;
     size_t cap;
@@ -446,7 +392,7 @@ static void put_real(text_t* t, const char* indent, const char* key, double x, i
 {
     char r[40];
     if (isfinite(x)) {
-        py_repr(x, r, sizeof r);
+        nte_py_repr(x, r, sizeof r); /* csv_in.c: Python's repr, the reference's floats */
     } else {
         (void)snprintf(r, sizeof r, "null");
     }
