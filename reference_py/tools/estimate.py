@@ -97,8 +97,9 @@ def run_estimate(trial: Trial, preset: Preset, model: int, estimator: str = "ban
                        pars, sds, names, conf, cont)
 
 
-#: the estimator configuration files' schema (the discrepancy workflow writes the same one)
-CONFIG_SCHEMA = "nte-estimator-config/1"
+#: the estimator configuration files' schema (the discrepancy workflow writes the same one;
+#: estconfig.py reads it)
+from .estconfig import CONFIG_SCHEMA  # noqa: E402
 
 
 def export_config(run: EstimateRun, cfg: EstimatorConfig, preset: Preset) -> dict[str, object]:
