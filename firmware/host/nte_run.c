@@ -375,7 +375,7 @@ typedef struct out_t {
     mode_t mode;
 } out_t;
 
-static int check_out(const char* path, out_t* o, char* msg, size_t cap)
+static int check_out(const char* flag, const char* path, out_t* o, char* msg, size_t cap)
 {
     struct stat st;
     (void)snprintf(o->target, sizeof o->target, "%s", path);
@@ -384,7 +384,7 @@ static int check_out(const char* path, out_t* o, char* msg, size_t cap)
         char link[sizeof o->target];
         const ssize_t n = readlink(o->target, link, sizeof link - 1U);
         if ((n < 0) || (depth >= 40)) {
-            (void)snprintf(msg, cap, "--out %s: cannot follow the symbolic link: %s", path,
+            (void)snprintf(msg, cap, "%s %s: cannot follow the symbolic link: %s", flag, path,
                            (n < 0) ? strerror(errno) : "too many levels");
             return -1;
         }
@@ -398,8 +398,8 @@ static int check_out(const char* path, out_t* o, char* msg, size_t cap)
                            o->target, link);
             const size_t len = strlen(joined);
             if (len >= sizeof o->target) {
-                (void)snprintf(msg, cap, "--out %s: the symbolic link's target path is too "
-                                         "long", path);
+                (void)snprintf(msg, cap, "%s %s: the symbolic link's target path is too "
+                                         "long", flag, path);
                 return -1;
             }
             (void)memcpy(o->target, joined, len + 1U);
@@ -413,8 +413,8 @@ static int check_out(const char* path, out_t* o, char* msg, size_t cap)
                            : S_ISSOCK(st.st_mode) ? "a socket"
                                                   : NULL;
         if (kind != NULL) {
-            (void)snprintf(msg, cap, "--out %s: is %s, not a regular file; refusing to "
-                                     "replace it", path, kind);
+            (void)snprintf(msg, cap, "%s %s: is %s, not a regular file; refusing to "
+                                     "replace it", flag, path, kind);
             return -1;
         }
         o->mode = st.st_mode & 07777U;
@@ -431,12 +431,12 @@ static int check_out(const char* path, out_t* o, char* msg, size_t cap)
     (void)snprintf(dir, sizeof dir, "%.*s", (slash == o->target) ? 1 : (int)(slash - o->target),
                    o->target);
     if (stat(dir, &st) != 0) {
-        (void)snprintf(msg, cap, "--out %s: directory %s does not exist (it is not created)",
-                       path, dir);
+        (void)snprintf(msg, cap, "%s %s: directory %s does not exist (it is not created)",
+                       flag, path, dir);
         return -1;
     }
     if (!S_ISDIR(st.st_mode)) {
-        (void)snprintf(msg, cap, "--out %s: %s is not a directory", path, dir);
+        (void)snprintf(msg, cap, "%s %s: %s is not a directory", flag, path, dir);
         return -1;
     }
     return 0;
@@ -650,12 +650,13 @@ int main(int argc, char** argv)
     }
     out_t out;
     (void)memset(&out, 0, sizeof out);
-    if (check_out(a.out, &out, msg, sizeof msg) != 0) {
+    if (check_out("--out", a.out, &out, msg, sizeof msg) != 0) {
         return bad(msg);
     }
     out_t exp_out;
     (void)memset(&exp_out, 0, sizeof exp_out);
-    if ((a.export_config != NULL) && (check_out(a.export_config, &exp_out, msg, sizeof msg) != 0)) {
+    if ((a.export_config != NULL) &&
+        (check_out("--export-config", a.export_config, &exp_out, msg, sizeof msg) != 0)) {
         return bad(msg);
     }
     nte_trial_t tr;
