@@ -301,3 +301,57 @@ def test_export_same_bytes_from_both_twins(loop, args):
     for exe in (ref, crun):
         assert exe(str(loop["p1"]), "--config", str(cx), "--out",
                    str(d / "re.csv")).returncode == 0
+
+
+# -- nte-node --config: the same reader (firmware/config_json), Models I and II ---------------
+
+def _node() -> Path:
+    for c in (ROOT / "build/host/bin/nte-node", ROOT / "build/node/bin/nte-node"):
+        if c.exists():
+            return c
+    pytest.skip("nte-node not built (make build)")
+
+
+@pytest.mark.parametrize("name,text,why", BAD[:12], ids=[b[0] for b in BAD[:12]])
+def test_node_refuses_bad_configs_with_the_same_text(tmp_path, name, text, why):
+    bad = tmp_path / name
+    bad.write_text(text)
+    r = subprocess.run([str(_node()), "--replay", "/dev/null", "--record",
+                        str(tmp_path / "o.log"), "--config", str(bad)],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and r.stderr.splitlines() == [f"nte-node: error: {bad}: {why}"]
+
+
+def test_node_takes_the_config_and_flags_override_it(tmp_path):
+    """The paper insertion replayed through nte-node: a config holding the preset's values and
+    the default r_n2 publishes the same frames as --preset; another r_n2 changes them; the
+    workflow-style model 3 needs --model."""
+    sys.path.insert(0, str(ROOT))
+    from host_bench.cli import scenario_frames, write_candump
+    from host_bench.dbc import NteDatabase
+    csv = tmp_path / "paper.csv"
+    subprocess.run([sys.executable, "-m", "reference_py", "simulate", "--preset", "paper-10mms",
+                    "--depth", "10", "--dwell", "0.2", "--seed", "1", "--out", str(csv)],
+                   check=True, cwd=ROOT, stdout=subprocess.DEVNULL)
+    log = tmp_path / "in.log"
+    write_candump(log, scenario_frames(str(csv), NteDatabase(), 1000.0), "vcan0", 1.0)
+
+    def replay(tag: str, *extra: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run([str(_node()), "--replay", str(log), "--record",
+                               str(tmp_path / f"{tag}.log"), *extra],
+                              capture_output=True, text=True, timeout=120)
+
+    assert replay("preset", "--model", "2", "--preset", "paper-10mms").returncode == 0
+    same = tmp_path / "same.json"
+    same.write_text(_doc(r_n2=4e-6))
+    assert replay("same", "--config", str(same)).returncode == 0
+    assert (tmp_path / "preset.log").read_bytes() == (tmp_path / "same.log").read_bytes()
+    other = tmp_path / "other.json"
+    other.write_text(_doc(r_n2=1e-3))
+    assert replay("other", "--config", str(other)).returncode == 0
+    assert (tmp_path / "preset.log").read_bytes() != (tmp_path / "other.log").read_bytes()
+    m3 = tmp_path / "m3.json"
+    m3.write_text(json.loads(json.dumps(_doc())).replace('"model": 2', '"model": 3'))
+    r = replay("m3", "--config", str(m3))
+    assert r.returncode == 2 and "key 'model': the node runs Models I and II" in r.stderr
+    assert replay("m3b", "--config", str(m3), "--model", "2").returncode == 0

@@ -1,7 +1,7 @@
 /*
  * nte-node: the estimator as a CAN node on Linux SocketCAN.
  *
- *   nte-node --iface vcan0 [--base-id 0x200] [--model 1|2] [--preset NAME]
+ *   nte-node --iface vcan0 [--base-id 0x200] [--model 1|2] [--preset NAME] [--config FILE]
  *            [--depth-timeout-ms MS] [--heartbeat-ms MS] [--params-per-step N]
  *            [--resync-gap-ms MS] [--no-kernel-filter] [--ready FILE] [--stats FILE]
  *            [--record OUT.log] [--received IN.log]
@@ -17,6 +17,7 @@
  * Exit status: 0 clean stop, 2 bad arguments, 3 AF_CAN unavailable in this kernel,
  * 4 no such CAN interface, 1 other failure.
  */
+#include "nte_config_file.h"
 #include "nte_node.h"
 #include "nte_port_log.h"
 #include "nte_port_socketcan.h"
@@ -61,6 +62,9 @@ typedef struct args_t {
     unsigned long base_id;
     unsigned long resync_gap_ms;
     int model;
+    const char* config; /* --config FILE.json (firmware/config_json): model, params, r_n2 */
+    int given_model;
+    int given_preset;
     unsigned long timeout_ms;
     unsigned long heartbeat_ms;
     unsigned long params_per_step;
@@ -71,6 +75,8 @@ static int usage(const char* err)
 {
     fprintf(stderr,
             "usage: " PROG " --iface IFACE [--base-id 0x200] [--model 1|2] [--preset NAME]\n"
+            "       [--config FILE.json (default: none; its model 1|2, params as the nominal\n"
+            "       values unless --preset, r_n2; flags given override it)]\n"
             "       [--depth-timeout-ms 50] [--heartbeat-ms 100] [--params-per-step 1]\n"
             "       [--resync-gap-ms 20] [--no-kernel-filter] [--ready FILE] [--stats FILE]\n"
             "       [--record OUT.log] [--received IN.log]\n"
@@ -128,6 +134,9 @@ static int parse_args(int argc, char** argv, args_t* a)
             a->iface = v;
         } else if (strcmp(o, "--preset") == 0) {
             a->preset = v;
+            a->given_preset = 1;
+        } else if (strcmp(o, "--config") == 0) {
+            a->config = v;
         } else if (strcmp(o, "--ready") == 0) {
             a->ready = v;
         } else if (strcmp(o, "--stats") == 0) {
@@ -143,6 +152,7 @@ static int parse_args(int argc, char** argv, args_t* a)
                 return usage("argument --model: 1 or 2");
             }
             a->model = (v[0] == '1') ? 1 : 2;
+            a->given_model = 1;
         } else if ((strcmp(o, "--base-id") == 0) && (parse_ulong(v, &u) == 0)) {
             a->base_id = u;
         } else if ((strcmp(o, "--depth-timeout-ms") == 0) && (parse_ulong(v, &u) == 0)) {
@@ -179,17 +189,17 @@ static const nte_preset_t* find_preset(const char* name)
 
 /* The estimator configuration nte-run uses: default profile, schedule all, nominal = preset,
  * Model I's beta0 = the preset's beta, f1 excess computed in double. */
-static int estimator_config(nte_config_t* cfg, int32_t model, const nte_preset_t* p)
+static int estimator_config(nte_config_t* cfg, int32_t model, const double values[7])
 {
     nte_config_default(cfg, model, nte_schedule_all);
-    cfg->beta0 = (nte_real_t)p->values[6];
-    /* a preset holds the seven force-model parameters; Model III's relaxation strengths keep
-     * the configuration's nominal values */
+    cfg->beta0 = (nte_real_t)values[6];
+    /* a preset (or --config's params) holds the seven force-model parameters; Model III's
+     * relaxation strengths keep the configuration's nominal values */
     for (size_t j = 0u; j < 7u; j++) {
-        cfg->nominal[j] = (nte_real_t)p->values[j];
+        cfg->nominal[j] = (nte_real_t)values[j];
     }
-    const double kappa = (p->values[4] < 0.0) ? 1.0 : 0.0;
-    const double excess = p->values[3] - (kappa * (-p->values[4]));
+    const double kappa = (values[4] < 0.0) ? 1.0 : 0.0;
+    const double excess = values[3] - (kappa * (-values[4]));
     if (!(excess > 0.0)) {
         return -1;
     }
@@ -360,15 +370,35 @@ int main(int argc, char** argv)
         (void)snprintf(msg, sizeof msg, "unknown preset '%s'", a.preset);
         return usage(msg);
     }
+    /* --config: the same reader and rules as nte-run's (one line naming the key, exit 2) */
+    nte_file_config_t fc;
+    (void)memset(&fc, 0, sizeof fc);
+    if ((a.config != NULL) && (nte_config_file_read(a.config, &fc, msg, sizeof msg) != 0)) {
+        fprintf(stderr, PROG ": error: %s\n", msg);
+        return EXIT_USAGE;
+    }
+    if ((a.config != NULL) && !a.given_model) {
+        if (fc.model == 3) {
+            fprintf(stderr, PROG ": error: %s: key 'model': the node runs Models I and II "
+                    "(give --model 1|2)\n", a.config);
+            return EXIT_USAGE;
+        }
+        a.model = fc.model;
+    }
+    const double* values = ((a.config != NULL) && !a.given_preset) ? fc.params : p->values;
     nte_node_config_default(&cfg, a.model);
     cfg.base_id = (uint32_t)((a.base_id <= 0x7FFu) ? a.base_id : 0x800u);
     cfg.depth_timeout_us = (uint32_t)((a.timeout_ms <= 3000u) ? a.timeout_ms * 1000u : 0u);
     cfg.heartbeat_period_us = (uint32_t)((a.heartbeat_ms <= 10000u) ? a.heartbeat_ms * 1000u : 0u);
     cfg.params_per_step = (uint32_t)((a.params_per_step <= 7u) ? a.params_per_step : 0u);
     cfg.resync_gap_us = (uint32_t)((a.resync_gap_ms <= 3000u) ? a.resync_gap_ms * 1000u : 0u);
-    if ((estimator_config(&cfg.estimator[0], 1, p) != 0) ||
-        (estimator_config(&cfg.estimator[1], 2, p) != 0)) {
+    if ((estimator_config(&cfg.estimator[0], 1, values) != 0) ||
+        (estimator_config(&cfg.estimator[1], 2, values) != 0)) {
         return usage("preset: f1 must exceed -f2");
+    }
+    if ((a.config != NULL) && fc.has_r_n2) {
+        cfg.estimator[0].r_n2 = (nte_real_t)fc.r_n2;
+        cfg.estimator[1].r_n2 = (nte_real_t)fc.r_n2;
     }
     /* the port is needed for validation: check the node config with a stand-in first */
     uint32_t ids[3] = {(uint32_t)cfg.base_id + NTE_FRAMES_OFFSET_DEPTH,
