@@ -2,7 +2,7 @@
 
 One reader for both writers: the discrepancy workflow's ``estimator_config.json``
 (DISCREPANCY.md §7) and ``--export-config`` of ``nte-ref estimate`` / ``nte-run``.  The C
-twin (firmware/host/nte_config_file.c) applies the same rules in the same order with the same
+twin (firmware/config_json/nte_config_file.c) applies the same rules in the same order with the same
 message text; tests/python/test_config_loop.py runs both over a table of bad files and asserts
 identical lines.  Keep the two in step: every rule below has its twin there.
 

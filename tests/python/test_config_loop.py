@@ -5,7 +5,7 @@
 * each reader on the workflow's real output (two phantom trials, seeds 1 and 2, run through
   ``nte-discrepancy`` here), C = reference at 0 ULP with it, Models II and III;
 * a table of bad files: exit 2, one line naming the file and the key, the same text from both
-  readers (reference_py/tools/estconfig.py and firmware/host/config_file.c), nothing written;
+  readers (reference_py/tools/estconfig.py and firmware/config_json/nte_config_file.c), nothing written;
 * export -> re-read round trip; --predict-only holds the parameters, C = reference at 0 ULP;
 * the loop figure: innovation RMS with the workflow's config <= half of Model II's default
   on a third record (seed 3, not given to the workflow).
