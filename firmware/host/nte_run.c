@@ -117,7 +117,8 @@ static void help(void)
            "  --no-relaxation        Model III: no relaxation branches (default: on)\n"
            "  --no-direction-memory  Model III: tanh(v/eps) instead of the direction state\n"
            "                         (default: on)\n"
-           "  --contact on|off       the surface and tare front end (default: off): depth is\n"
+           "  --contact on|off       the surface and tare front end (default: on for --model 3\n"
+           "                         unless --predict-only, off for 1 and 2): depth is\n"
            "                         the stage position, the needle starts in the air; adds\n"
            "                         the columns surface_mm, tare_n, contact (0 air, 1 tissue)\n"
            "  --surface MM           a known surface (stage position, -500..500 mm) instead of\n"
@@ -632,6 +633,10 @@ int main(int argc, char** argv)
         a.relaxation = (fc.has_relaxation && a.relaxation) ? fc.relaxation : a.relaxation;
         a.direction_memory = (fc.has_direction_memory && a.direction_memory)
                                  ? fc.direction_memory : a.direction_memory;
+    }
+    if ((a.contact == -1) && isnan(a.surface) && (a.model == 3) && !a.predict_only) {
+        /* the front end is part of Model III: a record as a rig writes it starts in the air */
+        a.contact = 1;
     }
     if (a.predict_only && (a.contact == 1) && isnan(a.surface)) {
         return bad("argument --predict-only: the front end finds the surface from the force; "

@@ -206,7 +206,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="tanh(v/eps) instead of the direction state (default: on)")
     add_unit_arguments(e)
     e.add_argument("--contact", choices=("on", "off"), default=None,
-                   help="the surface and tare front end (default: off): the depth column is "
+                   help="the surface and tare front end (default: on for --model 3 unless "
+                        "--predict-only, off for Models I and II): the depth column is "
                         "the stage position, the needle starts in the air; the tare is learned "
                         "there, contact is found from the force onset and the bank gets the "
                         "depth below the surface found; adds the columns surface_mm, tare_n, "
@@ -409,6 +410,9 @@ def _file_config(a: argparse.Namespace) -> "tuple[FileConfig | None, Preset]":
                 raise ValueError(f"{a.config}: key 'surface_mm': per-trial surfaces give no "
                                  f"surface to predict with; give --surface MM")
             a.contact = "on"
+    if a.contact is None and a.surface is None and a.model == 3 and not a.predict_only:
+        # the front end is part of Model III: a record as a rig writes it starts in the air
+        a.contact = "on"
     if a.predict_only and a.contact == "on" and a.surface is None:
         raise ValueError("argument --predict-only: the front end finds the surface from the "
                          "force; give --surface MM")

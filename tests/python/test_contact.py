@@ -276,6 +276,18 @@ def test_c_equals_the_reference_with_the_front_end_on(air_file, precision, extra
 
 
 @needs_c
+@pytest.mark.parametrize("extra,on", [(["--model", "3"], True),
+                                      (["--model", "3", "--contact", "off"], False),
+                                      (["--model", "2"], False), (["--model", "1"], False)])
+def test_the_front_end_is_part_of_model_three(air_file, tmp_path, extra, on):
+    """Model III turns the front end on unless told otherwise (a record as a rig writes it starts
+    in the air); Models I and II leave it off: both twins, the same bytes."""
+    c_text, py_text = _both("float64", air_file, extra, tmp_path)
+    assert c_text == py_text
+    assert ("surface_mm" in c_text.split("\n")[0]) == on
+
+
+@needs_c
 def test_the_front_end_off_leaves_the_columns_out(air_file, tmp_path):
     c_text, py_text = _both("float32", air_file, ["--model", "2", "--contact", "off"], tmp_path)
     assert c_text == py_text
