@@ -135,6 +135,18 @@ def run_c(precision: str, run: Run, out: Path) -> list[str]:
     return out.read_text().split("\n")[:-1]
 
 
+def cli_pair(precision: str, csv: Path, extra: list[str], tmp: Path) -> tuple[bytes, bytes]:
+    """The estimate file of each twin's command line on `csv` with the flags `extra`:
+    (nte-run's, nte-ref estimate's), written into `tmp`."""
+    c_out, py_out = tmp / f"c_{precision}.csv", tmp / f"py_{precision}.csv"
+    subprocess.run([str(EXE[precision]), str(csv), "--out", str(c_out)] + extra, check=True,
+                   capture_output=True)
+    subprocess.run([sys.executable, "-m", "reference_py", "estimate", str(csv), "--precision",
+                    precision, "--out", str(py_out)] + extra, check=True, capture_output=True,
+                   cwd=ROOT)
+    return c_out.read_bytes(), py_out.read_bytes()
+
+
 def _ordered(bits: np.ndarray, width: int) -> np.ndarray:
     """Map IEEE bit patterns to integers whose difference is the ULP distance."""
     b = bits.astype(np.int64) if width == 32 else bits.astype(object)

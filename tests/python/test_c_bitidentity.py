@@ -14,15 +14,13 @@ from __future__ import annotations
 
 import json
 import os
-import subprocess
-import sys
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import pytest
 
-from c_twin import (ALL_RUNS, DATA, EXE, ROOT, groups, reference_batch, reference_key, run_c,
-                    ulp_distance)
+from c_twin import (ALL_RUNS, DATA, EXE, ROOT, cli_pair, groups, reference_batch,
+                    reference_key, run_c, ulp_distance)
 
 pytestmark = pytest.mark.skipif(
     not all(p.exists() for p in EXE.values()),
@@ -69,16 +67,6 @@ def test_paper_scenarios_bit_identical(reference, precision, tmp_path):
     assert not failures, "\n".join(failures)
 
 
-def _cli_pair(precision: str, csv: Path, extra: list[str], tmp: Path) -> tuple[bytes, bytes]:
-    c_out, py_out = tmp / f"c_{precision}.csv", tmp / f"py_{precision}.csv"
-    subprocess.run([str(EXE[precision]), str(csv), "--out", str(c_out)] + extra, check=True,
-                   capture_output=True)
-    subprocess.run([sys.executable, "-m", "reference_py", "estimate", str(csv), "--precision",
-                    precision, "--out", str(py_out)] + extra, check=True, capture_output=True,
-                   cwd=ROOT)
-    return c_out.read_bytes(), py_out.read_bytes()
-
-
 @pytest.mark.parametrize("precision,extra", [
     ("float32", ["--model", "2", "--profile", "paper", "--schedule", "rotate",
                  "--init-seed", "7", "--init-factor", "1.25"]),
@@ -93,7 +81,7 @@ def test_whole_files_from_both_clis(precision, extra, tmp_path):
     lines += [",".join(row.split(",")[i] for i in keep) for row in src if row]
     csv = tmp_path / "novel.csv"
     csv.write_text("\n".join(lines) + "\n")
-    c_bytes, py_bytes = _cli_pair(precision, csv, extra, tmp_path)
+    c_bytes, py_bytes = cli_pair(precision, csv, extra, tmp_path)
     if c_bytes != py_bytes:
         ulp = ulp_distance(c_bytes.decode().split("\n")[:-1], py_bytes.decode().split("\n")[:-1],
                            precision)
@@ -121,7 +109,7 @@ def model3_csv(tmp_path_factory) -> Path:
 def test_model3_whole_files_bit_identical(model3_csv, precision, extra, tmp_path):
     """Model III through both command-line programs: identical files (0 ULP) in both
     precisions, with every switch of the model."""
-    c_bytes, py_bytes = _cli_pair(precision, model3_csv, ["--model", "3"] + extra, tmp_path)
+    c_bytes, py_bytes = cli_pair(precision, model3_csv, ["--model", "3"] + extra, tmp_path)
     header = py_bytes.split(b"\n", 1)[0].decode()
     assert header.startswith("t_s,force_hat_n,z,innovation_n,status,sigma0")
     if "--no-relaxation" not in extra:
@@ -146,7 +134,7 @@ def test_whole_files_with_the_contact_front_end(precision, extra, tmp_path):
     rec = simulate_phantom(LAB, seed=11, rate_hz=75.0, speeds_mm_s=(3.0,))
     csv = tmp_path / "air.csv"
     write_phantom(csv, replace(rec, depth_mm=rec.depth_mm - 3.0))
-    c_bytes, py_bytes = _cli_pair(precision, csv, extra, tmp_path)
+    c_bytes, py_bytes = cli_pair(precision, csv, extra, tmp_path)
     assert c_bytes.split(b"\n")[0].endswith(b",surface_mm,tare_n,contact")
     if c_bytes != py_bytes:
         ulp = ulp_distance(c_bytes.decode().split("\n")[:-1], py_bytes.decode().split("\n")[:-1],

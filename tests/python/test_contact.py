@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from c_twin import EXE, ROOT, ulp_distance
+from c_twin import EXE, ROOT, cli_pair, ulp_distance
 from reference_py.bank import REJECT_RANGE, FilterBank
 from reference_py.config import ContactConfig, default_config
 from reference_py.contact import CONTACT_AIR, CONTACT_TISSUE, ContactFrontEnd
@@ -243,13 +243,8 @@ def air_file(tmp_path_factory) -> Path:
 
 
 def _both(precision: str, csv: Path, extra: list[str], tmp: Path) -> tuple[str, str]:
-    c_out, py_out = tmp / f"c_{precision}.csv", tmp / f"py_{precision}.csv"
-    subprocess.run([str(EXE[precision]), str(csv), "--out", str(c_out)] + extra, check=True,
-                   capture_output=True)
-    subprocess.run([sys.executable, "-m", "reference_py", "estimate", str(csv), "--precision",
-                    precision, "--out", str(py_out)] + extra, check=True, capture_output=True,
-                   cwd=ROOT)
-    return c_out.read_text(), py_out.read_text()
+    c_bytes, py_bytes = cli_pair(precision, csv, extra, tmp)
+    return c_bytes.decode(), py_bytes.decode()
 
 
 @needs_c
