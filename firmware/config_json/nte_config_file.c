@@ -134,7 +134,7 @@ static int check(const reader_t* r, const cJSON* doc, nte_file_config_t* out)
     if ((out->params[4] < 0.0) && !((out->params[3] + out->params[4]) > 0.0)) {
         return fail(r, "params.f1", "g(0) = f1 + f2 must be > 0");
     }
-    int got = number(r, doc, "r_n2", "r_n2", 0.0, INFINITY, &out->r_n2);
+    int got = number(r, doc, "r_n2", "r_n2", 0.0, (double)INFINITY, &out->r_n2);
     if (got < 0) {
         return -1;
     }

@@ -159,7 +159,7 @@ static int parse_args(int argc, char** argv, args_t* a)
     a->relaxation = 1;
     a->direction_memory = 1;
     a->contact = -1;
-    a->surface = (double)NAN;
+    a->surface = (double)NAN; /* NAN is a float: said explicitly for -Wdouble-promotion */
     a->config = NULL;
     a->export_config = NULL;
     a->predict_only = 0;
@@ -167,7 +167,7 @@ static int parse_args(int argc, char** argv, args_t* a)
     a->given_presliding = 0;
     a->given_tau_fast = 0;
     a->given_tau_slow = 0;
-    a->given_relax_branches = 0; /* NAN is a float: said explicitly for -Wdouble-promotion */
+    a->given_relax_branches = 0;
     for (int i = 1; i < argc; i++) {
         if ((strcmp(argv[i], "--help") == 0) || (strcmp(argv[i], "-h") == 0)) {
             help();
