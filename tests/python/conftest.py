@@ -9,19 +9,7 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 os.environ.setdefault("MPLBACKEND", "Agg")
 
-import vcan_session  # noqa: E402  (tests/python is on sys.path under pytest's rootdir rules)
-
-
-def pytest_configure(config: pytest.Config) -> None:
-    # the controller (or a run without xdist) owns the session's kernel; workers inherit the
-    # shared directory through the environment
-    if not hasattr(config, "workerinput"):
-        vcan_session.configure()
-
-
-def pytest_unconfigure(config: pytest.Config) -> None:
-    if not hasattr(config, "workerinput"):
-        vcan_session.shutdown()
+import vcan_session  # noqa: E402  (its session hooks: tests/conftest.py)
 
 
 @pytest.fixture(scope="session")

@@ -10,10 +10,12 @@ first by asking (DIR/stop), then by its process group id -- never by name.  If t
 dies, with-vcan notices (WITH_VCAN_SERVE_PARENT) and stops its kernel by itself.
 
 The state shared between workers lives in a directory named by NTE_VCAN_SESSION_DIR, which the
-owner creates before any worker starts; a file lock makes exactly one worker start the kernel.
+owner creates before any worker starts (tests/conftest.py, loaded by the controller before xdist
+starts its workers); a file lock makes exactly one worker start the kernel.
 """
 from __future__ import annotations
 
+import atexit
 import fcntl
 import os
 import shutil
@@ -44,7 +46,11 @@ def configure() -> None:
 
 
 def _session_dir() -> Path:
-    configure()   # a worker started without an owner (plain pytest) becomes its own owner
+    if SESSION_ENV not in os.environ:
+        # no owner prepared one (tests/conftest.py not loaded): this process owns the session
+        # and stops its kernel when it exits
+        configure()
+        atexit.register(shutdown)
     return Path(os.environ[SESSION_ENV])
 
 
