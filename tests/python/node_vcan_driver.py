@@ -257,6 +257,12 @@ def enobufs(out: Path) -> dict:
     cap = capture(out / "nobuf.sent.log")
     res = _result(out, cap, "nobuf", [m for _, m in frames])
     res["alive_after"] = (out / "nobuf.alive").read_text().strip() == "1"
+    # every Estimate frame the node recorded, whether or not it passes the receiver's E2E check:
+    # the counter counts modulo 15, so when the outage took a multiple of 15 frames the first
+    # one after it carries the counter of the last one before and the receiver refuses it as a
+    # repeat (decoded = recorded - 1 then, about one run in 15)
+    res["estimate_frames_recorded"] = sum(1 for m in cap
+                                          if m.arbitration_id == DB.frame_id("Estimate"))
     # the frames that did go out still follow the reference; counters cannot align the node's
     # estimates to the mirror's across 15+ losses, so compare the tail after the outage (the
     # last 500) one to one
