@@ -8,11 +8,13 @@
 static const uint16_t nte_frames_offsets[nte_frames_kind_count] = {
     NTE_FRAMES_OFFSET_DEPTH,    NTE_FRAMES_OFFSET_FORCE,  NTE_FRAMES_OFFSET_COMMAND,
     NTE_FRAMES_OFFSET_ESTIMATE, NTE_FRAMES_OFFSET_PARAMS, NTE_FRAMES_OFFSET_HEARTBEAT,
+    NTE_FRAMES_OFFSET_CONTACT,
 };
 
 static const uint16_t nte_frames_data_ids[nte_frames_kind_count] = {
     NTE_FRAMES_DATA_ID_DEPTH,    NTE_FRAMES_DATA_ID_FORCE,  NTE_FRAMES_DATA_ID_COMMAND,
     NTE_FRAMES_DATA_ID_ESTIMATE, NTE_FRAMES_DATA_ID_PARAMS, NTE_FRAMES_DATA_ID_HEARTBEAT,
+    NTE_FRAMES_DATA_ID_CONTACT,
 };
 
 /* Raw value of log10(std) that means std = 0. */
@@ -260,7 +262,7 @@ nte_frames_err_t nte_frames_decode_force(nte_e2e_rx_t* e2e, const uint8_t* data,
 
 static bool nte_frames_command_ok(uint8_t model_sel, uint8_t estimator_sel, uint8_t adapt_cmd)
 {
-    return (model_sel <= (uint8_t)NTE_FRAMES_MODEL_II) &&
+    return (model_sel <= (uint8_t)NTE_FRAMES_MODEL_III) &&
            (estimator_sel <= (uint8_t)NTE_FRAMES_ESTIMATOR_ROBUST) &&
            (adapt_cmd <= (uint8_t)NTE_FRAMES_ADAPT_RESUME);
 }
@@ -380,7 +382,9 @@ static void nte_frames_param_set(struct nte_can_params_t* m, uint8_t index, floa
     case NTE_FRAMES_PARAM_F1: m->f1 = value; m->f1_std_log10 = std_raw; break;
     case NTE_FRAMES_PARAM_F2: m->f2 = value; m->f2_std_log10 = std_raw; break;
     case NTE_FRAMES_PARAM_ALPHA: m->alpha = value; m->alpha_std_log10 = std_raw; break;
-    default: m->beta = value; m->beta_std_log10 = std_raw; break;
+    case NTE_FRAMES_PARAM_BETA: m->beta = value; m->beta_std_log10 = std_raw; break;
+    case NTE_FRAMES_PARAM_G_FAST: m->g_fast = value; m->g_fast_std_log10 = std_raw; break;
+    default: m->g_slow = value; m->g_slow_std_log10 = std_raw; break;
     }
 }
 
@@ -394,7 +398,9 @@ static void nte_frames_param_get(const struct nte_can_params_t* m, uint8_t index
     case NTE_FRAMES_PARAM_F1: *value = m->f1; *std_raw = m->f1_std_log10; break;
     case NTE_FRAMES_PARAM_F2: *value = m->f2; *std_raw = m->f2_std_log10; break;
     case NTE_FRAMES_PARAM_ALPHA: *value = m->alpha; *std_raw = m->alpha_std_log10; break;
-    default: *value = m->beta; *std_raw = m->beta_std_log10; break;
+    case NTE_FRAMES_PARAM_BETA: *value = m->beta; *std_raw = m->beta_std_log10; break;
+    case NTE_FRAMES_PARAM_G_FAST: *value = m->g_fast; *std_raw = m->g_fast_std_log10; break;
+    default: *value = m->g_slow; *std_raw = m->g_slow_std_log10; break;
     }
 }
 
@@ -476,7 +482,7 @@ nte_frames_err_t nte_frames_encode_heartbeat(const nte_frames_heartbeat_t* in, n
     if ((in == NULL) || (e2e == NULL) || (out == NULL)) {
         return nte_frames_err_null;
     }
-    if ((in->node_state > (uint8_t)NTE_FRAMES_STATE_FAULT) || (in->active_model > 1u) ||
+    if ((in->node_state > (uint8_t)NTE_FRAMES_STATE_FAULT) || (in->active_model > 2u) ||
         (in->active_estimator > 1u)) {
         return nte_frames_err_selector;
     }
@@ -521,7 +527,7 @@ nte_frames_err_t nte_frames_decode_heartbeat(nte_e2e_rx_t* e2e, const uint8_t* d
         return err;
     }
     (void)nte_can_heartbeat_unpack(&m, data, length);
-    if (m.node_state > (uint8_t)NTE_FRAMES_STATE_FAULT) {
+    if ((m.node_state > (uint8_t)NTE_FRAMES_STATE_FAULT) || (m.active_model > 2u)) {
         return nte_frames_err_selector;
     }
     if (!nte_can_heartbeat_uptime_is_in_range(m.uptime) ||
@@ -535,6 +541,70 @@ nte_frames_err_t nte_frames_decode_heartbeat(nte_e2e_rx_t* e2e, const uint8_t* d
     out->e2e_errors = m.e2e_errors;
     out->range_errors = m.range_errors;
     out->step_time_s = nte_can_heartbeat_step_time_decode(m.step_time);
+    return nte_frames_ok;
+}
+
+/* ----------------------------------------------------------------------------- contact */
+
+nte_frames_err_t nte_frames_encode_contact(const nte_frames_contact_t* in, nte_e2e_tx_t* e2e,
+                                           uint8_t* out)
+{
+    struct nte_can_contact_t m;
+    bool clamped = false;
+    if ((in == NULL) || (e2e == NULL) || (out == NULL)) {
+        return nte_frames_err_null;
+    }
+    if ((in->contact_state > (uint8_t)NTE_FRAMES_CONTACT_TISSUE) || (in->active_model > 2u)) {
+        return nte_frames_err_selector;
+    }
+    if (!isfinite(in->tare_n) || (in->surface_valid && !isfinite(in->surface_mm))) {
+        return nte_frames_err_not_finite;
+    }
+    if (in->surface_valid &&
+        !nte_frames_within(in->surface_mm, -NTE_FRAMES_SURFACE_MAX_MM, NTE_FRAMES_SURFACE_MAX_MM,
+                           0.0005f)) {
+        return nte_frames_err_range;
+    }
+    (void)nte_can_contact_init(&m);
+    m.contact_state = in->contact_state;
+    m.surface_valid = in->surface_valid ? 1u : 0u;
+    m.active_model = in->active_model;
+    m.surface = in->surface_valid ? nte_can_contact_surface_encode(in->surface_mm) : 0;
+    if (!nte_can_contact_surface_is_in_range(m.surface)) {
+        return nte_frames_err_range;
+    }
+    m.tare = nte_can_contact_tare_encode(
+        nte_frames_clamp(in->tare_n, -NTE_FRAMES_FORCE_MAX_N, NTE_FRAMES_FORCE_MAX_N, &clamped));
+    (void)nte_can_contact_pack(out, &m, NTE_FRAMES_LENGTH);
+    return nte_frames_protect(e2e, nte_frames_kind_contact, out);
+}
+
+nte_frames_err_t nte_frames_decode_contact(nte_e2e_rx_t* e2e, const uint8_t* data,
+                                           size_t length, nte_frames_contact_t* out,
+                                           nte_e2e_result_t* e2e_result, uint8_t* lost)
+{
+    struct nte_can_contact_t m;
+    nte_frames_err_t err;
+    if ((e2e == NULL) || (data == NULL) || (out == NULL)) {
+        return nte_frames_err_null;
+    }
+    err = nte_frames_check(e2e, nte_frames_kind_contact, data, length, e2e_result, lost);
+    if (err != nte_frames_ok) {
+        return err;
+    }
+    (void)nte_can_contact_unpack(&m, data, length);
+    if (m.active_model > 2u) {
+        return nte_frames_err_selector;
+    }
+    if (!nte_can_contact_surface_is_in_range(m.surface) ||
+        !nte_can_contact_tare_is_in_range(m.tare)) {
+        return nte_frames_err_range;
+    }
+    out->contact_state = m.contact_state;
+    out->surface_valid = (m.surface_valid != 0u);
+    out->active_model = m.active_model;
+    out->surface_mm = nte_can_contact_surface_decode(m.surface);
+    out->tare_n = nte_can_contact_tare_decode(m.tare);
     return nte_frames_ok;
 }
 

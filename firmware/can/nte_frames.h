@@ -15,7 +15,8 @@
  *
  * CAN ids: id = base + offset, base configurable (default NTE_FRAMES_BASE_ID_DEFAULT = 0x200,
  * the ids written in the DBC); offsets: depth 0x00, force 0x01, command 0x02, estimate 0x10,
- * params 0x11, heartbeat 0x12. Standard 11-bit ids, so base <= 0x7FF - 0x12. The DBC attribute
+ * params 0x11, heartbeat 0x12, contact 0x13. Standard 11-bit ids, so base <= 0x7FF - 0x13 = 0x7EC.
+ * The DBC attribute
  * NteIdOffset holds the same offsets and NteE2EDataId the data ids below; a test checks that
  * this header and the DBC agree.
  *
@@ -51,6 +52,7 @@ extern "C" {
 #define NTE_FRAMES_OFFSET_ESTIMATE 0x10u
 #define NTE_FRAMES_OFFSET_PARAMS 0x11u
 #define NTE_FRAMES_OFFSET_HEARTBEAT 0x12u
+#define NTE_FRAMES_OFFSET_CONTACT 0x13u
 
 #define NTE_FRAMES_DATA_ID_DEPTH 0x4E00u
 #define NTE_FRAMES_DATA_ID_FORCE 0x4E01u
@@ -58,6 +60,7 @@ extern "C" {
 #define NTE_FRAMES_DATA_ID_ESTIMATE 0x4E10u
 #define NTE_FRAMES_DATA_ID_PARAMS 0x4E11u
 #define NTE_FRAMES_DATA_ID_HEARTBEAT 0x4E12u
+#define NTE_FRAMES_DATA_ID_CONTACT 0x4E13u
 
 /** Sender clock tick of SensorTime, s. */
 #define NTE_FRAMES_TICK_S 1.0e-4f
@@ -70,7 +73,8 @@ extern "C" {
 #define NTE_FRAMES_INNOVATION_MAX_N 0.8188f
 #define NTE_FRAMES_Z_MIN (-8.192f)
 #define NTE_FRAMES_Z_MAX 8.1915f
-#define NTE_FRAMES_UPTIME_WRAP_S 104857.6f
+#define NTE_FRAMES_UPTIME_WRAP_S 52428.8f  /**< 19-bit Uptime at 0.1 s (14.56 h) */
+#define NTE_FRAMES_SURFACE_MAX_MM 500.0f  /**< |Contact.Surface|, stage position mm */
 #define NTE_FRAMES_STEP_TIME_MAX_S 0.00819f
 /** log10(std) is sent in 0.001 steps in [-32.767, 32.767]; -32.768 means std = 0 (fixed). */
 #define NTE_FRAMES_STD_LOG10_MIN (-32.767f)
@@ -91,7 +95,7 @@ typedef enum {
     nte_frames_err_wrong_kind = -8   /**< The E2E state passed in belongs to another message. */
 } nte_frames_err_t;
 
-/** The six messages. */
+/** The seven messages. */
 typedef enum {
     nte_frames_kind_depth = 0,
     nte_frames_kind_force = 1,
@@ -99,12 +103,14 @@ typedef enum {
     nte_frames_kind_estimate = 3,
     nte_frames_kind_params = 4,
     nte_frames_kind_heartbeat = 5,
-    nte_frames_kind_count = 6
+    nte_frames_kind_contact = 6,
+    nte_frames_kind_count = 7
 } nte_frames_kind_t;
 
 /** Command selectors (0 = keep the current setting). */
 enum {
-    NTE_FRAMES_MODEL_KEEP = 0, NTE_FRAMES_MODEL_I = 1, NTE_FRAMES_MODEL_II = 2
+    NTE_FRAMES_MODEL_KEEP = 0, NTE_FRAMES_MODEL_I = 1, NTE_FRAMES_MODEL_II = 2,
+    NTE_FRAMES_MODEL_III = 3
 };
 enum {
     NTE_FRAMES_ESTIMATOR_KEEP = 0, NTE_FRAMES_ESTIMATOR_BANK = 1, NTE_FRAMES_ESTIMATOR_ROBUST = 2
@@ -112,12 +118,16 @@ enum {
 enum {
     NTE_FRAMES_ADAPT_KEEP = 0, NTE_FRAMES_ADAPT_FREEZE = 1, NTE_FRAMES_ADAPT_RESUME = 2
 };
-/** Parameter indices of the Params frame. */
+/** Parameter indices of the Params frame (nte.h nte_param_id_t order).  Models I and II
+ *  publish 0..6 (NTE_FRAMES_PARAM_COUNT_MODEL_II), Model III 0..8 (NTE_FRAMES_PARAM_COUNT). */
 enum {
     NTE_FRAMES_PARAM_SIGMA0 = 0, NTE_FRAMES_PARAM_SIGMA1 = 1, NTE_FRAMES_PARAM_SIGMA2 = 2,
     NTE_FRAMES_PARAM_F1 = 3, NTE_FRAMES_PARAM_F2 = 4, NTE_FRAMES_PARAM_ALPHA = 5,
-    NTE_FRAMES_PARAM_BETA = 6, NTE_FRAMES_PARAM_COUNT = 7
+    NTE_FRAMES_PARAM_BETA = 6, NTE_FRAMES_PARAM_G_FAST = 7, NTE_FRAMES_PARAM_G_SLOW = 8,
+    NTE_FRAMES_PARAM_COUNT_MODEL_II = 7, NTE_FRAMES_PARAM_COUNT = 9
 };
+/** Contact states of the Contact frame. */
+enum { NTE_FRAMES_CONTACT_AIR = 0, NTE_FRAMES_CONTACT_TISSUE = 1 };
 /** Heartbeat node states. */
 enum { NTE_FRAMES_STATE_INIT = 0, NTE_FRAMES_STATE_RUNNING = 1, NTE_FRAMES_STATE_FAULT = 2 };
 
@@ -166,14 +176,24 @@ typedef struct {
 /** Heartbeat (output). */
 typedef struct {
     uint8_t node_state;        /**< NTE_FRAMES_STATE_*. */
-    uint8_t active_model;      /**< 0 = Model I, 1 = Model II. */
+    uint8_t active_model;      /**< 0 = Model I, 1 = Model II, 2 = Model III. */
     uint8_t active_estimator;  /**< 0 = bank, 1 = robust. */
-    float uptime_s;            /**< >= 0 s; sent modulo 104857.6 s with 0.1 s resolution. */
+    float uptime_s;            /**< >= 0 s; sent modulo 52428.8 s with 0.1 s resolution. */
     uint32_t e2e_errors;       /**< Counter of frames rejected by E2E; sent modulo 256. */
     uint32_t range_errors;     /**< Counter of frames rejected by range checks; modulo 256. */
     float step_time_s;         /**< >= 0 s, longest step since the last heartbeat; clamped to
                                     8.19 ms, 2 us resolution. */
 } nte_frames_heartbeat_t;
+
+/** Model III's contact front end (output). */
+typedef struct {
+    uint8_t contact_state;  /**< NTE_FRAMES_CONTACT_AIR or _TISSUE. */
+    bool surface_valid;     /**< A surface is known; false: surface_mm is ignored (sent as 0). */
+    uint8_t active_model;   /**< 0 = Model I, 1 = Model II, 2 = Model III. */
+    float surface_mm;       /**< Surface, stage position mm, -500..500 (an error beyond), 1 um
+                                 resolution; must be finite when surface_valid. */
+    float tare_n;           /**< Tare, N; clamped to +-50 N, 0.1 mN resolution. */
+} nte_frames_contact_t;
 
 /** Sender clock unwrapper: use ONE for all streams stamped by the same clock. */
 typedef struct {
@@ -210,6 +230,9 @@ nte_frames_err_t nte_frames_encode_param(const nte_frames_param_t* in, nte_e2e_t
                                          uint8_t* out);
 nte_frames_err_t nte_frames_encode_heartbeat(const nte_frames_heartbeat_t* in, nte_e2e_tx_t* e2e,
                                              uint8_t* out);
+/** Non-finite tare (or surface, when valid) and |surface| > 500 mm are errors. */
+nte_frames_err_t nte_frames_encode_contact(const nte_frames_contact_t* in, nte_e2e_tx_t* e2e,
+                                           uint8_t* out);
 
 /* Decoders: E2E check with `e2e` (its result goes to *e2e_result if that is not NULL; a skipped
  * counter is accepted, the number lost is in *lost if not NULL), then unpack and range check.
@@ -233,6 +256,9 @@ nte_frames_err_t nte_frames_decode_param(nte_e2e_rx_t* e2e, const uint8_t* data,
 nte_frames_err_t nte_frames_decode_heartbeat(nte_e2e_rx_t* e2e, const uint8_t* data,
                                              size_t length, nte_frames_heartbeat_t* out,
                                              nte_e2e_result_t* e2e_result, uint8_t* lost);
+nte_frames_err_t nte_frames_decode_contact(nte_e2e_rx_t* e2e, const uint8_t* data,
+                                           size_t length, nte_frames_contact_t* out,
+                                           nte_e2e_result_t* e2e_result, uint8_t* lost);
 
 /** Forget the clock history. */
 void nte_frames_clock_reset(nte_frames_clock_t* self);

@@ -3,6 +3,7 @@
  */
 #include "nte_node.h"
 
+#include <math.h>
 #include <string.h>
 
 #define NTE_NODE_TICK_US 100u
@@ -12,6 +13,8 @@
 #define NTE_NODE_OUT_ESTIMATE 0u
 #define NTE_NODE_OUT_PARAMS 1u
 #define NTE_NODE_OUT_HEARTBEAT 2u
+#define NTE_NODE_OUT_CONTACT 3u
+#define NTE_NODE_MODELS 3
 
 static const char* const nte_node_event_names[NTE_NODE_EVENT_COUNT] = {
     "wrong_dlc",      "unknown_id",    "bad_crc",        "counter_invalid", "counter_repeated",
@@ -41,6 +44,8 @@ void nte_node_config_default(nte_node_config_t* cfg, int32_t model)
     cfg->model = model;
     nte_config_default(&cfg->estimator[0], 1, nte_schedule_all);
     nte_config_default(&cfg->estimator[1], 2, nte_schedule_all);
+    nte_config_default(&cfg->estimator[2], 3, nte_schedule_all);
+    cfg->estimator[2].contact.enabled = true; /* Model III: Depth is the stage position */
     cfg->depth_timeout_us = 50000u;
     cfg->heartbeat_period_us = 100000u;
     cfg->params_per_step = 1u;
@@ -55,19 +60,21 @@ static nte_node_err_t nte_node_check(const nte_node_config_t* cfg, const nte_nod
     if ((port->receive == NULL) || (port->send == NULL) || (port->now_us == NULL)) {
         return nte_node_err_null;
     }
-    if ((nte_frames_can_id(cfg->base_id, nte_frames_kind_heartbeat, &id) != nte_frames_ok) ||
-        ((cfg->model != 1) && (cfg->model != 2)) || (cfg->depth_timeout_us < 100u) ||
+    if ((nte_frames_can_id(cfg->base_id, nte_frames_kind_contact, &id) != nte_frames_ok) ||
+        (cfg->model < 1) || (cfg->model > NTE_NODE_MODELS) || (cfg->depth_timeout_us < 100u) ||
         (cfg->depth_timeout_us > 3000000u) || (cfg->heartbeat_period_us < 1000u) ||
         (cfg->heartbeat_period_us > 10000000u) || (cfg->params_per_step < 1u) ||
-        (cfg->params_per_step > (uint32_t)NTE_FRAMES_PARAM_COUNT) || (cfg->rx_budget < 1u) ||
+        (cfg->params_per_step > (uint32_t)NTE_FRAMES_PARAM_COUNT_MODEL_II) ||
+        (cfg->rx_budget < 1u) ||
         (cfg->rx_budget > 65535u) || (cfg->resync_gap_us < 1000u) ||
         (cfg->resync_gap_us > 3000000u) || (cfg->command_interval_us > 10000000u)) {
         return nte_node_err_bad_config;
     }
-    if ((cfg->estimator[0].model != 1) || (cfg->estimator[1].model != 2) ||
-        (nte_config_check(&cfg->estimator[0]) != nte_err_ok) ||
-        (nte_config_check(&cfg->estimator[1]) != nte_err_ok)) {
-        return nte_node_err_estimator;
+    for (int32_t m = 0; m < NTE_NODE_MODELS; m++) {
+        if ((cfg->estimator[m].model != (m + 1)) ||
+            (nte_config_check(&cfg->estimator[m]) != nte_err_ok)) {
+            return nte_node_err_estimator;
+        }
     }
     return nte_node_ok;
 }
@@ -85,7 +92,15 @@ static bool nte_node_start_model(nte_node_t* self, int32_t model, nte_estimator_
     self->state = nte_node_state_init;
     (void)memset(&self->last, 0, sizeof self->last);
     self->last.adapting = true;
+    self->contact_sent = false;
     return true;
+}
+
+/* Params multiplexer indices cycled in the active model: 0..6, Model III 0..8. */
+static uint32_t nte_node_param_count(const nte_node_t* self)
+{
+    return (self->model == 3) ? (uint32_t)NTE_FRAMES_PARAM_COUNT
+                              : (uint32_t)NTE_FRAMES_PARAM_COUNT_MODEL_II;
 }
 
 nte_node_err_t nte_node_init(nte_node_t* self, const nte_node_config_t* cfg,
@@ -93,8 +108,9 @@ nte_node_err_t nte_node_init(nte_node_t* self, const nte_node_config_t* cfg,
 {
     static const nte_frames_kind_t in_kinds[3] = {nte_frames_kind_depth, nte_frames_kind_force,
                                                   nte_frames_kind_command};
-    static const nte_frames_kind_t out_kinds[3] = {
-        nte_frames_kind_estimate, nte_frames_kind_params, nte_frames_kind_heartbeat};
+    static const nte_frames_kind_t out_kinds[4] = {
+        nte_frames_kind_estimate, nte_frames_kind_params, nte_frames_kind_heartbeat,
+        nte_frames_kind_contact};
     if ((self == NULL) || (cfg == NULL) || (port == NULL)) {
         return nte_node_err_null;
     }
@@ -107,6 +123,8 @@ nte_node_err_t nte_node_init(nte_node_t* self, const nte_node_config_t* cfg,
     self->port = *port;
     for (uint32_t i = 0u; i < 3u; i++) {
         (void)nte_frames_rx_init(&self->rx[i], in_kinds[i]);
+    }
+    for (uint32_t i = 0u; i < 4u; i++) {
         (void)nte_frames_tx_init(&self->tx[i], out_kinds[i]);
     }
     nte_frames_clock_reset(&self->clock);
@@ -190,6 +208,7 @@ static void nte_node_all_params(const nte_node_t* self, float value[NTE_FRAMES_P
 {
     nte_param_estimate_t pe[NTE_IDENTIFIED_MAX];
     const nte_config_t* c = &self->cfg.estimator[self->model - 1];
+    /* NTE_FRAMES_PARAM_COUNT == NTE_PARAM_COUNT: the frame's indices are nte_param_id_t */
     for (uint32_t j = 0u; j < (uint32_t)NTE_FRAMES_PARAM_COUNT; j++) {
         value[j] = (float)c->nominal[j];
         sd[j] = 0.0f;
@@ -211,15 +230,18 @@ static void nte_node_publish_params(nte_node_t* self)
 {
     float value[NTE_FRAMES_PARAM_COUNT];
     float sd[NTE_FRAMES_PARAM_COUNT];
+    const uint32_t count = nte_node_param_count(self);
     nte_node_all_params(self, value, sd);
     for (uint32_t k = 0u; k < self->cfg.params_per_step; k++) {
         nte_frames_param_t p;
         uint8_t data[NTE_FRAMES_LENGTH];
+        if (self->param_next >= count) {
+            self->param_next = 0u; /* after a change from Model III to I or II */
+        }
         p.index = self->param_next;
         p.value = value[p.index];
         p.std = sd[p.index];
-        self->param_next =
-            (uint8_t)((self->param_next + 1u) % (uint32_t)NTE_FRAMES_PARAM_COUNT);
+        self->param_next = (uint8_t)((self->param_next + 1u) % count);
         if (nte_frames_encode_param(&p, &self->tx[NTE_NODE_OUT_PARAMS], data) !=
             nte_frames_ok) {
             nte_node_count(self, nte_node_ev_encode_error);
@@ -238,8 +260,8 @@ static void nte_node_heartbeat(nte_node_t* self, uint64_t now)
     hb.node_state = (uint8_t)self->state;
     hb.active_model = (uint8_t)(self->model - 1);
     hb.active_estimator = (self->estimator == nte_estimator_robust) ? 1u : 0u;
-    /* 0.1 s steps, reduced modulo the frame's wrap (1048576 steps) before the float */
-    hb.uptime_s = (float)(uint32_t)((up_us / 100000u) % 1048576u) * 0.1f;
+    /* 0.1 s steps, reduced modulo the frame's wrap (2^19 steps) before the float */
+    hb.uptime_s = (float)(uint32_t)((up_us / 100000u) % 524288u) * 0.1f;
     hb.e2e_errors = ev[nte_node_ev_wrong_dlc] + ev[nte_node_ev_bad_crc] +
                     ev[nte_node_ev_counter_invalid] + ev[nte_node_ev_counter_repeated];
     hb.range_errors = ev[nte_node_ev_out_of_range] + ev[nte_node_ev_time_backwards] +
@@ -252,6 +274,37 @@ static void nte_node_heartbeat(nte_node_t* self, uint64_t now)
         nte_node_count(self, nte_node_ev_encode_error);
     }
     self->step_time_max_us = 0u;
+}
+
+/* Model III: the Contact frame after a step at sensor time t (rule in nte_node.h, MODEL III). */
+static void nte_node_publish_contact(nte_node_t* self, uint32_t t, const nte_output_t* o)
+{
+    nte_frames_contact_t c;
+    uint8_t data[NTE_FRAMES_LENGTH];
+    (void)memset(&c, 0, sizeof c);
+    c.contact_state = (o->contact == nte_contact_tissue) ? (uint8_t)NTE_FRAMES_CONTACT_TISSUE
+                                                         : (uint8_t)NTE_FRAMES_CONTACT_AIR;
+    c.surface_valid = !isnan(o->surface_mm);
+    c.active_model = (uint8_t)(self->model - 1);
+    c.surface_mm = c.surface_valid ? (float)o->surface_mm : 0.0f;
+    c.tare_n = (float)o->tare_n;
+    const bool changed = !self->contact_sent ||
+                         (c.contact_state != self->contact.contact_state) ||
+                         (c.surface_valid != self->contact.surface_valid) ||
+                         (memcmp(&c.surface_mm, &self->contact.surface_mm, sizeof(float)) != 0);
+    const int32_t since = nte_node_tdiff(t, self->contact_t);
+    if (!changed && (since >= 0) &&
+        (since < (int32_t)(NTE_NODE_CONTACT_PERIOD_US / NTE_NODE_TICK_US))) {
+        return;
+    }
+    self->contact_sent = true;
+    self->contact_t = t;
+    self->contact = c;
+    if (nte_frames_encode_contact(&c, &self->tx[NTE_NODE_OUT_CONTACT], data) != nte_frames_ok) {
+        nte_node_count(self, nte_node_ev_encode_error);
+        return;
+    }
+    nte_node_send(self, nte_frames_kind_contact, NTE_NODE_OUT_CONTACT, data);
 }
 
 /* ------------------------------------------------------------------------------------------ */
@@ -297,7 +350,9 @@ static void nte_node_step(nte_node_t* self, const nte_node_force_t* f, float dep
     e.force_n = (float)o.force_hat_n;
     e.innovation_n = (float)o.innovation_n;
     e.z = (float)o.z;
-    e.in_tissue = depth_mm > 0.0f;
+    const bool front_end = self->cfg.estimator[self->model - 1].contact.enabled;
+    /* with the contact front end the depth is the stage position: its contact state decides */
+    e.in_tissue = front_end ? (o.contact == nte_contact_tissue) : (depth_mm > 0.0f);
     e.adapting = true;
     e.fault = (o.status & NTE_STATUS_REJECTED) != 0u;
     e.stale = false;
@@ -305,6 +360,9 @@ static void nte_node_step(nte_node_t* self, const nte_node_force_t* f, float dep
     self->last = e;
     nte_node_publish_estimate(self, &e);
     nte_node_publish_params(self);
+    if (front_end) {
+        nte_node_publish_contact(self, f->t, &o);
+    }
 }
 
 /* Decide the force sample at the head of the queue: 1 = done (stepped or held), 0 = wait. */
@@ -613,7 +671,7 @@ static void nte_node_on_command(nte_node_t* self, const nte_node_frame_t* fr)
     int32_t model = self->model;
     nte_estimator_t estimator = self->estimator;
     if (c.model_sel != NTE_FRAMES_MODEL_KEEP) {
-        model = (c.model_sel == NTE_FRAMES_MODEL_I) ? 1 : 2;
+        model = (int32_t)c.model_sel; /* 1, 2, 3: the frame layer refused the rest */
     }
     if (c.estimator_sel != NTE_FRAMES_ESTIMATOR_KEEP) {
         estimator = (c.estimator_sel == NTE_FRAMES_ESTIMATOR_ROBUST) ? nte_estimator_robust
@@ -631,6 +689,7 @@ static void nte_node_on_command(nte_node_t* self, const nte_node_frame_t* fr)
     if (c.reset) {
         (void)nte_reset(&self->est);
         self->state = nte_node_state_init;
+        self->contact_sent = false;
         (void)memset(&self->last, 0, sizeof self->last);
         self->last.adapting = true;
     }

@@ -6,9 +6,22 @@
  *   E2E CRC and alive counter, DBC ranges, sensor timestamps), and runs one estimator step
  *   (firmware/include/nte.h) per accepted Force frame, with depth and velocity interpolated
  *   linearly to the force sample's own timestamp.  After every step it sends one Estimate frame
- *   and `params_per_step` Params frames (rotating through the seven multiplexer indices); every
- *   `heartbeat_period_us` of the port's clock it sends a Heartbeat.  It counts every dropped or
- *   rejected frame by cause (nte_node_event_t).
+ *   and `params_per_step` Params frames (rotating through the multiplexer indices: 0..6 in
+ *   Models I and II, 0..8 in Model III, whose 7 and 8 are g_fast and g_slow); every
+ *   `heartbeat_period_us` of the port's clock it sends a Heartbeat.  In Model III it also sends
+ *   a Contact frame (see MODEL III).  It counts every dropped or rejected frame by cause
+ *   (nte_node_event_t).
+ *
+ * MODEL III (model 3: nte.h, Model II + direction memory + relaxation; the contact front end on)
+ *   The Depth frames carry the STAGE position (mm, 0..500 as the DBC allows) and the Force
+ *   frames the raw force: the library's contact front end learns the tare in the air and finds
+ *   the surface from the force onset (nte.h, THE CONTACT FRONT END; estimator[2].contact).
+ *   The Estimate's InTissue bit is then the front end's contact state (not depth > 0).  After
+ *   an estimator step (not after a stale hold) a Contact frame is sent when its contact state,
+ *   surface validity or surface differs from the last Contact frame sent, or when the force
+ *   sample is at least NTE_NODE_CONTACT_PERIOD_US of sensor time after the last one (10 Hz):
+ *   the decision uses the frames' SensorTime only, so a replay is deterministic.  Heartbeat
+ *   ActiveModel 2.  Models I and II send no Contact frame and cycle Params 0..6 as before.
  *
  * TIME
  *   Results depend only on the frames' SensorTime stamps (unwrapped, one clock for both streams),
@@ -151,7 +164,8 @@ typedef enum nte_node_event_t {
     nte_node_ev_queue_overflow = 8,   /**< force frame dropped: force queue full */
     nte_node_ev_send_failed = 9,      /**< port send() refused an output frame: dropped */
     nte_node_ev_command_refused = 10, /**< valid command the node may not carry out (model,
-                                           estimator or reset while in tissue; freeze): ignored */
+                                           estimator or reset while in tissue; freeze; Model
+                                           III with the robust estimator): ignored */
     nte_node_ev_stale = 11,           /**< force sample without recent depth: estimate held */
     nte_node_ev_receive_error = 12,   /**< port receive() reported an error */
     nte_node_ev_encode_error = 13,    /**< an output could not be encoded (non-finite): the
@@ -171,16 +185,19 @@ typedef struct nte_node_counters_t {
     uint32_t events[NTE_NODE_EVENT_COUNT]; /**< by nte_node_event_t */
     uint32_t frames_lost;                  /**< frames missed upstream, from counter skips */
     uint32_t rx_accepted[3];               /**< accepted depth, force, command frames */
-    uint32_t tx[3];                        /**< sent estimate, params, heartbeat frames */
+    uint32_t tx[4];                        /**< sent estimate, params, heartbeat, contact
+                                                frames */
     uint32_t steps;                        /**< estimator steps (non-stale force samples) */
     uint32_t commands_applied;             /**< commands carried out */
 } nte_node_counters_t;
 
 /** Node tuning; fill with nte_node_config_default, then change what you need. */
 typedef struct nte_node_config_t {
-    uint32_t base_id;             /**< CAN id base, 0..0x7FF - 0x12 (default 0x200) */
-    int32_t model;                /**< model at start: 1 or 2 */
-    nte_config_t estimator[2];    /**< estimator configuration for Model I [0] and II [1] */
+    uint32_t base_id;             /**< CAN id base, 0..0x7FF - 0x13 = 0x7EC (default 0x200) */
+    int32_t model;                /**< model at start: 1, 2 or 3 */
+    nte_config_t estimator[3];    /**< estimator configuration for Model I [0], II [1] and
+                                       III [2] (model fields 1, 2, 3; Model III: the bank
+                                       estimator only, the robust one refuses it) */
     uint32_t depth_timeout_us;    /**< depth older than this (sensor time) at a force sample
                                        makes it stale, 100..3000000 us (default 50000) */
     uint32_t heartbeat_period_us; /**< port clock, 1000..10000000 us (default 100000) */
@@ -200,6 +217,9 @@ typedef enum nte_node_err_t {
     nte_node_err_bad_config = -2, /**< a node field outside its range */
     nte_node_err_estimator = -3   /**< an estimator configuration fails nte_config_check */
 } nte_node_err_t;
+
+/** Sensor time between two Contact frames when nothing changes (Model III), us (10 Hz). */
+#define NTE_NODE_CONTACT_PERIOD_US 100000u
 
 /** Node state (as in the Heartbeat). */
 typedef enum nte_node_state_t {
@@ -241,7 +261,7 @@ typedef struct nte_node_t {
     bool have_command;
     uint64_t last_command_us;     /* port clock of the last applied command */
     nte_e2e_rx_t rx[3];           /* depth, force, command */
-    nte_e2e_tx_t tx[3];           /* estimate, params, heartbeat */
+    nte_e2e_tx_t tx[4];           /* estimate, params, heartbeat, contact */
     nte_frames_clock_t clock;
     nte_node_depth_t depth[NTE_NODE_DEPTH_HISTORY];
     uint32_t depth_next;          /* ring write index */
@@ -254,6 +274,9 @@ typedef struct nte_node_t {
     uint32_t last_force_t;        /* newest accepted force time (queued or processed) */
     nte_frames_estimate_t last;   /* last published estimate values (held when stale) */
     uint8_t param_next;
+    bool contact_sent;            /* a Contact frame was sent since the model started */
+    uint32_t contact_t;           /* sensor ticks of the force sample of the last one */
+    nte_frames_contact_t contact; /* its content */
     nte_node_state_t state;
     uint64_t t_start_us;
     uint64_t next_heartbeat_us;
@@ -261,8 +284,9 @@ typedef struct nte_node_t {
     nte_node_counters_t counters;
 } nte_node_t;
 
-/** Defaults: base 0x200, the given model, nte_config_default for both models (schedule all,
- *  bank estimator), 50 ms depth timeout, 100 ms heartbeat, one Params frame per step, 64 frames
+/** Defaults: base 0x200, the given model, nte_config_default for the three models (schedule
+ *  all, bank estimator; Model III with the contact front end on, surface found from the
+ *  force), 50 ms depth timeout, 100 ms heartbeat, one Params frame per step, 64 frames
  *  per poll, 20 ms resync gap, 100 ms between commands. */
 void nte_node_config_default(nte_node_config_t* cfg, int32_t model);
 
@@ -283,7 +307,7 @@ uint64_t nte_node_next_deadline_us(const nte_node_t* self);
 /** CAN id of input `kind` (0 depth, 1 force, 2 command) for the configured base. */
 uint32_t nte_node_input_id(const nte_node_t* self, uint32_t kind);
 
-/** Active model (1 or 2) and state. */
+/** Active model (1, 2 or 3) and state. */
 int32_t nte_node_model(const nte_node_t* self);
 nte_node_state_t nte_node_state(const nte_node_t* self);
 

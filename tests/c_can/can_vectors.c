@@ -97,6 +97,7 @@ SIG(params, sigma0) SIG(params, sigma0_std_log10) SIG(params, sigma1) SIG(params
 SIG(params, sigma2) SIG(params, sigma2_std_log10) SIG(params, f1) SIG(params, f1_std_log10)
 SIG(params, f2) SIG(params, f2_std_log10) SIG(params, alpha) SIG(params, alpha_std_log10)
 SIG(params, beta) SIG(params, beta_std_log10)
+SIG(params, g_fast) SIG(params, g_fast_std_log10) SIG(params, g_slow) SIG(params, g_slow_std_log10)
 static const signal_t params_signals[] = {
     ENTRY(params, crc, "Crc"), ENTRY(params, counter, "Counter"),
     ENTRY(params, param_index, "ParamIndex"),
@@ -106,7 +107,9 @@ static const signal_t params_signals[] = {
     ENTRY(params, f1, "F1"), ENTRY(params, f1_std_log10, "F1StdLog10"),
     ENTRY(params, f2, "F2"), ENTRY(params, f2_std_log10, "F2StdLog10"),
     ENTRY(params, alpha, "Alpha"), ENTRY(params, alpha_std_log10, "AlphaStdLog10"),
-    ENTRY(params, beta, "Beta"), ENTRY(params, beta_std_log10, "BetaStdLog10")};
+    ENTRY(params, beta, "Beta"), ENTRY(params, beta_std_log10, "BetaStdLog10"),
+    ENTRY(params, g_fast, "GFast"), ENTRY(params, g_fast_std_log10, "GFastStdLog10"),
+    ENTRY(params, g_slow, "GSlow"), ENTRY(params, g_slow_std_log10, "GSlowStdLog10")};
 
 MSG(heartbeat)
 SIG(heartbeat, crc) SIG(heartbeat, counter) SIG(heartbeat, node_state)
@@ -115,9 +118,18 @@ SIG(heartbeat, e2e_errors) SIG(heartbeat, range_errors) SIG(heartbeat, step_time
 static const signal_t heartbeat_signals[] = {
     ENTRY(heartbeat, crc, "Crc"), ENTRY(heartbeat, counter, "Counter"),
     ENTRY(heartbeat, node_state, "NodeState"), ENTRY(heartbeat, active_model, "ActiveModel"),
-    ENTRY(heartbeat, active_estimator, "ActiveEstimator"), ENTRY(heartbeat, uptime, "Uptime"),
+    ENTRY(heartbeat, uptime, "Uptime"), ENTRY(heartbeat, active_estimator, "ActiveEstimator"),
     ENTRY(heartbeat, e2e_errors, "E2eErrors"), ENTRY(heartbeat, range_errors, "RangeErrors"),
     ENTRY(heartbeat, step_time, "StepTime")};
+
+MSG(contact)
+SIG(contact, crc) SIG(contact, counter) SIG(contact, contact_state) SIG(contact, surface_valid)
+SIG(contact, active_model) SIG(contact, surface) SIG(contact, tare)
+static const signal_t contact_signals[] = {
+    ENTRY(contact, crc, "Crc"), ENTRY(contact, counter, "Counter"),
+    ENTRY(contact, contact_state, "ContactState"), ENTRY(contact, surface_valid, "SurfaceValid"),
+    ENTRY(contact, active_model, "ActiveModel"), ENTRY(contact, surface, "Surface"),
+    ENTRY(contact, tare, "Tare")};
 
 #define COUNT(a) (sizeof(a) / sizeof((a)[0]))
 static const message_t messages[] = {
@@ -133,6 +145,8 @@ static const message_t messages[] = {
      COUNT(params_signals)},
     {"Heartbeat", nte_frames_kind_heartbeat, init_heartbeat, pack_heartbeat, unpack_heartbeat,
      heartbeat_signals, COUNT(heartbeat_signals)},
+    {"Contact", nte_frames_kind_contact, init_contact, pack_contact, unpack_contact,
+     contact_signals, COUNT(contact_signals)},
 };
 
 typedef union {
@@ -142,6 +156,7 @@ typedef union {
     struct nte_can_estimate_t estimate;
     struct nte_can_params_t params;
     struct nte_can_heartbeat_t heartbeat;
+    struct nte_can_contact_t contact;
 } any_message_t;
 
 static const message_t* find_message(const char* name)

@@ -32,24 +32,25 @@ static void test_ids(void** state)
     uint32_t id;
     nte_frames_kind_t kind;
     int k;
-    const uint32_t offsets[6] = {0x00, 0x01, 0x02, 0x10, 0x11, 0x12};
+    const uint32_t offsets[7] = {0x00, 0x01, 0x02, 0x10, 0x11, 0x12, 0x13};
     (void)state;
     for (k = 0; k < (int)nte_frames_kind_count; ++k) {
         assert_int_equal(nte_frames_can_id(0x200u, (nte_frames_kind_t)k, &id), nte_frames_ok);
         assert_int_equal(id, 0x200u + offsets[k]);
         assert_int_equal(nte_frames_kind_of(0x200u, id, &kind), nte_frames_ok);
         assert_int_equal(kind, k);
-        assert_int_equal(nte_frames_can_id(0x7EDu, (nte_frames_kind_t)k, &id), nte_frames_ok);
-        assert_int_equal(nte_frames_kind_of(0x7EDu, id, &kind), nte_frames_ok);
+        assert_int_equal(nte_frames_can_id(0x7ECu, (nte_frames_kind_t)k, &id), nte_frames_ok);
+        assert_int_equal(nte_frames_kind_of(0x7ECu, id, &kind), nte_frames_ok);
         assert_int_equal(kind, k);
     }
-    assert_int_equal(nte_frames_can_id(0x7EEu, nte_frames_kind_heartbeat, &id),
+    assert_int_equal(nte_frames_can_id(0x7EDu, nte_frames_kind_contact, &id),
                      nte_frames_err_bad_config);
+    assert_int_equal(nte_frames_can_id(0x7EDu, nte_frames_kind_heartbeat, &id), nte_frames_ok);
     assert_int_equal(nte_frames_can_id(0x200u, nte_frames_kind_count, &id),
                      nte_frames_err_bad_config);
     assert_int_equal(nte_frames_kind_of(0x200u, 0x203u, &kind), nte_frames_err_unknown_id);
     assert_int_equal(nte_frames_kind_of(0x200u, 0x1FFu, &kind), nte_frames_err_unknown_id);
-    assert_int_equal(nte_frames_kind_of(0x200u, 0x213u, &kind), nte_frames_err_unknown_id);
+    assert_int_equal(nte_frames_kind_of(0x200u, 0x214u, &kind), nte_frames_err_unknown_id);
 }
 
 static void test_depth_round_trip(void** state)
@@ -206,7 +207,7 @@ static void test_command_all_values(void** state)
                     nte_frames_command_t in = {reset != 0u, (uint8_t)m, (uint8_t)e, (uint8_t)a};
                     nte_frames_command_t out;
                     nte_frames_err_t err = nte_frames_encode_command(&in, &l.tx, l.frame);
-                    if ((m == 3u) || (e == 3u) || (a == 3u)) {
+                    if ((e == 3u) || (a == 3u)) { /* ModelSel 3 = Model III is valid */
                         assert_int_equal(err, nte_frames_err_selector);
                         continue;
                     }
@@ -221,12 +222,19 @@ static void test_command_all_values(void** state)
             }
         }
     }
-    /* a received ModelSel = 3 (bits 13..14) is a selector error */
+    /* a received ModelSel = 3 (bits 13..14) is Model III; EstimatorSel = 3 (bits 16..17) is a
+     * selector error */
     memset(l.frame, 0, 8);
     l.frame[1] = 0x60u;
     assert_int_equal(nte_e2e_protect(&l.tx, l.frame, 8), nte_e2e_ok);
     {
         nte_frames_command_t out;
+        assert_int_equal(nte_frames_decode_command(&l.rx, l.frame, 8, &out, NULL, NULL),
+                         nte_frames_ok);
+        assert_int_equal(out.model_sel, NTE_FRAMES_MODEL_III);
+        memset(l.frame, 0, 8);
+        l.frame[2] = 0x03u;
+        assert_int_equal(nte_e2e_protect(&l.tx, l.frame, 8), nte_e2e_ok);
         assert_int_equal(nte_frames_decode_command(&l.rx, l.frame, 8, &out, NULL, NULL),
                          nte_frames_err_selector);
     }
@@ -281,8 +289,8 @@ static void test_estimate_clamp_and_flags(void** state)
 static void test_params(void** state)
 {
     /* Model II nominal values (reference_py/MODEL.md §3) and a spread of standard deviations */
-    static const float values[7] = {7.9e-3f, 2.46f, 4.14e-3f, 5.59e-2f, -2.11e-2f, 5.25e-2f,
-                                    2.55e-2f};
+    static const float values[9] = {7.9e-3f, 2.46f, 4.14e-3f, 5.59e-2f, -2.11e-2f, 5.25e-2f,
+                                    2.55e-2f, 0.15f, 0.25f}; /* + Model III's g_fast, g_slow */
     static const float stds[] = {0.0f, 1e-30f, 3.3e-7f, 1e-4f, 0.0123f, 1.0f, 517.0f, 1e30f};
     link_t l;
     unsigned i;
@@ -290,7 +298,7 @@ static void test_params(void** state)
     nte_frames_param_t out;
     (void)state;
     link_init(&l, nte_frames_kind_params);
-    for (i = 0; i < 7u; ++i) {
+    for (i = 0; i < 9u; ++i) {
         for (j = 0; j < sizeof stds / sizeof stds[0]; ++j) {
             nte_frames_param_t in = {(uint8_t)i, values[i], stds[j]};
             assert_int_equal(nte_frames_encode_param(&in, &l.tx, l.frame), nte_frames_ok);
@@ -308,7 +316,7 @@ static void test_params(void** state)
         }
     }
     {
-        nte_frames_param_t bad_index = {7u, 1.0f, 1.0f};
+        nte_frames_param_t bad_index = {9u, 1.0f, 1.0f};
         nte_frames_param_t neg_std = {0u, 1.0f, -1e-3f};
         nte_frames_param_t nan_value = {0u, NAN, 1.0f};
         nte_frames_param_t inf_std = {0u, 1.0f, INFINITY};
@@ -331,7 +339,7 @@ static void test_params(void** state)
                          nte_frames_ok);
         assert_near(log10((double)out.std), 32.767, 1e-3);
     }
-    /* a received index 7..15 is a selector error */
+    /* a received index 9..15 is a selector error */
     memset(l.frame, 0, 8);
     l.frame[1] = 0xF0u;
     assert_int_equal(nte_e2e_protect(&l.tx, l.frame, 8), nte_e2e_ok);
@@ -344,8 +352,9 @@ static void test_heartbeat(void** state)
     link_t l;
     nte_frames_heartbeat_t out;
     nte_frames_heartbeat_t in = {NTE_FRAMES_STATE_RUNNING, 1u, 0u, 3600.3f, 259u, 17u, 0.000734f};
-    nte_frames_heartbeat_t wrap = {NTE_FRAMES_STATE_FAULT, 0u, 1u, 104857.6f + 12.5f, 0u, 255u,
-                                   0.5f};
+    nte_frames_heartbeat_t wrap = {NTE_FRAMES_STATE_FAULT, 2u, 1u, 52428.8f + 12.5f, 0u, 255u,
+                                   0.5f}; /* Model III; Uptime wraps at 2^19 x 0.1 s */
+    nte_frames_heartbeat_t bad_model = {0u, 3u, 0u, 0.0f, 0u, 0u, 0.0f};
     nte_frames_heartbeat_t bad_state = {3u, 0u, 0u, 0.0f, 0u, 0u, 0.0f};
     nte_frames_heartbeat_t neg = {0u, 0u, 0u, -1.0f, 0u, 0u, 0.0f};
     (void)state;
@@ -363,12 +372,74 @@ static void test_heartbeat(void** state)
     assert_int_equal(nte_frames_encode_heartbeat(&wrap, &l.tx, l.frame), nte_frames_ok);
     assert_int_equal(nte_frames_decode_heartbeat(&l.rx, l.frame, 8, &out, NULL, NULL),
                      nte_frames_ok);
-    assert_near(out.uptime_s, 12.5, 0.05 + 0.01); /* float32 at 1e5 s: 0.008 s ulp */
+    assert_near(out.uptime_s, 12.5, 0.05 + 0.01); /* float32 at 5e4 s: 0.004 s ulp */
+    assert_int_equal(out.active_model, 2);
+    assert_int_equal(out.active_estimator, 1);
+    /* layout: ActiveModel bits 14..15, Uptime 16..34, ActiveEstimator bit 35 */
+    assert_int_equal((l.frame[1] >> 6) & 3u, 2u);
+    assert_int_equal((l.frame[4] >> 3) & 1u, 1u);
+    assert_int_equal(nte_frames_encode_heartbeat(&bad_model, &l.tx, l.frame),
+                     nte_frames_err_selector);
     assert_near(out.step_time_s, 0.00819, 1e-9 + 1e-7);
     assert_int_equal(out.node_state, NTE_FRAMES_STATE_FAULT);
     assert_int_equal(nte_frames_encode_heartbeat(&bad_state, &l.tx, l.frame),
                      nte_frames_err_selector);
     assert_int_equal(nte_frames_encode_heartbeat(&neg, &l.tx, l.frame), nte_frames_err_range);
+}
+
+static void test_contact(void** state)
+{
+    static const float surfaces[] = {-500.0f, -0.001f, 0.0f, 6.481f, 123.456f, 500.0f};
+    static const float tares[] = {-50.0f, -0.0123f, 0.0f, 0.0042f, 50.0f};
+    link_t l;
+    nte_frames_contact_t out;
+    size_t i;
+    size_t j;
+    (void)state;
+    link_init(&l, nte_frames_kind_contact);
+    for (i = 0; i < sizeof surfaces / sizeof surfaces[0]; ++i) {
+        for (j = 0; j < sizeof tares / sizeof tares[0]; ++j) {
+            nte_frames_contact_t in = {(uint8_t)(j % 2u), (i % 3u) != 0u, 2u, surfaces[i],
+                                       tares[j]};
+            assert_int_equal(nte_frames_encode_contact(&in, &l.tx, l.frame), nte_frames_ok);
+            assert_int_equal(nte_frames_decode_contact(&l.rx, l.frame, 8, &out, NULL, NULL),
+                             nte_frames_ok);
+            assert_int_equal(out.contact_state, in.contact_state);
+            assert_int_equal(out.surface_valid, in.surface_valid);
+            assert_int_equal(out.active_model, 2u);
+            /* half a 1 um step, half a 0.1 mN step, plus float rounding */
+            assert_near(out.surface_mm, in.surface_valid ? in.surface_mm : 0.0f, 5e-4 + 5e-5);
+            assert_near(out.tare_n, in.tare_n, 5e-5 + 5e-6);
+        }
+    }
+    {
+        nte_frames_contact_t far = {0u, true, 2u, 500.01f, 0.0f};
+        nte_frames_contact_t nan_surface = {0u, true, 2u, NAN, 0.0f};
+        nte_frames_contact_t nan_ignored = {0u, false, 2u, NAN, 0.01f};
+        nte_frames_contact_t nan_tare = {0u, false, 2u, 0.0f, NAN};
+        nte_frames_contact_t big_tare = {1u, false, 2u, 0.0f, 80.0f};
+        nte_frames_contact_t bad_state = {2u, false, 2u, 0.0f, 0.0f};
+        nte_frames_contact_t bad_model = {0u, false, 3u, 0.0f, 0.0f};
+        assert_int_equal(nte_frames_encode_contact(&far, &l.tx, l.frame), nte_frames_err_range);
+        assert_int_equal(nte_frames_encode_contact(&nan_surface, &l.tx, l.frame),
+                         nte_frames_err_not_finite);
+        assert_int_equal(nte_frames_encode_contact(&nan_tare, &l.tx, l.frame),
+                         nte_frames_err_not_finite);
+        assert_int_equal(nte_frames_encode_contact(&bad_state, &l.tx, l.frame),
+                         nte_frames_err_selector);
+        assert_int_equal(nte_frames_encode_contact(&bad_model, &l.tx, l.frame),
+                         nte_frames_err_selector);
+        assert_int_equal(nte_frames_encode_contact(&nan_ignored, &l.tx, l.frame), nte_frames_ok);
+        assert_int_equal(nte_frames_decode_contact(&l.rx, l.frame, 8, &out, NULL, NULL),
+                         nte_frames_ok);
+        assert_false(out.surface_valid);
+        assert_near(out.surface_mm, 0.0, 1e-9);
+        assert_int_equal(nte_frames_encode_contact(&big_tare, &l.tx, l.frame), nte_frames_ok);
+        assert_int_equal(nte_frames_decode_contact(&l.rx, l.frame, 8, &out, NULL, NULL),
+                         nte_frames_ok);
+        assert_near(out.tare_n, 50.0, 1e-6); /* clamped */
+        assert_int_equal(out.contact_state, NTE_FRAMES_CONTACT_TISSUE);
+    }
 }
 
 static void test_clock_unwrap(void** state)
@@ -413,6 +484,7 @@ int main(void)
         cmocka_unit_test(test_estimate_clamp_and_flags),
         cmocka_unit_test(test_params),
         cmocka_unit_test(test_heartbeat),
+        cmocka_unit_test(test_contact),
         cmocka_unit_test(test_clock_unwrap),
     };
     return cmocka_run_group_tests_name("nte_frames", tests, NULL, NULL);

@@ -225,11 +225,23 @@ static void test_config_errors(void** state)
     assert_int_equal(nte_node_init(&g_node_a, &cfg, NULL), nte_node_err_null);
     bad_port.send = NULL;
     assert_int_equal(nte_node_init(&g_node_a, &cfg, &bad_port), nte_node_err_null);
-    cfg.model = 3;
+    cfg.model = 4;
+    assert_int_equal(nte_node_init(&g_node_a, &cfg, &port), nte_node_err_bad_config);
+    cfg.model = 0;
     assert_int_equal(nte_node_init(&g_node_a, &cfg, &port), nte_node_err_bad_config);
     nte_node_config_default(&cfg, 2);
-    cfg.base_id = 0x7F0u;
+    cfg.base_id = 0x7EDu; /* the Contact frame (offset 0x13) would leave the 11-bit range */
     assert_int_equal(nte_node_init(&g_node_a, &cfg, &port), nte_node_err_bad_config);
+    cfg.base_id = 0x7ECu;
+    assert_int_equal(nte_node_init(&g_node_a, &cfg, &port), nte_node_ok);
+    nte_node_config_default(&cfg, 3);
+    assert_int_equal(nte_node_init(&g_node_a, &cfg, &port), nte_node_ok);
+    assert_int_equal(nte_node_model(&g_node_a), 3);
+    cfg.estimator[2].estimator = nte_estimator_robust; /* the library refuses it */
+    assert_int_equal(nte_node_init(&g_node_a, &cfg, &port), nte_node_err_estimator);
+    nte_node_config_default(&cfg, 2);
+    cfg.estimator[2].model = 2;
+    assert_int_equal(nte_node_init(&g_node_a, &cfg, &port), nte_node_err_estimator);
     nte_node_config_default(&cfg, 2);
     cfg.params_per_step = 8u;
     assert_int_equal(nte_node_init(&g_node_a, &cfg, &port), nte_node_err_bad_config);
@@ -848,6 +860,271 @@ static void test_params_and_heartbeat(void** state)
     assert_int_equal(count_id(&g_port_a, NTE_FRAMES_OFFSET_PARAMS), 21u);
 }
 
+/* ---------------------------------------------------------------------------------------- */
+/* Model III: selected by Command, Params 0..8 with g_fast and g_slow, the Contact frame.      */
+
+#define M3_SURFACE_MM 1.0f
+#define M3_TARE_N 0.05f
+#define M3_AIR 60u      /* force samples in the air before the stage moves (0.3 s) */
+#define M3_IN 100u      /* moving in at 10 mm/s (0.5 s: 5 mm of stage, 4 mm of tissue) */
+#define M3_OUT 140u     /* moving out at -10 mm/s (0.7 s: back to 0) */
+#define M3_N (M3_AIR + M3_IN + M3_OUT)
+
+/* Stage position, velocity and raw force of sample i (one every 50 ticks). */
+static void m3_sample(uint32_t i, float* x, float* v, float* f)
+{
+    const float noise = 0.0004f * (float)((int32_t)((i * 7u) % 5u) - 2);
+    if (i < M3_AIR) {
+        *x = 0.0f;
+        *v = 0.0f;
+    } else if (i < M3_AIR + M3_IN) {
+        *x = 0.05f * (float)(i - M3_AIR);
+        *v = 10.0f;
+    } else {
+        *x = 0.05f * (float)M3_IN - 0.05f * (float)(i - M3_AIR - M3_IN);
+        *x = (*x > 0.0f) ? *x : 0.0f;
+        *v = (*x > 0.0f) ? -10.0f : 0.0f;
+    }
+    const float pen = *x - M3_SURFACE_MM;
+    const float k = (*v < 0.0f) ? 0.15f : 0.3f; /* N/mm, less while retracting */
+    *f = M3_TARE_N + noise + ((pen > 0.0f) ? k * pen : 0.0f);
+}
+
+static void m3_push(fake_port_t* p, bench_t* b, uint32_t t0)
+{
+    for (uint32_t i = 0u; i < M3_N; i++) {
+        float x;
+        float v;
+        float f;
+        m3_sample(i, &x, &v, &f);
+        push(p, depth_frame(b, t0 + i * 50u, x, v));
+        push(p, force_frame(b, t0 + i * 50u, f));
+    }
+}
+
+static bool m3_same_float(float a, float b)
+{
+    return memcmp(&a, &b, sizeof a) == 0;
+}
+
+/* ModelSel 3 switches a Model II node to Model III out of tissue; every Estimate then equals a
+ * directly stepped Model III estimator (contact front end on: the depth is the stage
+ * position, InTissue its contact state); Params cycle 0..8, 7 and 8 carrying that estimator's
+ * g_fast and g_slow bit for bit; a Contact frame follows exactly the steps the documented rule
+ * names (change of state or surface, else 100 ms of sensor time) with that estimator's
+ * contact state, surface and tare; the heartbeat says Model III (2).  Back to Model I: Params
+ * 0..6 again and no Contact frame. */
+static void test_model3_params_contact(void** state)
+{
+    nte_node_config_t cfg;
+    bench_t b;
+    static nte_t ref;
+    static nte_output_t ro[M3_N];
+    static float g_val[M3_N][2];
+    (void)state;
+    nte_node_config_default(&cfg, 2);
+    assert_true(cfg.estimator[2].contact.enabled);
+    start(&g_node_a, &g_port_a, &cfg);
+    bench_init(&b);
+    /* Model II in the air for 10 samples */
+    for (uint32_t i = 0u; i < 10u; i++) {
+        push(&g_port_a, depth_frame(&b, 1000u + i * 50u, 0.0f, 0.0f));
+        push(&g_port_a, force_frame(&b, 1000u + i * 50u, M3_TARE_N));
+    }
+    run_all(&g_node_a, &g_port_a);
+    assert_int_equal(g_node_a.counters.steps, 10u);
+    /* Model III with the robust estimator: refused entirely */
+    push(&g_port_a, command_frame(&b, false, NTE_FRAMES_MODEL_III, NTE_FRAMES_ESTIMATOR_ROBUST,
+                                  0u));
+    run_all(&g_node_a, &g_port_a);
+    assert_int_equal(g_node_a.counters.events[nte_node_ev_command_refused], 1u);
+    assert_int_equal(nte_node_model(&g_node_a), 2);
+    push(&g_port_a, command_frame(&b, false, NTE_FRAMES_MODEL_III, 0u, 0u));
+    run_all(&g_node_a, &g_port_a);
+    assert_int_equal(nte_node_model(&g_node_a), 3);
+    assert_int_equal(g_node_a.counters.commands_applied, 1u);
+    assert_int_equal(nte_node_state(&g_node_a), nte_node_state_init);
+    const size_t mark = g_port_a.tx_n;
+    const uint32_t t1 = 1000u + 10u * 50u;
+    m3_push(&g_port_a, &b, t1);
+    run_all(&g_node_a, &g_port_a);
+    assert_int_equal(g_node_a.counters.steps, 10u + M3_N);
+    /* the reference: a fresh Model III estimator on the same quantised samples */
+    assert_int_equal(nte_init(&ref, &cfg.estimator[2]), nte_err_ok);
+    for (uint32_t i = 0u; i < M3_N; i++) {
+        float x;
+        float v;
+        float f;
+        nte_param_estimate_t pe[NTE_IDENTIFIED_MAX];
+        m3_sample(i, &x, &v, &f);
+        nte_sample_t s = {(int64_t)(t1 + 65536u + i * 50u) * 100, q(x, 0.001f), q(v, 0.01f),
+                          q(f, 0.0001f)};
+        assert_int_equal(nte_step(&ref, &s, &ro[i]), nte_err_ok);
+        const size_t n = nte_get_params(&ref, pe, NTE_IDENTIFIED_MAX);
+        assert_int_equal(n, 7u); /* Model II's five, g_fast, g_slow */
+        assert_int_equal(pe[5].id, nte_param_g_fast);
+        assert_int_equal(pe[6].id, nte_param_g_slow);
+        g_val[i][0] = (float)pe[5].value;
+        g_val[i][1] = (float)pe[6].value;
+    }
+    /* the scenario exercises the front end: contact found near the surface, tare learned */
+    uint32_t first_tissue = M3_N;
+    for (uint32_t i = 0u; i < M3_N; i++) {
+        if ((ro[i].contact == nte_contact_tissue) && (first_tissue == M3_N)) {
+            first_tissue = i;
+        }
+    }
+    assert_true(first_tissue < M3_AIR + M3_IN);
+    assert_true(fabsf((float)ro[first_tissue].surface_mm - M3_SURFACE_MM) < 0.2f);
+    assert_true(fabsf((float)ro[first_tissue].tare_n - M3_TARE_N) < 0.002f);
+    assert_int_equal(ro[M3_N - 1u].contact, nte_contact_air); /* retracted: re-armed */
+    /* walk the node's frames since the switch */
+    nte_e2e_rx_t rxe;
+    nte_e2e_rx_t rxp;
+    nte_e2e_rx_t rxc;
+    nte_e2e_tx_t txe;
+    nte_e2e_rx_t rxe2;
+    (void)nte_frames_rx_init(&rxe, nte_frames_kind_estimate);
+    (void)nte_frames_rx_init(&rxp, nte_frames_kind_params);
+    (void)nte_frames_rx_init(&rxc, nte_frames_kind_contact);
+    (void)nte_frames_tx_init(&txe, nte_frames_kind_estimate);
+    (void)nte_frames_rx_init(&rxe2, nte_frames_kind_estimate);
+    int32_t step = -1;
+    int32_t prev_index = -1;
+    uint32_t seen[NTE_FRAMES_PARAM_COUNT] = {0u};
+    bool sent[M3_N];
+    memset(sent, 0, sizeof sent);
+    size_t n_contact = 0u;
+    for (size_t k = mark; k < g_port_a.tx_n; k++) {
+        const nte_node_frame_t* fr = &g_port_a.tx[k];
+        if (fr->id == BASE + NTE_FRAMES_OFFSET_ESTIMATE) {
+            nte_frames_estimate_t got;
+            nte_frames_estimate_t back;
+            uint8_t data[8];
+            step++;
+            assert_true(step < (int32_t)M3_N);
+            const nte_output_t* o = &ro[step];
+            memset(&got, 0, sizeof got); /* padding compared below */
+            nte_frames_estimate_t e = {o->force_hat_n, o->innovation_n, o->z,
+                                       o->contact == nte_contact_tissue, true, false,
+                                       (o->status & NTE_STATUS_REJECTED) != 0u, false};
+            assert_int_equal(nte_frames_decode_estimate(&rxe, fr->data, 8u, &got, NULL, NULL),
+                             nte_frames_ok);
+            memset(&back, 0, sizeof back);
+            assert_int_equal(nte_frames_encode_estimate(&e, &txe, data), nte_frames_ok);
+            assert_int_equal(nte_frames_decode_estimate(&rxe2, data, 8u, &back, NULL, NULL),
+                             nte_frames_ok);
+            assert_memory_equal(&back, &got, sizeof back);
+        } else if (fr->id == BASE + NTE_FRAMES_OFFSET_PARAMS) {
+            nte_frames_param_t p;
+            assert_true(step >= 0);
+            assert_int_equal(nte_frames_decode_param(&rxp, fr->data, 8u, &p, NULL, NULL),
+                             nte_frames_ok);
+            if (prev_index >= 0) {
+                assert_int_equal(p.index, (uint32_t)(prev_index + 1) % 9u);
+            }
+            prev_index = (int32_t)p.index;
+            seen[p.index]++;
+            const bool fixed = (p.index == NTE_FRAMES_PARAM_F2) ||
+                               (p.index == NTE_FRAMES_PARAM_ALPHA);
+            assert_int_equal(p.std > 0.0f, !fixed);
+            if (p.index >= NTE_FRAMES_PARAM_G_FAST) {
+                const float g = g_val[step][p.index - NTE_FRAMES_PARAM_G_FAST];
+                assert_true(m3_same_float(p.value, g));
+                assert_true((p.value > 0.0f) && (p.value < 1.0f));
+            }
+        } else if (fr->id == BASE + NTE_FRAMES_OFFSET_CONTACT) {
+            nte_frames_contact_t c;
+            assert_true(step >= 0);
+            assert_int_equal(nte_frames_decode_contact(&rxc, fr->data, 8u, &c, NULL, NULL),
+                             nte_frames_ok);
+            const nte_output_t* o = &ro[step];
+            assert_false(sent[step]);
+            sent[step] = true;
+            n_contact++;
+            assert_int_equal(c.active_model, 2u);
+            assert_int_equal(c.contact_state, (o->contact == nte_contact_tissue) ? 1u : 0u);
+            assert_int_equal(c.surface_valid, !isnan(o->surface_mm));
+            if (c.surface_valid) {
+                assert_true(fabsf(c.surface_mm - (float)o->surface_mm) <= 0.0005f + 1e-5f);
+            } else {
+                assert_true(fabsf(c.surface_mm) <= 0.0f);
+            }
+            assert_true(fabsf(c.tare_n - (float)o->tare_n) <= 0.00005f + 1e-6f);
+        } else {
+            assert_int_equal(fr->id, BASE + NTE_FRAMES_OFFSET_HEARTBEAT);
+        }
+    }
+    assert_int_equal(step + 1, (int32_t)M3_N);
+    for (uint32_t j = 0u; j < 9u; j++) {
+        assert_true(seen[j] >= M3_N / 9u);
+    }
+    /* the rule, independently: the first step, a change of state or surface, else 1000 ticks */
+    {
+        int32_t last = -1;
+        for (uint32_t i = 0u; i < M3_N; i++) {
+            bool expect = (last < 0);
+            if (!expect) {
+                const nte_output_t* a = &ro[last];
+                const nte_output_t* c = &ro[i];
+                expect = (a->contact != c->contact) ||
+                         (isnan(a->surface_mm) != isnan(c->surface_mm)) ||
+                         (!isnan(c->surface_mm) &&
+                          !m3_same_float((float)a->surface_mm, (float)c->surface_mm)) ||
+                         ((i - (uint32_t)last) * 50u >= 1000u);
+            }
+            assert_int_equal(sent[i], expect);
+            if (expect) {
+                last = (int32_t)i;
+            }
+        }
+        assert_true(sent[first_tissue]);
+        /* about 10 Hz: 1.5 s of sensor time, plus the changes */
+        assert_true((n_contact >= (M3_N * 50u) / 1000u) && (n_contact <= 20u));
+    }
+    /* heartbeat: Model III */
+    g_port_a.now += 200000u;
+    (void)nte_node_poll(&g_node_a);
+    {
+        nte_e2e_rx_t rxh;
+        nte_frames_heartbeat_t h;
+        (void)nte_frames_rx_init(&rxh, nte_frames_kind_heartbeat);
+        assert_int_equal(g_port_a.tx[g_port_a.tx_n - 1u].id, BASE + NTE_FRAMES_OFFSET_HEARTBEAT);
+        assert_int_equal(nte_frames_decode_heartbeat(&rxh, g_port_a.tx[g_port_a.tx_n - 1u].data,
+                                                     8u, &h, NULL, NULL),
+                         nte_frames_ok);
+        assert_int_equal(h.active_model, 2u);
+        assert_int_equal(h.active_estimator, 0u);
+    }
+    assert_int_equal(g_node_a.counters.tx[3], n_contact);
+    /* back to Model I (out of tissue: the front end left contact): 0..6, no Contact frame */
+    push(&g_port_a, command_frame(&b, false, NTE_FRAMES_MODEL_I, 0u, 0u));
+    run_all(&g_node_a, &g_port_a);
+    assert_int_equal(nte_node_model(&g_node_a), 1);
+    const size_t mark1 = g_port_a.tx_n;
+    scenario(&g_port_a, &b, t1 + M3_N * 50u, 10u, 20u, 0);
+    run_all(&g_node_a, &g_port_a);
+    size_t n_params = 0u;
+    prev_index = -1;
+    for (size_t k = mark1; k < g_port_a.tx_n; k++) {
+        const nte_node_frame_t* fr = &g_port_a.tx[k];
+        assert_true(fr->id != BASE + NTE_FRAMES_OFFSET_CONTACT);
+        if (fr->id == BASE + NTE_FRAMES_OFFSET_PARAMS) {
+            nte_frames_param_t p;
+            assert_int_equal(nte_frames_decode_param(&rxp, fr->data, 8u, &p, NULL, NULL),
+                             nte_frames_ok);
+            assert_true(p.index < 7u);
+            if (prev_index >= 0) {
+                assert_int_equal(p.index, (uint32_t)(prev_index + 1) % 7u);
+            }
+            prev_index = (int32_t)p.index;
+            n_params++;
+        }
+    }
+    assert_int_equal(n_params, 20u);
+    assert_int_equal(g_node_a.counters.tx[3], n_contact);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -863,6 +1140,7 @@ int main(void)
         cmocka_unit_test(test_send_failure),
         cmocka_unit_test(test_commands),
         cmocka_unit_test(test_params_and_heartbeat),
+        cmocka_unit_test(test_model3_params_contact),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

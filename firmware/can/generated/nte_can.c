@@ -580,12 +580,12 @@ float nte_can_command_model_sel_decode(uint8_t value)
 
 bool nte_can_command_model_sel_is_in_range(uint8_t value)
 {
-    return (value <= 2u);
+    return (value <= 3u);
 }
 
 bool nte_can_command_model_sel_is_in_phys_range(float value)
 {
-    return ((value >= 0.0f) && (value <= 2.0f));
+    return ((value >= 0.0f) && (value <= 3.0f));
 }
 
 uint8_t nte_can_command_estimator_sel_encode(float value)
@@ -935,6 +935,8 @@ int nte_can_params_pack(
     uint16_t beta_std_log10;
     uint16_t f1_std_log10;
     uint16_t f2_std_log10;
+    uint16_t g_fast_std_log10;
+    uint16_t g_slow_std_log10;
     uint16_t sigma0_std_log10;
     uint16_t sigma1_std_log10;
     uint16_t sigma2_std_log10;
@@ -942,6 +944,8 @@ int nte_can_params_pack(
     uint32_t beta;
     uint32_t f1;
     uint32_t f2;
+    uint32_t g_fast;
+    uint32_t g_slow;
     uint32_t sigma0;
     uint32_t sigma1;
     uint32_t sigma2;
@@ -1035,6 +1039,28 @@ int nte_can_params_pack(
         dst_p[7] |= pack_right_shift_u16(beta_std_log10, 8u, 0xffu);
         break;
 
+    case 7:
+        memcpy(&g_fast, &src_p->g_fast, sizeof(g_fast));
+        dst_p[2] |= pack_left_shift_u32(g_fast, 0u, 0xffu);
+        dst_p[3] |= pack_right_shift_u32(g_fast, 8u, 0xffu);
+        dst_p[4] |= pack_right_shift_u32(g_fast, 16u, 0xffu);
+        dst_p[5] |= pack_right_shift_u32(g_fast, 24u, 0xffu);
+        g_fast_std_log10 = (uint16_t)src_p->g_fast_std_log10;
+        dst_p[6] |= pack_left_shift_u16(g_fast_std_log10, 0u, 0xffu);
+        dst_p[7] |= pack_right_shift_u16(g_fast_std_log10, 8u, 0xffu);
+        break;
+
+    case 8:
+        memcpy(&g_slow, &src_p->g_slow, sizeof(g_slow));
+        dst_p[2] |= pack_left_shift_u32(g_slow, 0u, 0xffu);
+        dst_p[3] |= pack_right_shift_u32(g_slow, 8u, 0xffu);
+        dst_p[4] |= pack_right_shift_u32(g_slow, 16u, 0xffu);
+        dst_p[5] |= pack_right_shift_u32(g_slow, 24u, 0xffu);
+        g_slow_std_log10 = (uint16_t)src_p->g_slow_std_log10;
+        dst_p[6] |= pack_left_shift_u16(g_slow_std_log10, 0u, 0xffu);
+        dst_p[7] |= pack_right_shift_u16(g_slow_std_log10, 8u, 0xffu);
+        break;
+
     default:
         break;
     }
@@ -1051,6 +1077,8 @@ int nte_can_params_unpack(
     uint16_t beta_std_log10;
     uint16_t f1_std_log10;
     uint16_t f2_std_log10;
+    uint16_t g_fast_std_log10;
+    uint16_t g_slow_std_log10;
     uint16_t sigma0_std_log10;
     uint16_t sigma1_std_log10;
     uint16_t sigma2_std_log10;
@@ -1058,6 +1086,8 @@ int nte_can_params_unpack(
     uint32_t beta;
     uint32_t f1;
     uint32_t f2;
+    uint32_t g_fast;
+    uint32_t g_slow;
     uint32_t sigma0;
     uint32_t sigma1;
     uint32_t sigma2;
@@ -1149,6 +1179,28 @@ int nte_can_params_unpack(
         dst_p->beta_std_log10 = (int16_t)beta_std_log10;
         break;
 
+    case 7:
+        g_fast = unpack_right_shift_u32(src_p[2], 0u, 0xffu);
+        g_fast |= unpack_left_shift_u32(src_p[3], 8u, 0xffu);
+        g_fast |= unpack_left_shift_u32(src_p[4], 16u, 0xffu);
+        g_fast |= unpack_left_shift_u32(src_p[5], 24u, 0xffu);
+        memcpy(&dst_p->g_fast, &g_fast, sizeof(dst_p->g_fast));
+        g_fast_std_log10 = unpack_right_shift_u16(src_p[6], 0u, 0xffu);
+        g_fast_std_log10 |= unpack_left_shift_u16(src_p[7], 8u, 0xffu);
+        dst_p->g_fast_std_log10 = (int16_t)g_fast_std_log10;
+        break;
+
+    case 8:
+        g_slow = unpack_right_shift_u32(src_p[2], 0u, 0xffu);
+        g_slow |= unpack_left_shift_u32(src_p[3], 8u, 0xffu);
+        g_slow |= unpack_left_shift_u32(src_p[4], 16u, 0xffu);
+        g_slow |= unpack_left_shift_u32(src_p[5], 24u, 0xffu);
+        memcpy(&dst_p->g_slow, &g_slow, sizeof(dst_p->g_slow));
+        g_slow_std_log10 = unpack_right_shift_u16(src_p[6], 0u, 0xffu);
+        g_slow_std_log10 |= unpack_left_shift_u16(src_p[7], 8u, 0xffu);
+        dst_p->g_slow_std_log10 = (int16_t)g_slow_std_log10;
+        break;
+
     default:
         break;
     }
@@ -1219,12 +1271,12 @@ float nte_can_params_param_index_decode(uint8_t value)
 
 bool nte_can_params_param_index_is_in_range(uint8_t value)
 {
-    return (value <= 6u);
+    return (value <= 8u);
 }
 
 bool nte_can_params_param_index_is_in_phys_range(float value)
 {
-    return ((value >= 0.0f) && (value <= 6.0f));
+    return ((value >= 0.0f) && (value <= 8.0f));
 }
 
 float nte_can_params_sigma0_encode(float value)
@@ -1363,6 +1415,46 @@ bool nte_can_params_beta_is_in_range(float value)
 }
 
 bool nte_can_params_beta_is_in_phys_range(float value)
+{
+    return ((value >= -1e+30f) && (value <= 1e+30f));
+}
+
+float nte_can_params_g_fast_encode(float value)
+{
+    return (float)(value);
+}
+
+float nte_can_params_g_fast_decode(float value)
+{
+    return ((float)value);
+}
+
+bool nte_can_params_g_fast_is_in_range(float value)
+{
+    return ((value >= -1e+30f) && (value <= 1e+30f));
+}
+
+bool nte_can_params_g_fast_is_in_phys_range(float value)
+{
+    return ((value >= -1e+30f) && (value <= 1e+30f));
+}
+
+float nte_can_params_g_slow_encode(float value)
+{
+    return (float)(value);
+}
+
+float nte_can_params_g_slow_decode(float value)
+{
+    return ((float)value);
+}
+
+bool nte_can_params_g_slow_is_in_range(float value)
+{
+    return ((value >= -1e+30f) && (value <= 1e+30f));
+}
+
+bool nte_can_params_g_slow_is_in_phys_range(float value)
 {
     return ((value >= -1e+30f) && (value <= 1e+30f));
 }
@@ -1521,6 +1613,50 @@ bool nte_can_params_beta_std_log10_is_in_phys_range(float value)
     return ((value >= -32.768f) && (value <= 32.767f));
 }
 
+int16_t nte_can_params_g_fast_std_log10_encode(float value)
+{
+    return (int16_t)(roundf(value / 0.001f));
+}
+
+float nte_can_params_g_fast_std_log10_decode(int16_t value)
+{
+    return ((float)value * 0.001f);
+}
+
+bool nte_can_params_g_fast_std_log10_is_in_range(int16_t value)
+{
+    (void)value;
+
+    return (true);
+}
+
+bool nte_can_params_g_fast_std_log10_is_in_phys_range(float value)
+{
+    return ((value >= -32.768f) && (value <= 32.767f));
+}
+
+int16_t nte_can_params_g_slow_std_log10_encode(float value)
+{
+    return (int16_t)(roundf(value / 0.001f));
+}
+
+float nte_can_params_g_slow_std_log10_decode(int16_t value)
+{
+    return ((float)value * 0.001f);
+}
+
+bool nte_can_params_g_slow_std_log10_is_in_range(int16_t value)
+{
+    (void)value;
+
+    return (true);
+}
+
+bool nte_can_params_g_slow_std_log10_is_in_phys_range(float value)
+{
+    return ((value >= -32.768f) && (value <= 32.767f));
+}
+
 int nte_can_heartbeat_pack(
     uint8_t *dst_p,
     const struct nte_can_heartbeat_t *src_p,
@@ -1535,11 +1671,11 @@ int nte_can_heartbeat_pack(
     dst_p[0] |= pack_left_shift_u8(src_p->crc, 0u, 0xffu);
     dst_p[1] |= pack_left_shift_u8(src_p->counter, 0u, 0x0fu);
     dst_p[1] |= pack_left_shift_u8(src_p->node_state, 4u, 0x30u);
-    dst_p[1] |= pack_left_shift_u8(src_p->active_model, 6u, 0x40u);
-    dst_p[1] |= pack_left_shift_u8(src_p->active_estimator, 7u, 0x80u);
+    dst_p[1] |= pack_left_shift_u8(src_p->active_model, 6u, 0xc0u);
     dst_p[2] |= pack_left_shift_u32(src_p->uptime, 0u, 0xffu);
     dst_p[3] |= pack_right_shift_u32(src_p->uptime, 8u, 0xffu);
-    dst_p[4] |= pack_right_shift_u32(src_p->uptime, 16u, 0x0fu);
+    dst_p[4] |= pack_right_shift_u32(src_p->uptime, 16u, 0x07u);
+    dst_p[4] |= pack_left_shift_u8(src_p->active_estimator, 3u, 0x08u);
     dst_p[4] |= pack_left_shift_u8(src_p->e2e_errors, 4u, 0xf0u);
     dst_p[5] |= pack_right_shift_u8(src_p->e2e_errors, 4u, 0x0fu);
     dst_p[5] |= pack_left_shift_u8(src_p->range_errors, 4u, 0xf0u);
@@ -1562,11 +1698,11 @@ int nte_can_heartbeat_unpack(
     dst_p->crc = unpack_right_shift_u8(src_p[0], 0u, 0xffu);
     dst_p->counter = unpack_right_shift_u8(src_p[1], 0u, 0x0fu);
     dst_p->node_state = unpack_right_shift_u8(src_p[1], 4u, 0x30u);
-    dst_p->active_model = unpack_right_shift_u8(src_p[1], 6u, 0x40u);
-    dst_p->active_estimator = unpack_right_shift_u8(src_p[1], 7u, 0x80u);
+    dst_p->active_model = unpack_right_shift_u8(src_p[1], 6u, 0xc0u);
     dst_p->uptime = unpack_right_shift_u32(src_p[2], 0u, 0xffu);
     dst_p->uptime |= unpack_left_shift_u32(src_p[3], 8u, 0xffu);
-    dst_p->uptime |= unpack_left_shift_u32(src_p[4], 16u, 0x0fu);
+    dst_p->uptime |= unpack_left_shift_u32(src_p[4], 16u, 0x07u);
+    dst_p->active_estimator = unpack_right_shift_u8(src_p[4], 3u, 0x08u);
     dst_p->e2e_errors = unpack_right_shift_u8(src_p[4], 4u, 0xf0u);
     dst_p->e2e_errors |= unpack_left_shift_u8(src_p[5], 4u, 0x0fu);
     dst_p->range_errors = unpack_right_shift_u8(src_p[5], 4u, 0xf0u);
@@ -1660,12 +1796,32 @@ float nte_can_heartbeat_active_model_decode(uint8_t value)
 
 bool nte_can_heartbeat_active_model_is_in_range(uint8_t value)
 {
-    return (value <= 1u);
+    return (value <= 2u);
 }
 
 bool nte_can_heartbeat_active_model_is_in_phys_range(float value)
 {
-    return ((value >= 0.0f) && (value <= 1.0f));
+    return ((value >= 0.0f) && (value <= 2.0f));
+}
+
+uint32_t nte_can_heartbeat_uptime_encode(float value)
+{
+    return (uint32_t)(cantools_unsigned_from_double(roundf(value / 0.1f)));
+}
+
+float nte_can_heartbeat_uptime_decode(uint32_t value)
+{
+    return ((float)value * 0.1f);
+}
+
+bool nte_can_heartbeat_uptime_is_in_range(uint32_t value)
+{
+    return (value <= 524287u);
+}
+
+bool nte_can_heartbeat_uptime_is_in_phys_range(float value)
+{
+    return ((value >= 0.0f) && (value <= 52428.7f));
 }
 
 uint8_t nte_can_heartbeat_active_estimator_encode(float value)
@@ -1686,26 +1842,6 @@ bool nte_can_heartbeat_active_estimator_is_in_range(uint8_t value)
 bool nte_can_heartbeat_active_estimator_is_in_phys_range(float value)
 {
     return ((value >= 0.0f) && (value <= 1.0f));
-}
-
-uint32_t nte_can_heartbeat_uptime_encode(float value)
-{
-    return (uint32_t)(cantools_unsigned_from_double(roundf(value / 0.1f)));
-}
-
-float nte_can_heartbeat_uptime_decode(uint32_t value)
-{
-    return ((float)value * 0.1f);
-}
-
-bool nte_can_heartbeat_uptime_is_in_range(uint32_t value)
-{
-    return (value <= 1048575u);
-}
-
-bool nte_can_heartbeat_uptime_is_in_phys_range(float value)
-{
-    return ((value >= 0.0f) && (value <= 104857.5f));
 }
 
 uint8_t nte_can_heartbeat_e2e_errors_encode(float value)
@@ -1770,4 +1906,225 @@ bool nte_can_heartbeat_step_time_is_in_range(uint16_t value)
 bool nte_can_heartbeat_step_time_is_in_phys_range(float value)
 {
     return ((value >= 0.0f) && (value <= 0.00819f));
+}
+
+int nte_can_contact_pack(
+    uint8_t *dst_p,
+    const struct nte_can_contact_t *src_p,
+    size_t size)
+{
+    uint32_t surface;
+    uint32_t tare;
+
+    if (size < 8u) {
+        return (-EINVAL);
+    }
+
+    memset(&dst_p[0], 0, 8);
+
+    dst_p[0] |= pack_left_shift_u8(src_p->crc, 0u, 0xffu);
+    dst_p[1] |= pack_left_shift_u8(src_p->counter, 0u, 0x0fu);
+    dst_p[1] |= pack_left_shift_u8(src_p->contact_state, 4u, 0x10u);
+    dst_p[1] |= pack_left_shift_u8(src_p->surface_valid, 5u, 0x20u);
+    dst_p[1] |= pack_left_shift_u8(src_p->active_model, 6u, 0xc0u);
+    surface = (uint32_t)src_p->surface;
+    dst_p[2] |= pack_left_shift_u32(surface, 0u, 0xffu);
+    dst_p[3] |= pack_right_shift_u32(surface, 8u, 0xffu);
+    dst_p[4] |= pack_right_shift_u32(surface, 16u, 0x0fu);
+    tare = (uint32_t)src_p->tare;
+    dst_p[4] |= pack_left_shift_u32(tare, 4u, 0xf0u);
+    dst_p[5] |= pack_right_shift_u32(tare, 4u, 0xffu);
+    dst_p[6] |= pack_right_shift_u32(tare, 12u, 0xffu);
+
+    return (8);
+}
+
+int nte_can_contact_unpack(
+    struct nte_can_contact_t *dst_p,
+    const uint8_t *src_p,
+    size_t size)
+{
+    uint32_t surface;
+    uint32_t tare;
+
+    if (size < 8u) {
+        return (-EINVAL);
+    }
+
+    dst_p->crc = unpack_right_shift_u8(src_p[0], 0u, 0xffu);
+    dst_p->counter = unpack_right_shift_u8(src_p[1], 0u, 0x0fu);
+    dst_p->contact_state = unpack_right_shift_u8(src_p[1], 4u, 0x10u);
+    dst_p->surface_valid = unpack_right_shift_u8(src_p[1], 5u, 0x20u);
+    dst_p->active_model = unpack_right_shift_u8(src_p[1], 6u, 0xc0u);
+    surface = unpack_right_shift_u32(src_p[2], 0u, 0xffu);
+    surface |= unpack_left_shift_u32(src_p[3], 8u, 0xffu);
+    surface |= unpack_left_shift_u32(src_p[4], 16u, 0x0fu);
+
+    if ((surface & (1u << 19)) != 0u) {
+        surface |= 0xfff00000u;
+    }
+
+    dst_p->surface = (int32_t)surface;
+    tare = unpack_right_shift_u32(src_p[4], 4u, 0xf0u);
+    tare |= unpack_left_shift_u32(src_p[5], 4u, 0xffu);
+    tare |= unpack_left_shift_u32(src_p[6], 12u, 0xffu);
+
+    if ((tare & (1u << 19)) != 0u) {
+        tare |= 0xfff00000u;
+    }
+
+    dst_p->tare = (int32_t)tare;
+
+    return (0);
+}
+
+int nte_can_contact_init(struct nte_can_contact_t *msg_p)
+{
+    if (msg_p == NULL) return -1;
+
+    memset(msg_p, 0, sizeof(struct nte_can_contact_t));
+
+    return 0;
+}
+
+uint8_t nte_can_contact_crc_encode(float value)
+{
+    return (uint8_t)(cantools_unsigned_from_double(roundf(value)));
+}
+
+float nte_can_contact_crc_decode(uint8_t value)
+{
+    return ((float)value);
+}
+
+bool nte_can_contact_crc_is_in_range(uint8_t value)
+{
+    (void)value;
+
+    return (true);
+}
+
+bool nte_can_contact_crc_is_in_phys_range(float value)
+{
+    return ((value >= 0.0f) && (value <= 255.0f));
+}
+
+uint8_t nte_can_contact_counter_encode(float value)
+{
+    return (uint8_t)(cantools_unsigned_from_double(roundf(value)));
+}
+
+float nte_can_contact_counter_decode(uint8_t value)
+{
+    return ((float)value);
+}
+
+bool nte_can_contact_counter_is_in_range(uint8_t value)
+{
+    return (value <= 14u);
+}
+
+bool nte_can_contact_counter_is_in_phys_range(float value)
+{
+    return ((value >= 0.0f) && (value <= 14.0f));
+}
+
+uint8_t nte_can_contact_contact_state_encode(float value)
+{
+    return (uint8_t)(cantools_unsigned_from_double(roundf(value)));
+}
+
+float nte_can_contact_contact_state_decode(uint8_t value)
+{
+    return ((float)value);
+}
+
+bool nte_can_contact_contact_state_is_in_range(uint8_t value)
+{
+    return (value <= 1u);
+}
+
+bool nte_can_contact_contact_state_is_in_phys_range(float value)
+{
+    return ((value >= 0.0f) && (value <= 1.0f));
+}
+
+uint8_t nte_can_contact_surface_valid_encode(float value)
+{
+    return (uint8_t)(cantools_unsigned_from_double(roundf(value)));
+}
+
+float nte_can_contact_surface_valid_decode(uint8_t value)
+{
+    return ((float)value);
+}
+
+bool nte_can_contact_surface_valid_is_in_range(uint8_t value)
+{
+    return (value <= 1u);
+}
+
+bool nte_can_contact_surface_valid_is_in_phys_range(float value)
+{
+    return ((value >= 0.0f) && (value <= 1.0f));
+}
+
+uint8_t nte_can_contact_active_model_encode(float value)
+{
+    return (uint8_t)(cantools_unsigned_from_double(roundf(value)));
+}
+
+float nte_can_contact_active_model_decode(uint8_t value)
+{
+    return ((float)value);
+}
+
+bool nte_can_contact_active_model_is_in_range(uint8_t value)
+{
+    return (value <= 2u);
+}
+
+bool nte_can_contact_active_model_is_in_phys_range(float value)
+{
+    return ((value >= 0.0f) && (value <= 2.0f));
+}
+
+int32_t nte_can_contact_surface_encode(float value)
+{
+    return (int32_t)(roundf(value / 0.001f));
+}
+
+float nte_can_contact_surface_decode(int32_t value)
+{
+    return ((float)value * 0.001f);
+}
+
+bool nte_can_contact_surface_is_in_range(int32_t value)
+{
+    return ((value >= -500000) && (value <= 500000));
+}
+
+bool nte_can_contact_surface_is_in_phys_range(float value)
+{
+    return ((value >= -500.0f) && (value <= 500.0f));
+}
+
+int32_t nte_can_contact_tare_encode(float value)
+{
+    return (int32_t)(roundf(value / 0.0001f));
+}
+
+float nte_can_contact_tare_decode(int32_t value)
+{
+    return ((float)value * 0.0001f);
+}
+
+bool nte_can_contact_tare_is_in_range(int32_t value)
+{
+    return ((value >= -500000) && (value <= 500000));
+}
+
+bool nte_can_contact_tare_is_in_phys_range(float value)
+{
+    return ((value >= -50.0f) && (value <= 50.0f));
 }

@@ -51,6 +51,7 @@ extern "C" {
 #define NTE_CAN_ESTIMATE_FRAME_ID (0x210u)
 #define NTE_CAN_PARAMS_FRAME_ID (0x211u)
 #define NTE_CAN_HEARTBEAT_FRAME_ID (0x212u)
+#define NTE_CAN_CONTACT_FRAME_ID (0x213u)
 
 /* Frame lengths in bytes. */
 #define NTE_CAN_DEPTH_LENGTH (8u)
@@ -59,6 +60,7 @@ extern "C" {
 #define NTE_CAN_ESTIMATE_LENGTH (8u)
 #define NTE_CAN_PARAMS_LENGTH (8u)
 #define NTE_CAN_HEARTBEAT_LENGTH (8u)
+#define NTE_CAN_CONTACT_LENGTH (8u)
 
 /* Extended or standard frame types. */
 #define NTE_CAN_DEPTH_IS_EXTENDED (0)
@@ -67,6 +69,7 @@ extern "C" {
 #define NTE_CAN_ESTIMATE_IS_EXTENDED (0)
 #define NTE_CAN_PARAMS_IS_EXTENDED (0)
 #define NTE_CAN_HEARTBEAT_IS_EXTENDED (0)
+#define NTE_CAN_CONTACT_IS_EXTENDED (0)
 
 /* Frame cycle times in milliseconds. */
 #define NTE_CAN_DEPTH_CYCLE_TIME_MS (1u)
@@ -74,11 +77,13 @@ extern "C" {
 #define NTE_CAN_ESTIMATE_CYCLE_TIME_MS (5u)
 #define NTE_CAN_PARAMS_CYCLE_TIME_MS (10u)
 #define NTE_CAN_HEARTBEAT_CYCLE_TIME_MS (100u)
+#define NTE_CAN_CONTACT_CYCLE_TIME_MS (100u)
 
 /* Signal choices. */
 #define NTE_CAN_COMMAND_MODEL_SEL_KEEP_CHOICE (0u)
 #define NTE_CAN_COMMAND_MODEL_SEL_MODEL_I_CHOICE (1u)
 #define NTE_CAN_COMMAND_MODEL_SEL_MODEL_II_CHOICE (2u)
+#define NTE_CAN_COMMAND_MODEL_SEL_MODEL_III_CHOICE (3u)
 
 #define NTE_CAN_COMMAND_ESTIMATOR_SEL_KEEP_CHOICE (0u)
 #define NTE_CAN_COMMAND_ESTIMATOR_SEL_BANK_CHOICE (1u)
@@ -95,10 +100,23 @@ extern "C" {
 #define NTE_CAN_PARAMS_PARAM_INDEX_F2_CHOICE (4u)
 #define NTE_CAN_PARAMS_PARAM_INDEX_ALPHA_CHOICE (5u)
 #define NTE_CAN_PARAMS_PARAM_INDEX_BETA_CHOICE (6u)
+#define NTE_CAN_PARAMS_PARAM_INDEX_G_FAST_CHOICE (7u)
+#define NTE_CAN_PARAMS_PARAM_INDEX_G_SLOW_CHOICE (8u)
 
 #define NTE_CAN_HEARTBEAT_NODE_STATE_INIT_CHOICE (0u)
 #define NTE_CAN_HEARTBEAT_NODE_STATE_RUNNING_CHOICE (1u)
 #define NTE_CAN_HEARTBEAT_NODE_STATE_FAULT_CHOICE (2u)
+
+#define NTE_CAN_HEARTBEAT_ACTIVE_MODEL_MODEL_I_CHOICE (0u)
+#define NTE_CAN_HEARTBEAT_ACTIVE_MODEL_MODEL_II_CHOICE (1u)
+#define NTE_CAN_HEARTBEAT_ACTIVE_MODEL_MODEL_III_CHOICE (2u)
+
+#define NTE_CAN_CONTACT_CONTACT_STATE_AIR_CHOICE (0u)
+#define NTE_CAN_CONTACT_CONTACT_STATE_TISSUE_CHOICE (1u)
+
+#define NTE_CAN_CONTACT_ACTIVE_MODEL_MODEL_I_CHOICE (0u)
+#define NTE_CAN_CONTACT_ACTIVE_MODEL_MODEL_II_CHOICE (1u)
+#define NTE_CAN_CONTACT_ACTIVE_MODEL_MODEL_III_CHOICE (2u)
 
 /* Frame Names. */
 #define NTE_CAN_DEPTH_NAME "Depth"
@@ -107,6 +125,7 @@ extern "C" {
 #define NTE_CAN_ESTIMATE_NAME "Estimate"
 #define NTE_CAN_PARAMS_NAME "Params"
 #define NTE_CAN_HEARTBEAT_NAME "Heartbeat"
+#define NTE_CAN_CONTACT_NAME "Contact"
 
 /* Signal Names. */
 #define NTE_CAN_DEPTH_CRC_NAME "Crc"
@@ -144,6 +163,8 @@ extern "C" {
 #define NTE_CAN_PARAMS_F2_NAME "F2"
 #define NTE_CAN_PARAMS_ALPHA_NAME "Alpha"
 #define NTE_CAN_PARAMS_BETA_NAME "Beta"
+#define NTE_CAN_PARAMS_G_FAST_NAME "GFast"
+#define NTE_CAN_PARAMS_G_SLOW_NAME "GSlow"
 #define NTE_CAN_PARAMS_SIGMA0_STD_LOG10_NAME "Sigma0StdLog10"
 #define NTE_CAN_PARAMS_SIGMA1_STD_LOG10_NAME "Sigma1StdLog10"
 #define NTE_CAN_PARAMS_SIGMA2_STD_LOG10_NAME "Sigma2StdLog10"
@@ -151,15 +172,24 @@ extern "C" {
 #define NTE_CAN_PARAMS_F2_STD_LOG10_NAME "F2StdLog10"
 #define NTE_CAN_PARAMS_ALPHA_STD_LOG10_NAME "AlphaStdLog10"
 #define NTE_CAN_PARAMS_BETA_STD_LOG10_NAME "BetaStdLog10"
+#define NTE_CAN_PARAMS_G_FAST_STD_LOG10_NAME "GFastStdLog10"
+#define NTE_CAN_PARAMS_G_SLOW_STD_LOG10_NAME "GSlowStdLog10"
 #define NTE_CAN_HEARTBEAT_CRC_NAME "Crc"
 #define NTE_CAN_HEARTBEAT_COUNTER_NAME "Counter"
 #define NTE_CAN_HEARTBEAT_NODE_STATE_NAME "NodeState"
 #define NTE_CAN_HEARTBEAT_ACTIVE_MODEL_NAME "ActiveModel"
-#define NTE_CAN_HEARTBEAT_ACTIVE_ESTIMATOR_NAME "ActiveEstimator"
 #define NTE_CAN_HEARTBEAT_UPTIME_NAME "Uptime"
+#define NTE_CAN_HEARTBEAT_ACTIVE_ESTIMATOR_NAME "ActiveEstimator"
 #define NTE_CAN_HEARTBEAT_E2E_ERRORS_NAME "E2eErrors"
 #define NTE_CAN_HEARTBEAT_RANGE_ERRORS_NAME "RangeErrors"
 #define NTE_CAN_HEARTBEAT_STEP_TIME_NAME "StepTime"
+#define NTE_CAN_CONTACT_CRC_NAME "Crc"
+#define NTE_CAN_CONTACT_COUNTER_NAME "Counter"
+#define NTE_CAN_CONTACT_CONTACT_STATE_NAME "ContactState"
+#define NTE_CAN_CONTACT_SURFACE_VALID_NAME "SurfaceValid"
+#define NTE_CAN_CONTACT_ACTIVE_MODEL_NAME "ActiveModel"
+#define NTE_CAN_CONTACT_SURFACE_NAME "Surface"
+#define NTE_CAN_CONTACT_TARE_NAME "Tare"
 
 /**
  * Signals in message Depth.
@@ -288,9 +318,9 @@ struct nte_can_command_t {
     uint8_t reset;
 
     /**
-     * 0 = keep, 1 = Model I, 2 = Model II.
+     * 0 = keep, 1 = Model I, 2 = Model II, 3 = Model III (Model II + direction memory + relaxation branches, with the contact front end: Depth is then the stage position and the node learns the tare and finds the surface, see the Contact frame).
      *
-     * Range: 0..2 (0..2 -)
+     * Range: 0..3 (0..3 -)
      * Scale: 1
      * Offset: 0
      */
@@ -338,7 +368,7 @@ struct nte_can_estimate_t {
     uint8_t counter;
 
     /**
-     * 1 = depth > 0 (the needle is in tissue).
+     * 1 = depth > 0 (the needle is in tissue). Model III (contact front end): 1 = the front end reports contact (Contact.ContactState), since Depth is then the stage position.
      *
      * Range: 0..1 (0..1 -)
      * Scale: 1
@@ -413,7 +443,7 @@ struct nte_can_estimate_t {
 /**
  * Signals in message Params.
  *
- * Identified parameters and their standard deviations, multiplexed by ParamIndex; one index per frame, cycling 0..6 (every 10 ms, a full set every 70 ms). Id offset 0x11. The value is an IEEE-754 float32 (relative resolution 6e-8 over the whole range of magnitudes, 1e-4 .. 10, found in the paper). The standard deviation is sent as log10(std) in a 16-bit integer with resolution 0.001 decade (relative step 0.23 %); the raw value -32768 (-32.768) means std = 0, i.e. the parameter is fixed (e.g. beta in Model I, alpha and f2 in Model II).
+ * Identified parameters and their standard deviations, multiplexed by ParamIndex; one index per frame, cycling 0..6 in Models I and II (every 10 ms, a full set every 70 ms) and 0..8 in Model III (a full set every 90 ms). Id offset 0x11. The value is an IEEE-754 float32 (relative resolution 6e-8 over the whole range of magnitudes, 1e-4 .. 10, found in the paper). The standard deviation is sent as log10(std) in a 16-bit integer with resolution 0.001 decade (relative step 0.23 %); the raw value -32768 (-32.768) means std = 0, i.e. the parameter is fixed (e.g. beta in Model I, alpha and f2 in Model II, g_slow in Model III with one relaxation branch).
  *
  * All signal values are as on the CAN bus.
  */
@@ -433,9 +463,9 @@ struct nte_can_params_t {
     uint8_t counter;
 
     /**
-     * 0 sigma0, 1 sigma1, 2 sigma2, 3 f1, 4 f2, 5 alpha, 6 beta (beta0 in Model I).
+     * 0 sigma0, 1 sigma1, 2 sigma2, 3 f1, 4 f2, 5 alpha, 6 beta (beta0 in Model I), 7 g_fast, 8 g_slow (Model III only).
      *
-     * Range: 0..6 (0..6 -)
+     * Range: 0..8 (0..8 -)
      * Scale: 1
      * Offset: 0
      */
@@ -491,6 +521,24 @@ struct nte_can_params_t {
     float beta;
 
     /**
+     * Model III: strength of the fast relaxation branch, the fraction (0..1) of the elastic force it takes once relaxed.
+     *
+     * Range: -1e+30..1e+30 (-1e+30..1e+30 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    float g_fast;
+
+    /**
+     * Model III: strength of the slow relaxation branch, fraction 0..1 (g_fast + g_slow < 1).
+     *
+     * Range: -1e+30..1e+30 (-1e+30..1e+30 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    float g_slow;
+
+    /**
      * Range: -32768..32767 (-32.768..32.767 log10)
      * Scale: 0.001
      * Offset: 0
@@ -538,12 +586,26 @@ struct nte_can_params_t {
      * Offset: 0
      */
     int16_t beta_std_log10;
+
+    /**
+     * Range: -32768..32767 (-32.768..32.767 log10)
+     * Scale: 0.001
+     * Offset: 0
+     */
+    int16_t g_fast_std_log10;
+
+    /**
+     * Range: -32768..32767 (-32.768..32.767 log10)
+     * Scale: 0.001
+     * Offset: 0
+     */
+    int16_t g_slow_std_log10;
 };
 
 /**
  * Signals in message Heartbeat.
  *
- * Node heartbeat (10 Hz). Id offset 0x12.
+ * Node heartbeat (10 Hz). Id offset 0x12. Layout: ActiveModel bits 14..15, Uptime 16..34, ActiveEstimator 35.
  *
  * All signal values are as on the CAN bus.
  */
@@ -572,13 +634,22 @@ struct nte_can_heartbeat_t {
     uint8_t node_state;
 
     /**
-     * 0 = Model I, 1 = Model II.
+     * 0 = Model I, 1 = Model II, 2 = Model III. 2 bits since Model III: bit 15 was ActiveEstimator, which moved to bit 35 (the top bit of the former 20-bit Uptime).
      *
-     * Range: 0..1 (0..1 -)
+     * Range: 0..2 (0..2 -)
      * Scale: 1
      * Offset: 0
      */
     uint8_t active_model;
+
+    /**
+     * Time since boot, 0.1 s resolution, 19 bits: wraps after 52428.8 s (14.56 h; 20 bits and 104857.6 s before Model III widened ActiveModel).
+     *
+     * Range: 0..524287 (0..52428.7 s)
+     * Scale: 0.1
+     * Offset: 0
+     */
+    uint32_t uptime;
 
     /**
      * 0 = bank, 1 = robust.
@@ -588,15 +659,6 @@ struct nte_can_heartbeat_t {
      * Offset: 0
      */
     uint8_t active_estimator;
-
-    /**
-     * Time since boot, 0.1 s resolution, wraps after 104857.6 s.
-     *
-     * Range: 0..1048575 (0..104857.5 s)
-     * Scale: 0.1
-     * Offset: 0
-     */
-    uint32_t uptime;
 
     /**
      * Received frames rejected by the E2E check (bad length, CRC, repeated counter), modulo 256.
@@ -624,6 +686,74 @@ struct nte_can_heartbeat_t {
      * Offset: 0
      */
     uint16_t step_time;
+};
+
+/**
+ * Signals in message Contact.
+ *
+ * Model III's contact front end (sent only while it runs, i.e. in Model III): after an estimator step whose contact state or surface differs from the last Contact frame's, and otherwise every 100 ms of sensor time (the force sample's SensorTime, so a replay is deterministic). Id offset 0x13.
+ *
+ * All signal values are as on the CAN bus.
+ */
+struct nte_can_contact_t {
+    /**
+     * Range: 0..255 (0..255 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    uint8_t crc;
+
+    /**
+     * Range: 0..14 (0..14 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    uint8_t counter;
+
+    /**
+     * 0 = air (the tare is being learned), 1 = tissue (contact found; tare held).
+     *
+     * Range: 0..1 (0..1 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    uint8_t contact_state;
+
+    /**
+     * 1 = a surface has been found (or a known one touched); 0 = none yet, Surface is 0.
+     *
+     * Range: 0..1 (0..1 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    uint8_t surface_valid;
+
+    /**
+     * Model in use, as Heartbeat.ActiveModel (2 = Model III).
+     *
+     * Range: 0..2 (0..2 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    uint8_t active_model;
+
+    /**
+     * Tissue surface in use, stage position (the Depth signal's coordinate), 1 um resolution.
+     *
+     * Range: -500000..500000 (-500..500 mm)
+     * Scale: 0.001
+     * Offset: 0
+     */
+    int32_t surface;
+
+    /**
+     * Force tare subtracted before the estimator (learned in the air, held in contact), 0.1 mN resolution, clamped to +-50 N.
+     *
+     * Range: -500000..500000 (-50..50 N)
+     * Scale: 0.0001
+     * Offset: 0
+     */
+    int32_t tare;
 };
 
 /**
@@ -2218,6 +2348,86 @@ bool nte_can_params_beta_is_in_phys_range(float value);
  *
  * @return Encoded signal.
  */
+float nte_can_params_g_fast_encode(float value);
+
+/**
+ * Decode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to decode.
+ *
+ * @return Decoded signal.
+ */
+float nte_can_params_g_fast_decode(float value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_params_g_fast_is_in_range(float value);
+
+/**
+ * Check that given physical value is in allowed range before encoding.
+ *
+ * Use this BEFORE calling _encode() to avoid silent integer overflow:
+ *   encode(-1.0) on a [0,100] signal wraps to 255 and passes is_in_range().
+ *   is_in_phys_range(-1.0) correctly returns false.
+ *
+ * @param[in] value Physical signal value to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_params_g_fast_is_in_phys_range(float value);
+
+/**
+ * Encode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to encode.
+ *
+ * @return Encoded signal.
+ */
+float nte_can_params_g_slow_encode(float value);
+
+/**
+ * Decode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to decode.
+ *
+ * @return Decoded signal.
+ */
+float nte_can_params_g_slow_decode(float value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_params_g_slow_is_in_range(float value);
+
+/**
+ * Check that given physical value is in allowed range before encoding.
+ *
+ * Use this BEFORE calling _encode() to avoid silent integer overflow:
+ *   encode(-1.0) on a [0,100] signal wraps to 255 and passes is_in_range().
+ *   is_in_phys_range(-1.0) correctly returns false.
+ *
+ * @param[in] value Physical signal value to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_params_g_slow_is_in_phys_range(float value);
+
+/**
+ * Encode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to encode.
+ *
+ * @return Encoded signal.
+ */
 int16_t nte_can_params_sigma0_std_log10_encode(float value);
 
 /**
@@ -2492,6 +2702,86 @@ bool nte_can_params_beta_std_log10_is_in_range(int16_t value);
 bool nte_can_params_beta_std_log10_is_in_phys_range(float value);
 
 /**
+ * Encode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to encode.
+ *
+ * @return Encoded signal.
+ */
+int16_t nte_can_params_g_fast_std_log10_encode(float value);
+
+/**
+ * Decode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to decode.
+ *
+ * @return Decoded signal.
+ */
+float nte_can_params_g_fast_std_log10_decode(int16_t value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_params_g_fast_std_log10_is_in_range(int16_t value);
+
+/**
+ * Check that given physical value is in allowed range before encoding.
+ *
+ * Use this BEFORE calling _encode() to avoid silent integer overflow:
+ *   encode(-1.0) on a [0,100] signal wraps to 255 and passes is_in_range().
+ *   is_in_phys_range(-1.0) correctly returns false.
+ *
+ * @param[in] value Physical signal value to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_params_g_fast_std_log10_is_in_phys_range(float value);
+
+/**
+ * Encode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to encode.
+ *
+ * @return Encoded signal.
+ */
+int16_t nte_can_params_g_slow_std_log10_encode(float value);
+
+/**
+ * Decode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to decode.
+ *
+ * @return Decoded signal.
+ */
+float nte_can_params_g_slow_std_log10_decode(int16_t value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_params_g_slow_std_log10_is_in_range(int16_t value);
+
+/**
+ * Check that given physical value is in allowed range before encoding.
+ *
+ * Use this BEFORE calling _encode() to avoid silent integer overflow:
+ *   encode(-1.0) on a [0,100] signal wraps to 255 and passes is_in_range().
+ *   is_in_phys_range(-1.0) correctly returns false.
+ *
+ * @param[in] value Physical signal value to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_params_g_slow_std_log10_is_in_phys_range(float value);
+
+/**
  * Pack message Heartbeat.
  *
  * @param[out] dst_p Buffer to pack the message into.
@@ -2695,46 +2985,6 @@ bool nte_can_heartbeat_active_model_is_in_phys_range(float value);
  *
  * @return Encoded signal.
  */
-uint8_t nte_can_heartbeat_active_estimator_encode(float value);
-
-/**
- * Decode given signal by applying scaling and offset.
- *
- * @param[in] value Signal to decode.
- *
- * @return Decoded signal.
- */
-float nte_can_heartbeat_active_estimator_decode(uint8_t value);
-
-/**
- * Check that given signal is in allowed range.
- *
- * @param[in] value Signal to check.
- *
- * @return true if in range, false otherwise.
- */
-bool nte_can_heartbeat_active_estimator_is_in_range(uint8_t value);
-
-/**
- * Check that given physical value is in allowed range before encoding.
- *
- * Use this BEFORE calling _encode() to avoid silent integer overflow:
- *   encode(-1.0) on a [0,100] signal wraps to 255 and passes is_in_range().
- *   is_in_phys_range(-1.0) correctly returns false.
- *
- * @param[in] value Physical signal value to check.
- *
- * @return true if in range, false otherwise.
- */
-bool nte_can_heartbeat_active_estimator_is_in_phys_range(float value);
-
-/**
- * Encode given signal by applying scaling and offset.
- *
- * @param[in] value Signal to encode.
- *
- * @return Encoded signal.
- */
 uint32_t nte_can_heartbeat_uptime_encode(float value);
 
 /**
@@ -2767,6 +3017,46 @@ bool nte_can_heartbeat_uptime_is_in_range(uint32_t value);
  * @return true if in range, false otherwise.
  */
 bool nte_can_heartbeat_uptime_is_in_phys_range(float value);
+
+/**
+ * Encode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to encode.
+ *
+ * @return Encoded signal.
+ */
+uint8_t nte_can_heartbeat_active_estimator_encode(float value);
+
+/**
+ * Decode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to decode.
+ *
+ * @return Decoded signal.
+ */
+float nte_can_heartbeat_active_estimator_decode(uint8_t value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_heartbeat_active_estimator_is_in_range(uint8_t value);
+
+/**
+ * Check that given physical value is in allowed range before encoding.
+ *
+ * Use this BEFORE calling _encode() to avoid silent integer overflow:
+ *   encode(-1.0) on a [0,100] signal wraps to 255 and passes is_in_range().
+ *   is_in_phys_range(-1.0) correctly returns false.
+ *
+ * @param[in] value Physical signal value to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_heartbeat_active_estimator_is_in_phys_range(float value);
 
 /**
  * Encode given signal by applying scaling and offset.
@@ -2887,6 +3177,323 @@ bool nte_can_heartbeat_step_time_is_in_range(uint16_t value);
  * @return true if in range, false otherwise.
  */
 bool nte_can_heartbeat_step_time_is_in_phys_range(float value);
+
+/**
+ * Pack message Contact.
+ *
+ * @param[out] dst_p Buffer to pack the message into.
+ * @param[in] src_p Data to pack.
+ * @param[in] size Size of dst_p.
+ *
+ * @return Size of packed data, or negative error code.
+ */
+int nte_can_contact_pack(
+    uint8_t *dst_p,
+    const struct nte_can_contact_t *src_p,
+    size_t size);
+
+/**
+ * Unpack message Contact.
+ *
+ * @param[out] dst_p Object to unpack the message into.
+ * @param[in] src_p Message to unpack.
+ * @param[in] size Size of src_p.
+ *
+ * @return zero(0) or negative error code.
+ */
+int nte_can_contact_unpack(
+    struct nte_can_contact_t *dst_p,
+    const uint8_t *src_p,
+    size_t size);
+
+/**
+ * Init message fields to default values from Contact.
+ *
+ * @param[in] msg_p Message to init.
+ *
+ * @return zero(0) on success or (-1) in case of nullptr argument.
+ */
+int nte_can_contact_init(struct nte_can_contact_t *msg_p);
+
+/**
+ * Encode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to encode.
+ *
+ * @return Encoded signal.
+ */
+uint8_t nte_can_contact_crc_encode(float value);
+
+/**
+ * Decode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to decode.
+ *
+ * @return Decoded signal.
+ */
+float nte_can_contact_crc_decode(uint8_t value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_contact_crc_is_in_range(uint8_t value);
+
+/**
+ * Check that given physical value is in allowed range before encoding.
+ *
+ * Use this BEFORE calling _encode() to avoid silent integer overflow:
+ *   encode(-1.0) on a [0,100] signal wraps to 255 and passes is_in_range().
+ *   is_in_phys_range(-1.0) correctly returns false.
+ *
+ * @param[in] value Physical signal value to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_contact_crc_is_in_phys_range(float value);
+
+/**
+ * Encode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to encode.
+ *
+ * @return Encoded signal.
+ */
+uint8_t nte_can_contact_counter_encode(float value);
+
+/**
+ * Decode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to decode.
+ *
+ * @return Decoded signal.
+ */
+float nte_can_contact_counter_decode(uint8_t value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_contact_counter_is_in_range(uint8_t value);
+
+/**
+ * Check that given physical value is in allowed range before encoding.
+ *
+ * Use this BEFORE calling _encode() to avoid silent integer overflow:
+ *   encode(-1.0) on a [0,100] signal wraps to 255 and passes is_in_range().
+ *   is_in_phys_range(-1.0) correctly returns false.
+ *
+ * @param[in] value Physical signal value to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_contact_counter_is_in_phys_range(float value);
+
+/**
+ * Encode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to encode.
+ *
+ * @return Encoded signal.
+ */
+uint8_t nte_can_contact_contact_state_encode(float value);
+
+/**
+ * Decode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to decode.
+ *
+ * @return Decoded signal.
+ */
+float nte_can_contact_contact_state_decode(uint8_t value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_contact_contact_state_is_in_range(uint8_t value);
+
+/**
+ * Check that given physical value is in allowed range before encoding.
+ *
+ * Use this BEFORE calling _encode() to avoid silent integer overflow:
+ *   encode(-1.0) on a [0,100] signal wraps to 255 and passes is_in_range().
+ *   is_in_phys_range(-1.0) correctly returns false.
+ *
+ * @param[in] value Physical signal value to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_contact_contact_state_is_in_phys_range(float value);
+
+/**
+ * Encode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to encode.
+ *
+ * @return Encoded signal.
+ */
+uint8_t nte_can_contact_surface_valid_encode(float value);
+
+/**
+ * Decode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to decode.
+ *
+ * @return Decoded signal.
+ */
+float nte_can_contact_surface_valid_decode(uint8_t value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_contact_surface_valid_is_in_range(uint8_t value);
+
+/**
+ * Check that given physical value is in allowed range before encoding.
+ *
+ * Use this BEFORE calling _encode() to avoid silent integer overflow:
+ *   encode(-1.0) on a [0,100] signal wraps to 255 and passes is_in_range().
+ *   is_in_phys_range(-1.0) correctly returns false.
+ *
+ * @param[in] value Physical signal value to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_contact_surface_valid_is_in_phys_range(float value);
+
+/**
+ * Encode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to encode.
+ *
+ * @return Encoded signal.
+ */
+uint8_t nte_can_contact_active_model_encode(float value);
+
+/**
+ * Decode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to decode.
+ *
+ * @return Decoded signal.
+ */
+float nte_can_contact_active_model_decode(uint8_t value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_contact_active_model_is_in_range(uint8_t value);
+
+/**
+ * Check that given physical value is in allowed range before encoding.
+ *
+ * Use this BEFORE calling _encode() to avoid silent integer overflow:
+ *   encode(-1.0) on a [0,100] signal wraps to 255 and passes is_in_range().
+ *   is_in_phys_range(-1.0) correctly returns false.
+ *
+ * @param[in] value Physical signal value to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_contact_active_model_is_in_phys_range(float value);
+
+/**
+ * Encode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to encode.
+ *
+ * @return Encoded signal.
+ */
+int32_t nte_can_contact_surface_encode(float value);
+
+/**
+ * Decode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to decode.
+ *
+ * @return Decoded signal.
+ */
+float nte_can_contact_surface_decode(int32_t value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_contact_surface_is_in_range(int32_t value);
+
+/**
+ * Check that given physical value is in allowed range before encoding.
+ *
+ * Use this BEFORE calling _encode() to avoid silent integer overflow:
+ *   encode(-1.0) on a [0,100] signal wraps to 255 and passes is_in_range().
+ *   is_in_phys_range(-1.0) correctly returns false.
+ *
+ * @param[in] value Physical signal value to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_contact_surface_is_in_phys_range(float value);
+
+/**
+ * Encode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to encode.
+ *
+ * @return Encoded signal.
+ */
+int32_t nte_can_contact_tare_encode(float value);
+
+/**
+ * Decode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to decode.
+ *
+ * @return Decoded signal.
+ */
+float nte_can_contact_tare_decode(int32_t value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_contact_tare_is_in_range(int32_t value);
+
+/**
+ * Check that given physical value is in allowed range before encoding.
+ *
+ * Use this BEFORE calling _encode() to avoid silent integer overflow:
+ *   encode(-1.0) on a [0,100] signal wraps to 255 and passes is_in_range().
+ *   is_in_phys_range(-1.0) correctly returns false.
+ *
+ * @param[in] value Physical signal value to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_contact_tare_is_in_phys_range(float value);
 
 
 #ifdef __cplusplus

@@ -1,7 +1,7 @@
 /*
  * nte-node: the estimator as a CAN node on Linux SocketCAN.
  *
- *   nte-node --iface vcan0 [--base-id 0x200] [--model 1|2] [--preset NAME] [--config FILE]
+ *   nte-node --iface vcan0 [--base-id 0x200] [--model 1|2|3] [--preset NAME] [--config FILE]
  *            [--depth-timeout-ms MS] [--heartbeat-ms MS] [--params-per-step N]
  *            [--resync-gap-ms MS] [--no-kernel-filter] [--ready FILE] [--stats FILE]
  *            [--record OUT.log] [--received IN.log]
@@ -74,14 +74,21 @@ typedef struct args_t {
 static int usage(const char* err)
 {
     fprintf(stderr,
-            "usage: " PROG " --iface IFACE [--base-id 0x200] [--model 1|2] [--preset NAME]\n"
-            "       [--config FILE.json (default: none; its model 1|2, params as the nominal\n"
-            "       values unless --preset, r_n2; flags given override it)]\n"
+            "usage: " PROG " --iface IFACE [--base-id 0x200] [--model 1|2|3] [--preset NAME]\n"
+            "       [--config FILE.json (default: none; its model 1|2|3, params as the nominal\n"
+            "       values unless --preset, r_n2; Model III's presliding_mm, tau_fast_s,\n"
+            "       tau_slow_s, relax_branches, relaxation, direction_memory, strengths, and a\n"
+            "       single surface_mm as a known surface; flags given override it)]\n"
             "       [--depth-timeout-ms 50] [--heartbeat-ms 100] [--params-per-step 1]\n"
             "       [--resync-gap-ms 20] [--no-kernel-filter] [--ready FILE] [--stats FILE]\n"
             "       [--record OUT.log] [--received IN.log]\n"
             "       " PROG " --replay IN.log [--record OUT.log] [the options above]\n"
             "The needle-tissue force estimator as a CAN node (frames: firmware/can/nte.dbc).\n"
+            "--model (default 2): 1 Model I, 2 Model II, 3 Model III (Model II + direction\n"
+            "memory + relaxation, g_fast and g_slow published as Params 7 and 8) with the\n"
+            "contact front end as in nte-run: Depth frames carry the stage position, the tare\n"
+            "is learned in the air and the surface found from the force onset, published in\n"
+            "the Contact frame (on change and every 100 ms of sensor time).\n"
             "Stops on SIGINT/SIGTERM; SIGUSR1 rewrites --stats. --replay reads the frames of a\n"
             "candump -L log (its timestamps are the clock) instead of an interface, writes the\n"
             "frames sent to --record (candump -L, default stdout) and stops at its end. On an\n"
@@ -148,10 +155,12 @@ static int parse_args(int argc, char** argv, args_t* a)
         } else if (strcmp(o, "--received") == 0) {
             a->received = v;
         } else if (strcmp(o, "--model") == 0) {
-            if ((strcmp(v, "1") != 0) && (strcmp(v, "2") != 0)) {
-                return usage("argument --model: 1 or 2");
+            if ((strcmp(v, "1") != 0) && (strcmp(v, "2") != 0) && (strcmp(v, "3") != 0)) {
+                (void)snprintf(msg, sizeof msg, "argument --model: invalid choice: '%s' "
+                               "(choose from 1, 2, 3)", v);
+                return usage(msg);
             }
-            a->model = (v[0] == '1') ? 1 : 2;
+            a->model = v[0] - '0';
             a->given_model = 1;
         } else if ((strcmp(o, "--base-id") == 0) && (parse_ulong(v, &u) == 0)) {
             a->base_id = u;
@@ -217,12 +226,13 @@ static void write_stats(const nte_node_t* n, const nte_port_socketcan_t* port, F
     }
     fprintf(f,
             "}, \"frames_lost\": %u, \"rx_accepted\": {\"depth\": %u, \"force\": %u, "
-            "\"command\": %u}, \"tx\": {\"estimate\": %u, \"params\": %u, \"heartbeat\": %u}, "
+            "\"command\": %u}, \"tx\": {\"estimate\": %u, \"params\": %u, \"heartbeat\": %u, "
+            "\"contact\": %u}, "
             "\"steps\": %u, \"commands_applied\": %u, \"model\": %d, \"state\": %d, "
             "\"send_enobufs\": %u, \"last_errno\": %d}\n",
             (unsigned)c->frames_lost, (unsigned)c->rx_accepted[0], (unsigned)c->rx_accepted[1],
             (unsigned)c->rx_accepted[2], (unsigned)c->tx[0], (unsigned)c->tx[1],
-            (unsigned)c->tx[2], (unsigned)c->steps, (unsigned)c->commands_applied,
+            (unsigned)c->tx[2], (unsigned)c->tx[3], (unsigned)c->steps, (unsigned)c->commands_applied,
             (int)nte_node_model(n), (int)nte_node_state(n), (unsigned)port->send_errors_enobufs,
             port->last_errno);
 }
@@ -378,11 +388,6 @@ int main(int argc, char** argv)
         return EXIT_USAGE;
     }
     if ((a.config != NULL) && !a.given_model) {
-        if (fc.model == 3) {
-            fprintf(stderr, PROG ": error: %s: key 'model': the node runs Models I and II "
-                    "(give --model 1|2)\n", a.config);
-            return EXIT_USAGE;
-        }
         a.model = fc.model;
     }
     const double* values = ((a.config != NULL) && !a.given_preset) ? fc.params : p->values;
@@ -393,12 +398,45 @@ int main(int argc, char** argv)
     cfg.params_per_step = (uint32_t)((a.params_per_step <= 7u) ? a.params_per_step : 0u);
     cfg.resync_gap_us = (uint32_t)((a.resync_gap_ms <= 3000u) ? a.resync_gap_ms * 1000u : 0u);
     if ((estimator_config(&cfg.estimator[0], 1, values) != 0) ||
-        (estimator_config(&cfg.estimator[1], 2, values) != 0)) {
+        (estimator_config(&cfg.estimator[1], 2, values) != 0) ||
+        (estimator_config(&cfg.estimator[2], 3, values) != 0)) {
         return usage("preset: f1 must exceed -f2");
     }
-    if ((a.config != NULL) && fc.has_r_n2) {
-        cfg.estimator[0].r_n2 = (nte_real_t)fc.r_n2;
-        cfg.estimator[1].r_n2 = (nte_real_t)fc.r_n2;
+    /* Model III as nte-run runs it: the contact front end on, the surface found from the
+     * force unless the config gives a single known one */
+    cfg.estimator[2].contact.enabled = true;
+    if (a.config != NULL) {
+        for (size_t m = 0u; m < 3u; m++) {
+            if (fc.has_r_n2) {
+                cfg.estimator[m].r_n2 = (nte_real_t)fc.r_n2;
+            }
+        }
+        nte_config_t* c3 = &cfg.estimator[2];
+        if (fc.has_presliding) {
+            c3->presliding_mm = (nte_real_t)fc.presliding_mm;
+        }
+        if (fc.has_tau_fast) {
+            c3->tau_fast_s = (nte_real_t)fc.tau_fast_s;
+        }
+        if (fc.has_tau_slow) {
+            c3->tau_slow_s = (nte_real_t)fc.tau_slow_s;
+        }
+        if (fc.has_relax_branches) {
+            c3->relax_branches = fc.relax_branches;
+        }
+        if (fc.has_relaxation) {
+            c3->relaxation = fc.relaxation != 0;
+        }
+        if (fc.has_direction_memory) {
+            c3->direction_memory = fc.direction_memory != 0;
+        }
+        if (fc.has_strengths) {
+            c3->nominal[nte_param_g_fast] = (nte_real_t)fc.g[0];
+            c3->nominal[nte_param_g_slow] = (nte_real_t)fc.g[1];
+        }
+        if (fc.has_surface) {
+            c3->contact.surface_mm = (nte_real_t)fc.surface_mm;
+        }
     }
     /* the port is needed for validation: check the node config with a stand-in first */
     uint32_t ids[3] = {(uint32_t)cfg.base_id + NTE_FRAMES_OFFSET_DEPTH,
@@ -410,7 +448,7 @@ int main(int argc, char** argv)
         const nte_node_err_t err = nte_node_init(&node, &cfg, &probe);
         if (err != nte_node_ok) {
             (void)snprintf(msg, sizeof msg,
-                           "invalid node configuration (nte_node_err %d): base id <= 0x7ED, "
+                           "invalid node configuration (nte_node_err %d): base id <= 0x7EC, "
                            "depth timeout 1..3000 ms, heartbeat 1..10000 ms, params per step "
                            "1..7, resync gap 1..3000 ms",
                            (int)err);
@@ -458,7 +496,8 @@ int main(int argc, char** argv)
         }
     }
     fprintf(stderr, PROG ": %s, base 0x%03X, Model %s, preset %s, depth timeout %lu ms\n",
-            a.iface, (unsigned)cfg.base_id, (a.model == 1) ? "I" : "II", a.preset,
+            a.iface, (unsigned)cfg.base_id,
+            (a.model == 1) ? "I" : ((a.model == 2) ? "II" : "III"), a.preset,
             a.timeout_ms);
     while (g_stop == 0) {
         struct pollfd pfd;
