@@ -2,7 +2,7 @@
 
     nte-bench replay FILE.csv|FILE.log --channel vcan0 [--interface socketcan|slcan]
                      [--speed X] [--depth-rate HZ] [--player python|canplayer] --out DIR
-    nte-bench check DIR [--model 1|2] [--preset NAME]
+    nte-bench check DIR [--model 1|2|3] [--preset NAME]
     nte-bench send FILE.csv [--channel vcan0] [--speed X] [--force-every N]
                    [--record-csv FILE] [--record-log FILE]
 
@@ -14,6 +14,8 @@ runs the reference (reference_py FilterBank, float32, the node's configuration) 
 quantised frames through host_bench.node_mirror, compares the node's Estimate and Params
 frames with it raw value for raw value, writes DIR/summary.json, DIR/force.png and
 DIR/params.png (parameters with +-3 sigma bands), and prints the final parameters.
+--model 3 (the node started with --model 3): Model III with the contact front end, the CSV's
+depth column the stage position; the Contact frames are compared too.
 replay --no-check stops after recording (DIR/record.json added); check DIR then does the
 comparison and figures where no bus is needed -- on the host, when the bus lives in a slower
 virtual machine (host_bench/with-vcan).
@@ -48,11 +50,11 @@ from reference_py.tools.cli import (EXIT_BAD_INPUT, OneLineParser, add_unit_argu
 from reference_py.tools.csvio import Units
 from reference_py.tools.safe_write import Outputs
 
-from .dbc import TICK_S, NteDatabase, log10_to_std
-from .node_mirror import NodeMirror, compare, node_outputs
+from .dbc import PARAM_NAMES, PARAM_SIGNALS, TICK_S, NteDatabase, log10_to_std
+from .node_mirror import NodeMirror, compare, contact_outputs, node_outputs
 from .replay import read_scenario
 
-PARAM_LABELS = ("sigma0", "sigma1", "sigma2", "f1", "f2", "alpha", "beta")
+PARAM_LABELS = PARAM_NAMES
 
 
 def scenario_frames(csv_path: str, db: NteDatabase, depth_rate_hz: float,
@@ -180,7 +182,7 @@ def _send_canplayer(log: Path, duration_s: float, progress: bool) -> None:
 
 class _Collect(can.Listener):
     def __init__(self, db: NteDatabase, writers: Sequence[can.Listener]) -> None:
-        self.ids = {db.frame_id(n) for n in ("Estimate", "Params", "Heartbeat")}
+        self.ids = {db.frame_id(n) for n in ("Estimate", "Params", "Heartbeat", "Contact")}
         self.writers = list(writers)
         self.messages: list[can.Message] = []
 
@@ -200,7 +202,7 @@ def final_parameters(db: NteDatabase, messages: list[can.Message]) -> dict[str, 
         name, sig, _ = rx.decode(m.arbitration_id, bytes(m.data))
         if name == "Params" and sig is not None:
             j = int(sig["ParamIndex"])
-            vn = ("Sigma0", "Sigma1", "Sigma2", "F1", "F2", "Alpha", "Beta")[j]
+            vn = PARAM_SIGNALS[j][0]
             last[PARAM_LABELS[j]] = (float(sig[vn]), log10_to_std(float(sig[vn + "StdLog10"])))
     return last
 
@@ -221,7 +223,7 @@ def plot(files: Sequence[Path], db: NteDatabase, mirror: NodeMirror,
             est_f.append(float(sig["ForceEst"]))
         elif name == "Params":
             j = int(sig["ParamIndex"])
-            vn = ("Sigma0", "Sigma1", "Sigma2", "F1", "F2", "Alpha", "Beta")[j]
+            vn = PARAM_SIGNALS[j][0]
             par.append((len(par) // params_per_step, j, float(sig[vn]),
                         log10_to_std(float(sig[vn + "StdLog10"]))))
     t = np.array([tr[0] for tr in mirror.trace])
@@ -237,15 +239,17 @@ def plot(files: Sequence[Path], db: NteDatabase, mirror: NodeMirror,
     fig.tight_layout()
     fig.savefig(str(files[0]), dpi=110, format="png")
     plt.close(fig)
-    fig, axs = plt.subplots(4, 2, figsize=(10, 9), sharex=True)
-    for j, ax in enumerate(axs.flat[:7]):
+    n_par = 9 if any(jj >= 7 for _, jj, _, _ in par) else 7    # Model III: g_fast, g_slow
+    fig, axs = plt.subplots((n_par + 1) // 2, 2, figsize=(10, 9 if n_par == 7 else 11),
+                            sharex=True)
+    for j, ax in enumerate(axs.flat[:n_par]):
         pts = [(t[s] if s < len(t) else np.nan, v, sd) for s, jj, v, sd in par if jj == j]
         if pts:
             tt, vv, ss = (np.array(x) for x in zip(*pts))
             ax.fill_between(tt, vv - 3 * ss, vv + 3 * ss, color="C1", alpha=0.3, label="±3σ")
             ax.plot(tt, vv, color="C1", lw=1)
         ax.set_title(PARAM_LABELS[j], fontsize=9)
-    axs.flat[7].axis("off")
+    axs.flat[n_par].axis("off")
     for ax in axs[-1]:
         ax.set_xlabel("sensor time, s")
     fig.suptitle("Node parameters (Params frames) with ±3σ")
@@ -345,7 +349,9 @@ def check_against_reference(a: argparse.Namespace, db: NteDatabase,
                         params_per_step=a.params_per_step)
     mirror.feed_all(m for _, m in frames)
     est, par, bad = node_outputs(db, messages)
-    res = compare(mirror, est, par)
+    contacts, bad_c = contact_outputs(db, messages)
+    res = compare(mirror, est, par, contacts)
+    bad += bad_c
     res.update({"frames_sent": record["frames_sent"], "output_frames_received": len(messages),
                 "output_e2e_errors": bad, "wall_s": record["wall_s"],
                 "mirror_events": mirror.events,
@@ -375,8 +381,13 @@ def report(res: dict) -> int:
     events = ", ".join(f"{k} {v}" for k, v in sorted(res.get("mirror_events", {}).items()))
     print(f"frames: {res['frames_sent']} sent, {n_clip} input values clipped to the DBC ranges; "
           f"reference node events: {events or 'none'}")
+    if res.get("contact_reference") or res.get("contact_node"):
+        print(f"Contact frames: {res['contact_node']} (reference {res['contact_reference']}), "
+              f"{res['contact_mismatches']} mismatches")
     ok = (res["estimate_mismatches"] == 0 and res["param_value_mismatches"] == 0
           and res["estimates_node"] == res["estimates_reference"]
+          and res.get("contact_mismatches", 0) == 0
+          and res.get("contact_node", 0) == res.get("contact_reference", 0)
           and res["output_e2e_errors"] == 0)
     return 0 if ok else 1
 
@@ -466,7 +477,9 @@ def _base_id(text: str) -> int:
 
 def _node_flags(r: argparse.ArgumentParser) -> None:
     """The node's settings the reference must share."""
-    r.add_argument("--model", type=int, choices=(1, 2), default=2, help="the node's model")
+    r.add_argument("--model", type=int, choices=(1, 2, 3), default=2,
+                   help="the node's model (3: Model III with the contact front end, the depth "
+                        "column the stage position)")
     r.add_argument("--preset", default="paper-10mms", choices=sorted(PRESETS), metavar="NAME",
                    help=f"the node's preset, one of {', '.join(sorted(PRESETS))}")
     r.add_argument("--depth-timeout-ms", type=bounded(0.0, 60_000.0, " ms", lo_open=True),

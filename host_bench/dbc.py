@@ -37,7 +37,8 @@ TICK_WRAP = 1 << 16  #: SensorTime wraps after this many ticks (6.5536 s)
 STD_LOG10_ZERO = -32.768  #: Params *StdLog10 value that means "std = 0 (fixed)"
 STD_LOG10_MIN = -32.767
 STD_LOG10_MAX = 32.767
-PARAM_NAMES = ("sigma0", "sigma1", "sigma2", "f1", "f2", "alpha", "beta")
+#: Params multiplexer indices 0..6 (every model) and 7..8 (Model III's relaxation strengths)
+PARAM_NAMES = ("sigma0", "sigma1", "sigma2", "f1", "f2", "alpha", "beta", "g_fast", "g_slow")
 #: Params signal names by parameter index
 PARAM_SIGNALS = (
     ("Sigma0", "Sigma0StdLog10"),
@@ -47,6 +48,8 @@ PARAM_SIGNALS = (
     ("F2", "F2StdLog10"),
     ("Alpha", "AlphaStdLog10"),
     ("Beta", "BetaStdLog10"),
+    ("GFast", "GFastStdLog10"),
+    ("GSlow", "GSlowStdLog10"),
 )
 
 

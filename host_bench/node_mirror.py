@@ -9,19 +9,24 @@ time in float32 (same operations, same order), the stale rule, the Command frame
 reference_py's FilterBank in float32 with the node's configuration.  Its outputs are encoded
 as the C frame layer encodes them (float32 division by the scale, round half away from zero,
 clamping to the signal's range), so the node's frames are expected to match bit for bit.
+Model III (``model=3`` or a Command with ModelSel 3) runs with the contact front end on, as the
+node does: Params cycle 0..8 (7 g_fast, 8 g_slow), InTissue is the front end's contact state,
+and the Contact frames (``contacts``) follow the node's rule (nte_node.h, MODEL III).
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Iterable
 
 import numpy as np
 
-from reference_py.bank import FilterBank
+from reference_py.bank import FilterBank, identified_names
+from reference_py.config import ContactConfig
+from reference_py.contact import CONTACT_TISSUE
 from reference_py.tools.estimate import make_config
 from reference_py.fmath import real_for
-from reference_py.params import MODEL_PARAMS, PARAM_NAMES, PRESETS
+from reference_py.params import ALL_NAMES, PRESETS, RELAX_NOMINAL
 
 from .dbc import FRAME_LENGTH, NteDatabase
 
@@ -31,6 +36,8 @@ TICK_US = 100
 DEPTH_RAW = (0, 500000)
 VELOCITY_RAW = (-50000, 50000)
 FORCE_RAW = (-500000, 500000)
+#: Contact frames: at least every this many sensor ticks when nothing changes (100 ms)
+CONTACT_PERIOD_TICKS = 1000
 
 
 def roundf(x: np.float32) -> int:
@@ -74,6 +81,24 @@ class ParamOut:
 
 
 @dataclass
+class ContactOut:
+    contact_state: int
+    surface_valid: int
+    active_model: int
+    surface_raw: int
+    tare_raw: int
+
+    def key(self) -> tuple[int, ...]:
+        return (self.contact_state, self.surface_valid, self.active_model, self.surface_raw,
+                self.tare_raw)
+
+
+def param_count(model: int) -> int:
+    """Params multiplexer indices cycled by a model: 0..6, Model III 0..8."""
+    return 9 if model == 3 else 7
+
+
+@dataclass
 class NodeMirror:
     preset: str = "paper-10mms"
     model: int = 2
@@ -85,6 +110,7 @@ class NodeMirror:
     db: NteDatabase = field(init=False)
     estimates: list[EstimateOut] = field(default_factory=list)
     params: list[ParamOut] = field(default_factory=list)
+    contacts: list[ContactOut] = field(default_factory=list)
     #: per estimate: (t_s of the force sample, force_n, depth_mm used, params snapshot)
     trace: list[tuple[float, float, float, list[float], list[float]]] = field(default_factory=list)
     events: dict[str, int] = field(default_factory=dict)
@@ -108,7 +134,11 @@ class NodeMirror:
     # ------------------------------------------------------------------ estimator
     def _cfg(self, model: int):
         p = PRESETS[self.preset]
-        return make_config(p, model, "default", "all"), p.params.as_list()
+        cfg = make_config(p, model, "default", "all")
+        if model == 3:
+            # as nte-node (and nte-run --model 3): the stage position in, the front end on
+            cfg = replace(cfg, contact=ContactConfig(enabled=True))
+        return cfg, p.params.as_list()
 
     def _start(self, model: int, estimator: str = "bank") -> None:
         cfg, nominal = self._cfg(model)
@@ -124,21 +154,24 @@ class NodeMirror:
         self.stepped = False
         self.last = EstimateOut(0, 0, 0, 0, 1, 0, 0, 0)
         self.last_vals = (0.0, 0.0, 0.0)
-        self.par_vals = [0.0] * 7
-        self.par_sd = [0.0] * 7
+        self.identified = identified_names(self.cfg)
+        self.par_vals = [0.0] * len(self.identified)
+        self.par_sd = [0.0] * len(self.identified)
+        self.contact_last: tuple[int, ContactOut] | None = None   # (ticks, frame) last sent
         self._fixed_params()
 
     def _fixed_params(self) -> None:
-        vals = [F32(v) for v in self.nominal]
+        vals = [F32(v) for v in self.nominal] + [F32(RELAX_NOMINAL[n]) for n in ("g_fast",
+                                                                                  "g_slow")]
         if self.model == 1:
             vals[6] = F32(self.cfg.beta0)
         self.fixed_vals = vals
 
     def _all_params(self) -> tuple[list[np.float32], list[np.float32]]:
         vals = list(self.fixed_vals)
-        sds = [F32(0.0)] * 7
-        for k, name in enumerate(MODEL_PARAMS[self.model]):
-            j = PARAM_NAMES.index(name)
+        sds = [F32(0.0)] * 9
+        for k, name in enumerate(self.identified):
+            j = ALL_NAMES.index(name)
             vals[j] = F32(self.par_vals[k]) if self.stepped else F32(0.0)
             sds[j] = F32(self.par_sd[k]) if self.stepped else F32(0.0)
         return vals, sds
@@ -150,9 +183,12 @@ class NodeMirror:
     def _publish(self, est: EstimateOut, t_s: float, force: float, depth: float) -> None:
         self.estimates.append(est)
         vals, sds = self._all_params()
+        count = param_count(self.model)
         for _ in range(self.params_per_step):
+            if self.param_next >= count:
+                self.param_next = 0          # after a change from Model III to I or II
             j = self.param_next
-            self.param_next = (j + 1) % 7
+            self.param_next = (j + 1) % count
             sd = sds[j]
             if sd == 0:
                 std_raw = -32768
@@ -182,10 +218,34 @@ class NodeMirror:
         fr, c0 = quantise(fh, 1e-4, -50.0, 50.0)
         ir, c1 = quantise(inn, 4e-4, -0.8192, 0.8188)
         zr, c2 = quantise(z, 5e-4, -8.192, 8.1915)
-        e = EstimateOut(fr, ir, zr, int(d > 0), 1, int(c0 or c1 or c2), int((st & 2) != 0), 0)
+        front_end = self.cfg.contact.enabled
+        in_tissue = int(o.contact[0] == CONTACT_TISSUE) if front_end else int(d > 0)
+        e = EstimateOut(fr, ir, zr, in_tissue, 1, int(c0 or c1 or c2), int((st & 2) != 0), 0)
         self.last = e
         self.last_vals = (fh, inn, z)
         self._publish(e, self._t_s(t), float(force), float(d))
+        if front_end:
+            self._contact(t, F32(o.surface_mm[0]), F32(o.tare_n[0]), int(o.contact[0]))
+
+    def _contact(self, t: int, surface: np.float32, tare: np.float32, state: int) -> None:
+        """The node's Contact frame rule: on a change of state, surface validity or surface,
+        else once CONTACT_PERIOD_TICKS of sensor time have passed (or time went back)."""
+        valid = not bool(np.isnan(surface))
+        s_raw = roundf(F32(surface / F32(0.001))) if valid else 0
+        t_raw, _ = quantise(tare, 1e-4, -50.0, 50.0)
+        c = ContactOut(int(state == CONTACT_TISSUE), int(valid), self.model - 1, s_raw, t_raw)
+        if self.contact_last is not None:
+            t0, prev = self.contact_last
+            changed = (prev.contact_state != c.contact_state or prev.surface_valid != c.surface_valid
+                       or self._contact_surface != (surface.tobytes() if valid else b""))
+            if not changed and 0 <= t - t0 < CONTACT_PERIOD_TICKS:
+                return
+        self.contact_last = (t, c)
+        self._contact_surface = surface.tobytes() if valid else b""
+        if valid and abs(float(surface)) > 500.0005:
+            self._count("encode_error")
+            return
+        self.contacts.append(c)
 
     def _t_s(self, t: int) -> float:
         return (t - 65536) * 1e-4
@@ -395,7 +455,8 @@ class NodeMirror:
 
     def _on_command(self, sig: dict, t_us: int | None) -> None:
         """The node's command rules (nte_node.h, COMMANDS): applied entirely or not at all."""
-        if not all(0 <= int(sig[k]) <= 2 for k in ("ModelSel", "EstimatorSel", "AdaptCmd")):
+        if not (0 <= int(sig["ModelSel"]) <= 3
+                and all(0 <= int(sig[k]) <= 2 for k in ("EstimatorSel", "AdaptCmd"))):
             self._count("out_of_range")
             return
         if self._last_cmd_status == "skipped":
@@ -411,7 +472,8 @@ class NodeMirror:
         if int(sig["EstimatorSel"]):
             estimator = "robust" if int(sig["EstimatorSel"]) == 2 else "bank"
         restart = (model, estimator) != (self.model, self.estimator)
-        if int(sig["AdaptCmd"]) == 1 or ((restart or int(sig["Reset"])) and self.last.in_tissue):
+        if (int(sig["AdaptCmd"]) == 1 or ((restart or int(sig["Reset"])) and self.last.in_tissue)
+                or (restart and model == 3 and estimator == "robust")):   # nte_init refuses it
             self._count("command_refused")
             return
         if restart:
@@ -421,6 +483,7 @@ class NodeMirror:
             self.stepped = False
             self.last = EstimateOut(0, 0, 0, 0, 1, 0, 0, 0)
             self.last_vals = (0.0, 0.0, 0.0)
+            self.contact_last = None
         self.last_command_us = now
 
     def feed_all(self, frames: Iterable) -> "NodeMirror":
@@ -452,14 +515,36 @@ def node_outputs(db: NteDatabase, messages: Iterable) -> tuple[list[EstimateOut]
                                    int(raw["Saturated"]), int(raw["Fault"]), int(raw["Stale"])))
         else:
             j = int(raw["ParamIndex"])
-            vname, sname = ("Sigma0", "Sigma1", "Sigma2", "F1", "F2", "Alpha", "Beta")[j], None
+            vname = ("Sigma0", "Sigma1", "Sigma2", "F1", "F2", "Alpha", "Beta", "GFast",
+                     "GSlow")[j]
             sname = vname + "StdLog10"
             par.append(ParamOut(j, F32(raw[vname]), int(raw[sname])))
     return est, par, bad
 
 
-def compare(mirror: NodeMirror, est: list[EstimateOut], par: list[ParamOut]) -> dict:
-    """Mismatch counts between the node's outputs and the mirror's."""
+def contact_outputs(db: NteDatabase, messages: Iterable) -> tuple[list[ContactOut], int]:
+    """The node's Contact frames (in order) as raw values; and how many failed E2E."""
+    rx = db.receiver()
+    out: list[ContactOut] = []
+    bad = 0
+    for m in messages:
+        name, sig, _ = rx.decode(m.arbitration_id, bytes(m.data))
+        if name != "Contact":
+            continue
+        if sig is None:
+            bad += 1
+            continue
+        raw = db.db.get_message_by_name(name).decode(bytes(m.data), scaling=False,
+                                                     decode_choices=False)
+        out.append(ContactOut(int(raw["ContactState"]), int(raw["SurfaceValid"]),
+                              int(raw["ActiveModel"]), int(raw["Surface"]), int(raw["Tare"])))
+    return out, bad
+
+
+def compare(mirror: NodeMirror, est: list[EstimateOut], par: list[ParamOut],
+            contacts: list[ContactOut] | None = None) -> dict:
+    """Mismatch counts between the node's outputs and the mirror's (the Contact frames too
+    when ``contacts``, the node's, is given)."""
     n = min(len(est), len(mirror.estimates))
     est_mis = sum(1 for a, b in zip(est, mirror.estimates) if a.key() != b.key())
     m = min(len(par), len(mirror.params))
@@ -476,4 +561,8 @@ def compare(mirror: NodeMirror, est: list[EstimateOut], par: list[ParamOut]) -> 
             "param_value_mismatches": val_mis, "param_std_mismatches": std_mis,
             "param_std_beyond_1lsb": std_off1,
             "stale_reference": sum(e.stale for e in mirror.estimates),
-            "stale_node": sum(e.stale for e in est)}
+            "stale_node": sum(e.stale for e in est),
+            **({} if contacts is None else {
+                "contact_node": len(contacts), "contact_reference": len(mirror.contacts),
+                "contact_mismatches": sum(1 for a, b in zip(contacts, mirror.contacts)
+                                          if a.key() != b.key())})}

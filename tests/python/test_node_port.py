@@ -41,7 +41,7 @@ def test_without_af_can_or_interface() -> None:
 
 @pytest.mark.parametrize("args, text", [
     ([], "required: --iface"),
-    (["--iface", "vcan0", "--model", "3"], "--model"),
+    (["--iface", "vcan0", "--model", "4"], "argument --model: invalid choice: '4'"),
     (["--iface", "vcan0", "--preset", "nope"], "unknown preset 'nope'"),
     (["--iface", "vcan0", "--base-id", "0x7F0"], "invalid node configuration"),
     (["--iface", "vcan0", "--params-per-step", "9"], "invalid node configuration"),
@@ -236,3 +236,99 @@ def test_fault_recovers_within_bounds(fault_table: dict, fault: str) -> None:
 def test_force_sensor_faults_recover(fault_table: dict, fault: str) -> None:
     r = fault_table[fault]
     assert r["recovery_s"] <= 2.0 and r["error_pct"] <= 110.0, r
+
+
+# ------------------------------------------------------------------------------------------
+# Model III on the node: a phantom record that starts in the air with a tare.
+import math  # noqa: E402
+
+from host_bench.node_mirror import contact_outputs  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def phantom(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict]:
+    """nte-ref phantom lab --seed 101: 32.5 s at 78 Hz, stage 0..25 mm, surface 6.48 mm."""
+    import json
+    work = tmp_path_factory.mktemp("phantom")
+    csv = work / "lab101.csv"
+    subprocess.run([str(ROOT / ".venv/bin/nte-ref"), "phantom", "lab", "--seed", "101",
+                    "--out", str(csv)], check=True, cwd=ROOT, stdout=subprocess.DEVNULL)
+    return csv, json.loads((work / "lab101.truth.json").read_text())
+
+
+def replay_node_args(tmp_path: Path, frames: list, tag: str, args: list[str]) -> tuple[list, dict]:
+    """nte-node --replay on `frames` with `args`: (frames it sent, its counters)."""
+    import json
+    log, rec, stats = (tmp_path / f"{tag}.in.log", tmp_path / f"{tag}.out.log",
+                       tmp_path / f"{tag}.stats.json")
+    write_candump(log, frames, "vcan0", 1.0)
+    r = subprocess.run([str(node_binary()), "--replay", str(log), "--record", str(rec),
+                        "--stats", str(stats), *args], capture_output=True, text=True,
+                       timeout=300)
+    assert r.returncode == 0, r.stderr
+    return list(can.CanutilsLogReader(str(rec))), json.loads(stats.read_text())
+
+
+def test_replay_model3_phantom_equals_mirror(tmp_path: Path, phantom: tuple[Path, dict]) -> None:
+    """nte-node --replay --model 3 on the phantom (stage position in the Depth frames, raw force
+    with its tare): every Estimate, Params (cycling 0..8, 7-8 g_fast/g_slow) and Contact frame
+    equals the mirror's (reference_py FilterBank, Model III, contact front end) bit for bit; the
+    surface published is the truth's within 0.2 mm; the heartbeat says Model III."""
+    csv, truth = phantom
+    frames = scenario_frames(str(csv), DB, 1000.0)
+    sent, st = replay_node_args(tmp_path, frames, "m3", ["--model", "3",
+                                                         "--preset", "paper-10mms"])
+    mirror = NodeMirror(model=3).feed_all(m for _, m in frames)
+    assert_node_equals_mirror(sent, mirror)
+    est, par, _ = node_outputs(DB, sent)
+    contacts, bad = contact_outputs(DB, sent)
+    res = compare(mirror, est, par, contacts)
+    assert bad == 0
+    assert res["contact_node"] == res["contact_reference"] == st["tx"]["contact"] > 0
+    assert res["contact_mismatches"] == 0
+    assert st["model"] == 3 and st["steps"] == len(est)
+    # Params: 0..8 in turn; g_fast and g_slow identified (std given), fractions in (0, 1)
+    assert [p.index for p in par[:18]] == list(range(9)) * 2
+    g = [p for p in par if p.index in (7, 8)]
+    assert len(g) >= 2 * (len(par) // 9)
+    assert all(0.0 < float(p.value) < 1.0 and p.std_raw != -32768 for p in g[9:])
+    # the front end: air first (tare learned), then tissue; the surface near the truth's
+    assert contacts[0].contact_state == 0 and contacts[0].surface_valid == 0
+    touched = [c for c in contacts if c.contact_state == 1]
+    assert touched and all(c.surface_valid for c in touched)
+    assert abs(touched[0].surface_raw * 1e-3 - truth["surface_mm"]) < 0.2
+    assert all(abs(c.tare_raw) * 1e-4 < 0.05 for c in contacts)
+    # InTissue is the contact state, not stage > 0 (the stage leaves 0 before the surface)
+    assert sum(e.in_tissue for e in est) < len(est)
+    # every 100 ms of sensor time, i.e. every ceil(0.1 s / period) force samples, plus the
+    # changes (the first frame, into and out of the tissue: a few)
+    t_f = [t for t, m in frames if m.arbitration_id == DB.frame_id("Force")]
+    period = (t_f[-1] - t_f[0]) / (len(t_f) - 1)
+    every = math.ceil(0.1 / period - 1e-6)
+    periodic = (len(t_f) - 1) // every
+    assert periodic <= len(contacts) <= periodic + 6
+    hb = [DB.decode_unchecked("Heartbeat", bytes(m.data)) for m in sent
+          if m.arbitration_id == DB.frame_id("Heartbeat")]
+    assert hb and all(h["ActiveModel"] == 2 for h in hb)
+
+
+def test_replay_model3_from_config(tmp_path: Path, phantom: tuple[Path, dict]) -> None:
+    """--config FILE whose model is 3 (nte-run --export-config on the phantom) is accepted
+    (the node refused it before Model III): the node runs Model III, the heartbeat says 2, the
+    Contact frames come; a Model II node given the same frames sends none and cycles 0..6."""
+    csv, _ = phantom
+    cfg = tmp_path / "m3.json"
+    exe = node_binary().parent / "nte-run"
+    r = subprocess.run([str(exe), str(csv), "--model", "3", "--out", str(tmp_path / "e.csv"),
+                        "--export-config", str(cfg)], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    frames = scenario_frames(str(csv), DB, 1000.0)[:6000]     # the first 6 s
+    sent, st = replay_node_args(tmp_path, frames, "cfg", ["--config", str(cfg)])
+    assert st["model"] == 3 and st["steps"] > 0 and st["tx"]["contact"] > 0
+    hb = [DB.decode_unchecked("Heartbeat", bytes(m.data)) for m in sent
+          if m.arbitration_id == DB.frame_id("Heartbeat")]
+    assert hb and all(h["ActiveModel"] == 2 for h in hb)
+    sent2, st2 = replay_node_args(tmp_path, frames, "m2", ["--model", "2"])
+    _, par2, _ = node_outputs(DB, sent2)
+    assert st2["model"] == 2 and st2["tx"]["contact"] == 0
+    assert {p.index for p in par2} == set(range(7))
