@@ -127,6 +127,14 @@ case_enobufs() {
     stop "$node_pid" >/dev/null
 }
 
+case_model3() {
+    # a Model II node; the Command selecting Model III is in the input log (at 0.5 s)
+    start_node model3 --record "$OUT/model3.sent.log" --received "$OUT/model3.recv.log" || return 1
+    play "$OUT/model3_in.log" || return 1
+    sleep 0.5
+    stop "$node_pid" >/dev/null
+}
+
 case_no_iface() {
     "$NODE" --iface vcan9 2>"$OUT/noif.err"
     echo $? >"$OUT/noif.exit"

@@ -20,11 +20,15 @@ if str(ROOT) not in sys.path:
 from host_bench.cli import scenario_frames, write_candump  # noqa: E402
 from host_bench.dbc import NteDatabase, TICK_S  # noqa: E402
 from host_bench.faults import burst  # noqa: E402
-from host_bench.node_mirror import NodeMirror, compare, node_outputs  # noqa: E402
+from host_bench.node_mirror import NodeMirror, compare, contact_outputs, node_outputs  # noqa: E402
 
 DB = NteDatabase()
 INPUT_IDS = {DB.frame_id(n) for n in ("Depth", "Force", "Command")}
-CASES = ("full_rate", "bad_traffic", "cangen", "burst", "enobufs", "no_iface")
+CASES = ("full_rate", "bad_traffic", "cangen", "burst", "enobufs", "no_iface", "model3")
+#: the model3 case: the first seconds of phantom lab seed 101 (stage moves at 1.0 s, touches the
+#: surface, 6.48 mm, at 4.3 s), a Command selecting Model III at 0.5 s (in the air)
+MODEL3_WINDOW_S = 5.5
+MODEL3_COMMAND_S = 0.5
 
 
 def capture(path: Path) -> list[can.Message]:
@@ -77,9 +81,25 @@ def prepare(out: Path) -> None:
     write_candump(out / "gen_in.log", paper_frames(out, cycles=5), "vcan0", 1.0)
     frames, rep = burst(paper, DB, seed=2026)
     write_candump(out / "burst_in.log", frames, "vcan0", 1.0)
+    write_candump(out / "model3_in.log", model3_frames(out), "vcan0", 1.0)
     (out / "burst_report.json").write_text(json.dumps({
         "random": rep.random_frames, "crafted": rep.crafted_forward + rep.crafted_backward,
         "total": rep.total, "sent": len(frames)}))
+
+
+def model3_frames(out: Path) -> list:
+    """The phantom's first MODEL3_WINDOW_S seconds (stage position and raw force, as a rig
+    sends them) with a Command ModelSel 3 at MODEL3_COMMAND_S, while the stage is still at 0
+    (so the Model II node, InTissue = depth > 0, is out of tissue and applies it)."""
+    csv = out / "lab101.csv"
+    if not csv.exists():
+        subprocess.run([sys.executable, "-m", "reference_py", "phantom", "lab", "--seed", "101",
+                        "--out", str(csv)], check=True, stdout=subprocess.DEVNULL)
+    frames = [(t, m) for t, m in scenario_frames(str(csv), DB, 1000.0)
+              if t <= MODEL3_WINDOW_S]
+    cmd = DB.sender().message("Command", {"Reset": 0, "ModelSel": 3, "EstimatorSel": 0,
+                                          "AdaptCmd": 0})
+    return sorted(frames + [(MODEL3_COMMAND_S, cmd)], key=lambda e: e[0])
 
 
 def _bad_traffic_frames() -> tuple[list, dict]:
@@ -272,12 +292,39 @@ def enobufs(out: Path) -> dict:
     return res
 
 
+def model3(out: Path) -> dict:
+    """Model III selected by a Command during a replay: the mirror (started in Model II, as
+    the node) fed what the node received (its own log, port clock times) must give what it
+    sent -- Estimate, Params and Contact frames -- bit for bit."""
+    recv = capture(out / "model3.recv.log")
+    sent = capture(out / "model3.sent.log")
+    mirror = NodeMirror(model=2).feed_all(recv)
+    est, par, bad = node_outputs(DB, sent)
+    contacts, bad_c = contact_outputs(DB, sent)
+    res = compare(mirror, est, par, contacts)
+    res["output_e2e_errors"] = bad + bad_c
+    res["mirror_events"] = mirror.events
+    res["mirror_model"] = mirror.model
+    res["stats"] = json.loads((out / "model3.stats.json").read_text())
+    frames = model3_frames(out)
+    res["sent"] = len(frames)
+    res["received"] = len(recv)
+    res["genuine_received"] = sorted((m.arbitration_id, bytes(m.data)) for m in recv) == \
+        sorted((m.arbitration_id, bytes(m.data)) for _, m in frames)
+    res["heartbeat_models"] = [int(DB.decode_unchecked("Heartbeat", bytes(m.data))["ActiveModel"])
+                               for m in sent if m.arbitration_id == DB.frame_id("Heartbeat")]
+    res["param_indices"] = sorted({p.index for p in par})
+    res["contact_states"] = [c.contact_state for c in contacts]
+    res["surfaces_mm"] = sorted({c.surface_raw * 1e-3 for c in contacts if c.surface_valid})
+    return res
+
+
 def no_iface(out: Path) -> dict:
     return {"exit": int((out / "noif.exit").read_text()), "stderr": (out / "noif.err").read_text()}
 
 
 ANALYSE = {"full_rate": full_rate, "bad_traffic": bad_traffic, "cangen": cangen,
-           "burst": burst_case, "enobufs": enobufs, "no_iface": no_iface}
+           "burst": burst_case, "enobufs": enobufs, "no_iface": no_iface, "model3": model3}
 
 
 def analyse(out: Path, case: str) -> dict:

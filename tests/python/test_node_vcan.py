@@ -18,6 +18,9 @@ compares with the reference after, on the host.
   equal the burst-free reference.
 - enobufs: send() fails with ENOBUFS for 1 s (LD_PRELOAD shim): counted, the node carries on.
 - no_iface: an absent interface gives exit status 4 and a clear message.
+- model3: the first 5.5 s of phantom lab seed 101 (stage position, raw force with its tare) to a
+  Model II node, a Command selecting Model III at 0.5 s (in the air): applied; the node's
+  Estimate, Params (0..8) and Contact frames equal the mirror's bit for bit.
 """
 from __future__ import annotations
 
@@ -172,6 +175,23 @@ def test_enobufs_on_send_counted(results: dict) -> None:
     assert 0 <= r["estimate_frames_recorded"] - r["estimates_node"] <= 1
     assert r["output_e2e_errors"] <= 2                             # one Estimate, one Params
     assert r["tail_equal"]
+
+
+def test_model3_selected_by_command_equals_mirror(results: dict) -> None:
+    r = _ok(results, "model3")
+    assert r["genuine_received"] and r["received"] == r["sent"]
+    _exact(r)
+    _events_equal_mirror(r)
+    st = r["stats"]
+    assert st["commands_applied"] == 1 and st["model"] == 3 and r["mirror_model"] == 3
+    assert r["contact_node"] == r["contact_reference"] == st["tx"]["contact"] > 0
+    assert r["contact_mismatches"] == 0
+    assert r["param_indices"] == list(range(9))
+    # the front end in the air, then in the tissue (the surface 6.48 mm is reached at 4.3 s)
+    assert r["contact_states"][0] == 0 and r["contact_states"][-1] == 1
+    assert len(r["surfaces_mm"]) == 1 and abs(r["surfaces_mm"][0] - 6.475) < 0.2
+    hb = r["heartbeat_models"]
+    assert hb and hb[-1] == 2 and set(hb) <= {1, 2} and hb == sorted(hb)
 
 
 def test_absent_interface(results: dict) -> None:
