@@ -389,3 +389,38 @@ def test_check_refuses_a_directory_without_a_record(tmp_path, capsys):
     assert rc == 2 and line.startswith(f"nte-bench: error: {d / 'record.json'}: not a replay "
                                        f"record"), line
     assert sorted(p.name for p in d.iterdir()) == ["input.log", "node.log", "record.json"]
+
+
+def test_check_model3_against_the_node(tmp_path, capsys):
+    """nte-bench check --model 3 (the host half of a Model III replay): the phantom's first 6 s
+    through nte-node --replay --model 3 (stage position in the Depth frames, the raw force):
+    Estimate, Params (0..8) and Contact frames all equal the reference -> exit 0 with 0
+    mismatches; the same record checked as Model II disagrees -> exit 1."""
+    import json
+    from host_bench.cli import scenario_frames, write_candump
+    node = next((p for p in (ROOT / "build/host/bin/nte-node", ROOT / "build/node/bin/nte-node")
+                 if p.exists()), None)
+    if node is None:
+        pytest.skip("nte-node not built")
+    csv = tmp_path / "lab101.csv"
+    subprocess.run([str(ROOT / ".venv/bin/nte-ref"), "phantom", "lab", "--seed", "101", "--out",
+                    str(csv)], check=True, cwd=ROOT, stdout=subprocess.DEVNULL)
+    db = NteDatabase()
+    frames = [(t, m) for t, m in scenario_frames(str(csv), db, 1000.0) if t <= 6.0]
+    d = tmp_path / "rec"
+    d.mkdir()
+    write_candump(d / "input.log", frames, "vcan0", 1.0)
+    subprocess.run([str(node), "--replay", str(d / "input.log"), "--record", str(d / "node.log"),
+                    "--model", "3"], check=True, timeout=120)
+    (d / "record.json").write_text(json.dumps({"frames_sent": len(frames), "wall_s": 0.0,
+                                               "input_values_clipped": {}}))
+    from host_bench.cli import main
+    assert main(["check", str(d), "--model", "3", "--no-plot"]) == 0
+    s = json.loads((d / "summary.json").read_text())
+    assert s["estimates_node"] == s["estimates_reference"] > 400
+    assert s["estimate_mismatches"] == s["param_value_mismatches"] == 0
+    assert s["contact_node"] == s["contact_reference"] > 0 and s["contact_mismatches"] == 0
+    assert set(s["final_parameters"]) == {"sigma0", "sigma1", "sigma2", "f1", "f2", "alpha",
+                                          "beta", "g_fast", "g_slow"}
+    assert main(["check", str(d), "--model", "2", "--no-plot"]) == 1
+    capsys.readouterr()
