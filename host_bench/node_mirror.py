@@ -237,11 +237,11 @@ class NodeMirror:
         if self.contact_last is not None:
             t0, prev = self.contact_last
             changed = (prev.contact_state != c.contact_state or prev.surface_valid != c.surface_valid
-                       or self._contact_surface != (surface.tobytes() if valid else b""))
+                       or self._contact_surface != (float(surface) if valid else 0.0))
             if not changed and 0 <= t - t0 < CONTACT_PERIOD_TICKS:
                 return
         self.contact_last = (t, c)
-        self._contact_surface = surface.tobytes() if valid else b""
+        self._contact_surface = float(surface) if valid else 0.0
         if valid and abs(float(surface)) > 500.0005:
             self._count("encode_error")
             return

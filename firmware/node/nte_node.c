@@ -291,7 +291,8 @@ static void nte_node_publish_contact(nte_node_t* self, uint32_t t, const nte_out
     const bool changed = !self->contact_sent ||
                          (c.contact_state != self->contact.contact_state) ||
                          (c.surface_valid != self->contact.surface_valid) ||
-                         (memcmp(&c.surface_mm, &self->contact.surface_mm, sizeof(float)) != 0);
+                         (c.surface_mm < self->contact.surface_mm) ||
+                         (c.surface_mm > self->contact.surface_mm); /* finite: 0 when invalid */
     const int32_t since = nte_node_tdiff(t, self->contact_t);
     if (!changed && (since >= 0) &&
         (since < (int32_t)(NTE_NODE_CONTACT_PERIOD_US / NTE_NODE_TICK_US))) {
