@@ -52,9 +52,12 @@
  *   stays held.
  *
  * COMMANDS (the Command frame)
- *   A command is applied entirely or not at all.  ModelSel I/II and EstimatorSel bank/robust
- *   re-initialise the estimator with that model and estimator (the configured nominal values;
- *   the robust estimator refines after each insertion: nte.h); Reset restarts the running one.
+ *   A command is applied entirely or not at all.  ModelSel I/II/III and EstimatorSel
+ *   bank/robust re-initialise the estimator with that model and estimator (the configured
+ *   nominal values; the robust estimator refines after each insertion: nte.h; Model III with
+ *   the robust estimator is refused, command_refused, as nte_init refuses it); Reset restarts
+ *   the running one.  "Out of tissue" below is the last Estimate's InTissue bit: in Model III
+ *   the contact front end's state (see MODEL III).
  *   Rules: (1) the E2E counter must be the successor of the last command's: a replayed frame
  *   (stale counter) or one after a lost command is ignored (command_stale; the sender repeats
  *   with its next counter); a repeated counter fails E2E already.  (2) At most one command per
