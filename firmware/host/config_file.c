@@ -61,7 +61,13 @@ int nte_config_file_export_text(const nte_export_t* e, char* buf, size_t cap)
         put(&t, "  },\n");
     }
     put_real(&t, "  ", "r_n2", e->r_n2, 0);
-    put(&t, "  \"samples\": %zu%s\n", e->samples, ((e->model == 3) || e->contact) ? "," : "");
+    put(&t, "  \"samples\": %zu,\n  \"replay\": {\n", e->samples);
+    put_real(&t, "    ", "t_s", e->replay_t_s, 0);
+    put(&t, "    \"candidates\": %u,\n", e->replay_candidates);
+    put_real(&t, "    ", "rmse_n", e->replay_rmse_n, 0);
+    put_real(&t, "    ", "final_rmse_n", e->replay_final_rmse_n, 0);
+    put_real(&t, "    ", "peak_n", e->replay_peak_n, 1);
+    put(&t, "  }%s\n", ((e->model == 3) || e->contact) ? "," : "");
     if (e->model == 3) {
         put(&t, "  \"model3\": {\n    \"direction_memory\": %s,\n",
             e->direction_memory ? "true" : "false");

@@ -12,10 +12,16 @@
 typedef struct nte_export_t {
     const char* source;  /**< "nte-run" */
     int model;
-    double params[7];    /**< the final estimates, the fixed ones at their nominal */
+    double params[7];    /**< the chosen estimates, the fixed ones at their nominal */
     double sd[7];        /**< 0 for the fixed ones */
     double r_n2;
     size_t samples;
+    /* the replay from depth alone that chose the values (export_select.h); NaN: null */
+    double replay_t_s;          /**< time of the chosen snapshot, s */
+    unsigned replay_candidates; /**< snapshots replayed */
+    double replay_rmse_n;       /**< its RMSE against force - tare, N */
+    double replay_final_rmse_n; /**< the final estimates' RMSE, N */
+    double replay_peak_n;       /**< max |force - tare|, N */
     /* Model III */
     int direction_memory;
     double presliding_mm;

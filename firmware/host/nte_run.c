@@ -14,6 +14,7 @@
  * line on stderr ("FILE:LINE: column 'NAME': reason" or "argument --flag: why").
  */
 #include "config_file.h"
+#include "export_select.h"
 #include "csv_in.h"
 #include "nte.h"
 #include "nte_presets.h"
@@ -453,7 +454,7 @@ typedef struct counts_t {
 /* Write every row to a temporary file beside the target, then rename it into place.
  * Returns 0, EXIT_BAD_INPUT (the place cannot be written) or 1 (a write failed). */
 static int run(const args_t* a, const out_t* out, const nte_trial_t* tr, nte_t* est,
-               counts_t* counts, nte_output_t* last)
+               counts_t* counts, nte_output_t* last, nte_export_snapshot_t* snaps)
 {
     char tmp[sizeof out->target + 16U];
     const char* slash = strrchr(out->target, '/');
@@ -498,6 +499,16 @@ static int run(const args_t* a, const out_t* out, const nte_trial_t* tr, nte_t* 
         counts->gated += ((o.status & NTE_STATUS_GATED) != 0U) ? 1U : 0U;
         counts->clipped += ((o.status & NTE_STATUS_CLIPPED) != 0U) ? 1U : 0U;
         (void)nte_get_params(est, pe, NTE_IDENTIFIED_MAX);
+        if (snaps != NULL) { /* --export-config's candidates (export_select.h) */
+            for (size_t c = 0U; c < NTE_EXPORT_CANDIDATES; c++) {
+                if (nte_export_candidate_sample(c, tr->n) == k) {
+                    snaps[c].sample = k;
+                    snaps[c].t_s = tr->t_s[k];
+                    snaps[c].np = np;
+                    (void)memcpy(snaps[c].pe, pe, sizeof pe);
+                }
+            }
+        }
         fprintf(fh, "%.17g," REAL_FMT "," REAL_FMT "," REAL_FMT ",%u", tr->t_s[k],
                 (double)o.force_hat_n, (double)o.z, (double)o.innovation_n, (unsigned)o.status);
         for (size_t j = 0U; j < np; j++) {
@@ -521,35 +532,24 @@ static int run(const args_t* a, const out_t* out, const nte_trial_t* tr, nte_t* 
 }
 
 /* --export-config: what was identified, as tools/estimate.py export_config writes it (the
- * double build writes the reference's bytes but for "source"); temporary file, then rename */
-static int export_config(const args_t* a, const out_t* out, const nte_t* est,
-                         const nte_config_t* cfg, const double values[7], size_t samples,
-                         const nte_output_t* last, double r_n2)
+ * double build writes the reference's bytes but for "source"): the snapshot that replays the
+ * record best (export_select.h); temporary file, then rename */
+static int export_config(const args_t* a, const out_t* out, const nte_export_snapshot_t* snap,
+                         const nte_export_choice_t* choice, const nte_config_t* cfg,
+                         const double values[7], size_t samples, const nte_output_t* last,
+                         double r_n2)
 {
     nte_export_t e;
     (void)memset(&e, 0, sizeof e);
     e.source = "nte-run";
     e.model = a->model;
-    for (size_t j = 0U; j < 7U; j++) {
-        e.params[j] = values[j];
-    }
-    nte_param_estimate_t pe[NTE_IDENTIFIED_MAX];
-    const size_t np = nte_get_params(est, pe, NTE_IDENTIFIED_MAX);
-    for (size_t j = 0U; (j < np) && (j < NTE_IDENTIFIED_MAX); j++) {
-        const size_t id = (size_t)pe[j].id;
-        if (id < 7U) {
-            e.params[id] = (double)pe[j].value;
-            e.sd[id] = (double)pe[j].sd;
-        } else if (e.n_g < 2U) {
-            e.g_name[e.n_g] = nte_param_name(pe[j].id);
-            e.g[e.n_g] = (double)pe[j].value;
-            e.g_sd[e.n_g] = (double)pe[j].sd;
-            e.n_g++;
-        }
-    }
-    if (a->model == 1) { /* Model I's beta is its fixed beta0 */
-        e.params[6] = values[6];
-    }
+    nte_export_snapshot_values(snap, values, a->model, e.params, e.sd, e.g, e.g_sd, e.g_name,
+                               &e.n_g);
+    e.replay_t_s = snap->t_s;
+    e.replay_candidates = NTE_EXPORT_CANDIDATES;
+    e.replay_rmse_n = choice->rmse_n;
+    e.replay_final_rmse_n = choice->final_rmse_n;
+    e.replay_peak_n = choice->peak_n;
     e.r_n2 = r_n2;
     e.samples = samples;
     e.direction_memory = cfg->direction_memory ? 1 : 0;
@@ -581,6 +581,28 @@ static int export_config(const args_t* a, const out_t* out, const nte_t* est,
         return 1;
     }
     return 0;
+}
+
+/* The lines about the export (tools/export_select.py replay_summary, replay_warning). */
+static void print_replay(const nte_export_snapshot_t* snap, const nte_export_choice_t* ch)
+{
+    if (!isfinite(ch->rmse_n)) {
+        printf("exported the final estimates: no surface was found, so they were not replayed "
+               "from depth alone\n");
+        return;
+    }
+    const double frac = (ch->peak_n > 0.0) ? (ch->rmse_n / ch->peak_n) : (double)INFINITY;
+    printf("exported the estimates at t = %.3f s (best of %u): replayed from depth alone, RMSE "
+           "%.4g N = %.1f %% of the peak %.4g N (the final estimates: %.4g N)\n",
+           snap->t_s, (unsigned)NTE_EXPORT_CANDIDATES, ch->rmse_n, 100.0 * frac, ch->peak_n,
+           ch->final_rmse_n);
+    if ((ch->peak_n > 0.0) && (frac > NTE_EXPORT_WARN_FRACTION)) {
+        fprintf(stderr,
+                "warning: the exported parameters replay their own record from depth alone at "
+                "%.0f %% of its peak force (more than %.0f %%): a prediction from them will miss "
+                "by about as much\n",
+                100.0 * frac, 100.0 * NTE_EXPORT_WARN_FRACTION);
+    }
 }
 
 int main(int argc, char** argv)
@@ -728,16 +750,31 @@ int main(int argc, char** argv)
     nte_output_t last;
     (void)memset(&last, 0, sizeof last);
     last.surface_mm = (nte_real_t)NAN;
-    int rc = run(&a, &out, &tr, &est, &counts, &last);
+    static nte_export_snapshot_t snaps[NTE_EXPORT_CANDIDATES];
+    int rc = run(&a, &out, &tr, &est, &counts, &last,
+                 (a.export_config != NULL) ? snaps : NULL);
+    nte_export_choice_t choice;
+    (void)memset(&choice, 0, sizeof choice);
     if ((rc == 0) && (a.export_config != NULL)) {
-        rc = export_config(&a, &exp_out, &est, &cfg, values, tr.n, &last,
-                           (have_fc && fc.has_r_n2) ? fc.r_n2 : (double)cfg.r_n2);
+        static nte_t scratch; /* the replays of the candidates */
+        if (nte_export_choose(&cfg, &tr, snaps, values, a.model, (double)last.surface_mm,
+                              (double)last.tare_n, &scratch, &choice) != 0) {
+            fprintf(stderr, PROG ": error: --export-config: a candidate's replay was refused\n");
+            rc = 1;
+        } else {
+            rc = export_config(&a, &exp_out, &snaps[choice.candidate], &choice, &cfg, values,
+                               tr.n, &last,
+                               (have_fc && fc.has_r_n2) ? fc.r_n2 : (double)cfg.r_n2);
+        }
     }
     if (rc == 0) {
         printf("%zu samples, Model %s, " PRECISION "; wrote %s\n", tr.n,
                (a.model == 1) ? "I" : ((a.model == 2) ? "II" : "III"), a.out);
         printf("samples: %zu; rejected %zu, gated %zu, clipped %zu\n", tr.n, counts.rejected,
                counts.gated, counts.clipped);
+        if (a.export_config != NULL) {
+            print_replay(&snaps[choice.candidate], &choice);
+        }
     }
     nte_trial_free(&tr);
     return rc;

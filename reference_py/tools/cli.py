@@ -348,11 +348,13 @@ def _estimate(a: argparse.Namespace) -> int:
         if png is not None:
             from .plotting import plot_estimate
             plot_estimate(run, png)
+        choice = None
         if exported is not None:
             import json
             from .estimate import export_config
-            outs.write_text(exported, json.dumps(export_config(run, cfg, preset), indent=2)
-                            + "\n")
+            from .export_select import choose_export
+            choice = choose_export(run, run.config, preset, trial)
+            outs.write_text(exported, json.dumps(export_config(run, choice), indent=2) + "\n")
         outs.commit()
     print(f"{len(run.t_s)} samples, Model {'I' * a.model}, {a.precision}; "
           f"final estimates (± 1 sd):")
@@ -361,6 +363,12 @@ def _estimate(a: argparse.Namespace) -> int:
     print(f"wrote {a.out}" + (f" and {a.plot}" if a.plot else "")
           + (f" and {a.export_config}" if a.export_config else ""))
     print(status_counts(run.status))
+    if choice is not None:
+        from .export_select import replay_summary, replay_warning
+        print(replay_summary(choice))
+        warning = replay_warning(choice)
+        if warning is not None:
+            print(warning, file=sys.stderr)
     return 0
 
 

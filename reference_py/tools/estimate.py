@@ -32,6 +32,7 @@ class EstimateRun:
     confidence: Array | None = None   # robust estimator only: confidence of the last refinement
     # the contact front end, when on: surface_mm (stage mm, NaN until found), tare_n (N), state
     contact: tuple[Array, Array, Array] | None = None
+    config: EstimatorConfig | None = None   # the configuration the estimator ran with
 
 
 def make_config(preset: Preset, model: int, profile: str, schedule: str,
@@ -94,43 +95,52 @@ def run_estimate(trial: Trial, preset: Preset, model: int, estimator: str = "ban
         if cont is not None:
             cont[0][k], cont[1][k], cont[2][k] = o.surface_mm[0], o.tare_n[0], o.contact[0]
     return EstimateRun(precision, model, trial.t_s, trial.depth_mm, trial.force_n, fh, z, inn, st,
-                       pars, sds, names, conf, cont)
+                       pars, sds, names, conf, cont, cfg)
 
 
 #: the estimator configuration files' schema (the discrepancy workflow writes the same one;
 #: estconfig.py reads it)
 from .estconfig import CONFIG_SCHEMA  # noqa: E402
+from .export_select import EXPORT_CANDIDATES, ReplayChoice  # noqa: E402
 
 
-def export_config(run: EstimateRun, cfg: EstimatorConfig, preset: Preset) -> dict[str, object]:
+def export_config(run: EstimateRun, choice: "ReplayChoice") -> dict[str, object]:
     """What the estimator identified, as an estimator configuration (``--export-config``): the
-    seven force-model parameters (the final estimates of the identified ones, the preset's
-    values of the fixed ones; Model I's beta is its fixed beta0), their standard deviations
-    (0 for the fixed ones), the noise variance and, for Model III, its switches, constants and
-    identified strengths; with the contact front end on, the surface and tare it ended with."""
+    seven force-model parameters and their standard deviations at the snapshot that replays the
+    record best from depth alone (export_select.py; the fixed ones at the preset, sd 0; Model
+    I's beta is its fixed beta0), the replay's figures, the noise variance and, for Model III,
+    its switches, constants and identified strengths; with the contact front end on, the
+    surface and tare it ended with."""
     import math
-    from ..params import PARAM_NAMES, RELAX_NAMES
-    final = {nm: float(run.params[-1, j]) for j, nm in enumerate(run.names)}
-    sd = {nm: float(run.params_sd[-1, j]) for j, nm in enumerate(run.names)}
-    params = {nm: final.get(nm, float(getattr(preset.params, nm))) for nm in PARAM_NAMES}
-    if run.model == 1:
-        params["beta"] = float(cfg.beta0)
+    from ..params import PARAM_NAMES
+    cfg = run.config
+    assert cfg is not None
     out: dict[str, object] = {
         "schema": CONFIG_SCHEMA, "source": "nte-ref estimate", "model": run.model,
-        "params": params, "params_sd": {nm: sd.get(nm, 0.0) for nm in PARAM_NAMES},
-        "r_n2": float(cfg.r_n2), "samples": len(run.t_s)}
+        "params": dict(zip(PARAM_NAMES, choice.params)),
+        "params_sd": dict(zip(PARAM_NAMES, choice.params_sd)),
+        "r_n2": float(cfg.r_n2), "samples": len(run.t_s),
+        "replay": {"t_s": choice.t_s, "candidates": EXPORT_CANDIDATES,
+                   "rmse_n": _json_real(choice.rmse_n),
+                   "final_rmse_n": _json_real(choice.final_rmse_n),
+                   "peak_n": _json_real(choice.peak_n)}}
     if run.model == 3:
         out["model3"] = {
             "direction_memory": cfg.direction_memory, "presliding_mm": cfg.presliding_mm,
             "relaxation": cfg.relaxation, "relax_branches": cfg.relax_branches,
             "tau_fast_s": cfg.tau_fast_s, "tau_slow_s": cfg.tau_slow_s,
-            "strengths": {nm: final[nm] for nm in RELAX_NAMES if nm in final},
-            "strengths_sd": {nm: sd[nm] for nm in RELAX_NAMES if nm in sd}}
+            "strengths": choice.strengths, "strengths_sd": choice.strengths_sd}
     if run.contact is not None:
         surface = float(run.contact[0][-1])
         out["surface_mm"] = surface if math.isfinite(surface) else None
         out["tare_n"] = float(run.contact[1][-1])
     return out
+
+
+def _json_real(x: float) -> float | None:
+    """A float for JSON, null when not finite (NaN is not JSON)."""
+    import math
+    return float(x) if math.isfinite(x) else None
 
 
 def estimate_csv_lines(run: EstimateRun) -> list[str]:

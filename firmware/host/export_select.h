@@ -1,0 +1,66 @@
+/*
+ * Which identified parameter set nte-run's --export-config writes: of EXPORT_CANDIDATES
+ * snapshots of the estimates, evenly spaced over the record (the last sample among them), the
+ * one whose replay from depth alone (--predict-only, as a reader of the file would run it) has
+ * the smallest RMSE against the measured force less the tare.  Why: the bank's parameters at
+ * any sample follow the last stretch of force one step ahead; the final ones are the
+ * retraction's and miss the insertion when replayed.  Twin: reference_py/tools/export_select.py
+ * (the same candidates, the same replays at 0 ULP, the same double sums in sample order, the
+ * first smallest RMSE wins).
+ */
+#ifndef NTE_HOST_EXPORT_SELECT_H
+#define NTE_HOST_EXPORT_SELECT_H
+
+#include "csv_in.h"
+#include "nte.h"
+
+#include <stddef.h>
+
+/** Snapshots replayed per export. */
+#define NTE_EXPORT_CANDIDATES 24U
+/** Above this RMSE / peak the export warns that the parameters do not replay their record. */
+#define NTE_EXPORT_WARN_FRACTION 0.15
+
+/** The estimates at one sample. */
+typedef struct nte_export_snapshot_t {
+    size_t sample;                             /**< index in the record */
+    double t_s;                                /**< its time, s */
+    size_t np;                                 /**< identified parameters in pe */
+    nte_param_estimate_t pe[NTE_IDENTIFIED_MAX];
+} nte_export_snapshot_t;
+
+/** The replay's verdict. */
+typedef struct nte_export_choice_t {
+    size_t candidate;     /**< index into the snapshots */
+    double rmse_n;        /**< RMSE of its replay against force - tare, N (NaN: not replayed) */
+    double final_rmse_n;  /**< the same for the last snapshot (the final estimates), N */
+    double peak_n;        /**< max |force - tare| over the record, N */
+} nte_export_choice_t;
+
+/** Sample index of snapshot j (0-based, j < NTE_EXPORT_CANDIDATES) in a record of n samples:
+ * ((j + 1) * n) / K - 1, at least 0. */
+size_t nte_export_candidate_sample(size_t j, size_t n);
+
+/**
+ * The seven force-model values (and their sd) a snapshot exports: the identified ones from it,
+ * the others at `fixed` (the preset or --config values; Model I's beta stays fixed[6], its
+ * beta0); the relaxation strengths into g (in the order identified; *n_g of them).
+ */
+void nte_export_snapshot_values(const nte_export_snapshot_t* s, const double fixed[7], int model,
+                                double params[7], double sd[7], double g[2], double g_sd[2],
+                                const char* g_name[2], size_t* n_g);
+
+/**
+ * Replay every snapshot from depth alone over `tr` with the run's configuration `run_cfg`
+ * turned into a reader's (predict-only, the snapshot's values as the nominal, the known
+ * surface `surface_mm` when the front end is on) and choose.  `scratch` is an estimator the
+ * replays run in.  With the front end on and no surface found nothing is replayed: the last
+ * snapshot is chosen and rmse_n is NaN.  Returns 0, or -1 when a replay's configuration is
+ * refused (not expected: the run accepted the same values).
+ */
+int nte_export_choose(const nte_config_t* run_cfg, const nte_trial_t* tr,
+                      const nte_export_snapshot_t snaps[NTE_EXPORT_CANDIDATES],
+                      const double fixed[7], int model, double surface_mm, double tare_n,
+                      nte_t* scratch, nte_export_choice_t* out);
+
+#endif /* NTE_HOST_EXPORT_SELECT_H */

@@ -1,0 +1,146 @@
+"""Which identified parameter set ``--export-config`` writes: the one that replays best.
+
+Why.  The bank identifies online: its parameters at any sample are the ones that follow the last
+stretch of force one step ahead, not a model of the whole record.  On a measured-like insertion
+the final estimates are the retraction's (σ2 grows tenfold there to make up for a friction that
+differs by direction), and replayed from depth alone they miss the insertion by several times its
+peak force — which is what ``--config FILE --predict-only`` (the paper's atlas) would then do on
+the next trial.  So the export keeps EXPORT_CANDIDATES snapshots of the estimates, evenly spaced
+over the record (the last sample among them), replays each from depth alone exactly as a reader
+of the exported file would (the same nominal values, Model III constants, known surface, the
+force ignored), and writes the snapshot with the smallest RMSE against the measured force less
+the tare; the replay's figures go into the file's ``replay`` block and onto stdout.
+
+The C twin is firmware/host/export_select.c: the same candidates, the same replays (C ≡
+reference at 0 ULP), the same sum of squares in sample order in double, the first smallest
+RMSE wins.  A reader ignores the ``replay`` block (estconfig.py: unknown keys are ignored).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..bank import FilterBank
+from ..config import EstimatorConfig
+from ..fmath import real_for
+from ..params import IDX, PARAM_NAMES, RELAX_NAMES, Preset
+from .csvio import Trial, time_us
+
+#: snapshots replayed per export (the bank is batched over them: one pass over the record)
+EXPORT_CANDIDATES = 24
+#: above this RMSE / peak the export says the parameters do not replay their own record
+REPLAY_WARN_FRACTION = 0.15
+
+
+@dataclass(frozen=True)
+class ReplayChoice:
+    sample: int              # index of the chosen snapshot
+    t_s: float               # its time, s
+    rmse_n: float            # RMSE of its replay against force - tare, N
+    final_rmse_n: float      # the same for the final estimates (the last candidate), N
+    peak_n: float            # max |force - tare| over the record, N
+    params: list[float]      # the seven force-model values (PARAM_NAMES order)
+    params_sd: list[float]   # their sd (0 for the fixed ones)
+    strengths: dict[str, float]
+    strengths_sd: dict[str, float]
+
+
+def candidate_samples(n: int) -> list[int]:
+    """Sample indices of the snapshots: (j * n) // K - 1 for j = 1..K (the last is n - 1)."""
+    return [max(0, (j * n) // EXPORT_CANDIDATES - 1) for j in range(1, EXPORT_CANDIDATES + 1)]
+
+
+def snapshot(names: tuple[str, ...], values: np.ndarray, sds: np.ndarray, preset: Preset,
+             cfg: EstimatorConfig) -> tuple[list[float], list[float], dict[str, float],
+                                            dict[str, float]]:
+    """The export's values at one sample: the identified ones from the estimates, the fixed
+    ones at the preset (Model I's beta is its fixed beta0)."""
+    est = {nm: float(values[j]) for j, nm in enumerate(names)}
+    sd = {nm: float(sds[j]) for j, nm in enumerate(names)}
+    params = [est.get(nm, float(getattr(preset.params, nm))) for nm in PARAM_NAMES]
+    if cfg.model == 1:
+        params[IDX["beta"]] = float(cfg.beta0)
+    params_sd = [sd.get(nm, 0.0) for nm in PARAM_NAMES]
+    strengths = {nm: est[nm] for nm in RELAX_NAMES if nm in est}
+    strengths_sd = {nm: sd[nm] for nm in RELAX_NAMES if nm in sd}
+    return params, params_sd, strengths, strengths_sd
+
+
+def choose_export(run, cfg: EstimatorConfig, preset: Preset, trial: Trial) -> ReplayChoice:
+    """Replay every candidate snapshot of ``run`` from depth alone and keep the best."""
+    n = len(run.t_s)
+    samples = candidate_samples(n)
+    snaps = [snapshot(run.names, run.params[k], run.params_sd[k], preset, cfg) for k in samples]
+    surface, tare = math.nan, 0.0
+    pred_cfg = replace(cfg, predict_only=True)
+    if run.contact is not None:
+        surface, tare = float(run.contact[0][-1]), float(run.contact[1][-1])
+        pred_cfg = replace(pred_cfg, contact=replace(cfg.contact, surface_mm=surface))
+    if run.contact is not None and not math.isfinite(surface):
+        # no surface found: a reader could not predict from this file either (it needs one)
+        return _choice(len(samples) - 1, samples, snaps, run, math.nan, math.nan, math.nan)
+    # every row in the order a reader builds its nominal values: the seven, then the strengths
+    rows = [list(p) + [st[nm] for nm in RELAX_NAMES if nm in st] for p, _, st, _ in snaps]
+    R = real_for(run.precision)
+    bank = FilterBank(R, pred_cfg, rows)
+    K = len(rows)
+    t_us = time_us(trial.t_s)
+    depth, vel = R.arr(trial.depth_mm), R.arr(trial.velocity_mm_s)
+    zero_force = R.arr(np.zeros(K))
+    sums = [0.0] * K
+    counted = 0
+    peak = 0.0
+    for k in range(n):
+        o = bank.step(np.full(K, t_us[k]), np.full(K, depth[k], dtype=R.dtype),
+                      np.full(K, vel[k], dtype=R.dtype), zero_force)
+        f = float(trial.force_n[k])
+        if not math.isfinite(f):
+            continue
+        target = f - tare
+        counted += 1
+        peak = max(peak, abs(target))
+        for c in range(K):
+            e = float(o.force_hat[c]) - target
+            sums[c] = sums[c] + e * e
+    rmse = [math.sqrt(s / counted) if counted else math.nan for s in sums]
+    best = 0
+    for c in range(1, K):
+        if rmse[c] < rmse[best]:
+            best = c
+    return _choice(best, samples, snaps, run, rmse[best], rmse[-1], peak)
+
+
+def _choice(c: int, samples: list[int], snaps: list, run, rmse: float, final_rmse: float,
+            peak: float) -> ReplayChoice:
+    params, params_sd, strengths, strengths_sd = snaps[c]
+    return ReplayChoice(samples[c], float(run.t_s[samples[c]]), rmse, final_rmse, peak, params,
+                        params_sd, strengths, strengths_sd)
+
+
+def replay_summary(ch: ReplayChoice) -> str:
+    """The line the estimating tools print about the export (stdout)."""
+    if not math.isfinite(ch.rmse_n):
+        return ("exported the final estimates: no surface was found, so they were not "
+                "replayed from depth alone")
+    frac = ch.rmse_n / ch.peak_n if ch.peak_n > 0 else math.inf
+    return (f"exported the estimates at t = {ch.t_s:.3f} s (best of {EXPORT_CANDIDATES}): "
+            f"replayed from depth alone, RMSE {ch.rmse_n:.4g} N = {100 * frac:.1f} % of the "
+            f"peak {ch.peak_n:.4g} N (the final estimates: {ch.final_rmse_n:.4g} N)")
+
+
+def replay_warning(ch: ReplayChoice) -> str | None:
+    """A tool that did not fit its data says so (stderr; the file is written all the same)."""
+    if not (math.isfinite(ch.rmse_n) and ch.peak_n > 0):
+        return None
+    frac = ch.rmse_n / ch.peak_n
+    if frac <= REPLAY_WARN_FRACTION:
+        return None
+    return (f"warning: the exported parameters replay their own record from depth alone at "
+            f"{100 * frac:.0f} % of its peak force (more than {100 * REPLAY_WARN_FRACTION:.0f} "
+            f"%): a prediction from them will miss by about as much")
+
+
+__all__ = ["EXPORT_CANDIDATES", "REPLAY_WARN_FRACTION", "ReplayChoice", "candidate_samples",
+           "choose_export", "replay_summary", "replay_warning"]
