@@ -25,13 +25,13 @@ static uint64_t port_now_us(void* ctx)
     return nte_board_now_us();
 }
 
-int main(void);
-int main(void)
+/* The node's configuration (one estimator configuration per model, ~0.8 KiB) is needed only
+ * while the node starts: kept in this function's frame, which is gone before the loop runs,
+ * rather than in main's, which would hold it under the deepest path of every step (the stack
+ * budget, figures.py) or in RAM for good. */
+static int start_node(void) __attribute__((noinline));
+static int start_node(void)
 {
-    nte_board_clock_init();
-    nte_uart_init(NTE_UART_BAUDDIV);
-    nte_slcan_init(&g_slcan);
-
     nte_node_config_t cfg;
     nte_node_config_default(&cfg, 2);
     nte_node_port_t port;
@@ -39,7 +39,16 @@ int main(void)
     port.receive = nte_slcan_receive;
     port.send = nte_slcan_send;
     port.now_us = port_now_us;
-    if (nte_node_init(&g_node, &cfg, &port) != nte_node_ok) {
+    return (nte_node_init(&g_node, &cfg, &port) == nte_node_ok) ? 0 : -1;
+}
+
+int main(void);
+int main(void)
+{
+    nte_board_clock_init();
+    nte_uart_init(NTE_UART_BAUDDIV);
+    nte_slcan_init(&g_slcan);
+    if (start_node() != 0) {
         for (;;) {
             nte_uart_write("\a"); /* configuration refused: nothing else to do */
         }
