@@ -243,6 +243,27 @@ def render_md(rep: dict[str, Any], figures: list[str]) -> str:
 CONFIG_SCHEMA = "nte-estimator-config/1"
 
 
+def readable_params(params: dict[str, float], noise_n: float, depth_max_mm: float
+                    ) -> tuple[dict[str, float], dict[str, dict[str, float]]]:
+    """The base fit's values as the estimator can start from them.  The fit bounds the
+    friction coefficients at 0 (lsq_linear); the estimator identifies log-ratios to its
+    nominal values, so it needs them positive (its readers refuse 0).  A coefficient the fit
+    put at 0 is written as the smallest value the data could tell from 0 -- its term at the
+    deepest point equal to the noise: sigma2 = noise / depth, sigma1 = noise / (beta depth)
+    (the sigma1 term is at most sigma1 beta l) -- from which the filters can grow it by their
+    clip factor if the tissue wants it.  Returns the values and what was floored (fitted and
+    written values, for the report's reader)."""
+    out = dict(params)
+    floored: dict[str, dict[str, float]] = {}
+    depth = max(depth_max_mm, 1.0)
+    floors = {"sigma2": noise_n / depth, "sigma1": noise_n / (params["beta"] * depth)}
+    for name, floor in floors.items():
+        if not out[name] > 0.0:
+            floored[name] = {"fitted": float(out[name]), "written": float(floor)}
+            out[name] = float(floor)
+    return out, floored
+
+
 def estimator_config(res: Result) -> dict[str, Any]:
     """The fitted base model as an estimator configuration (schema in DISCREPANCY.md §7)."""
     base = res.fits[0]
@@ -273,9 +294,12 @@ def estimator_config(res: Result) -> dict[str, Any]:
         layers.append({"trial": p.name, "ruptures_mm": [r["depth_mm"] for r in t["ruptures"]],
                        "coefficients": coefs})
     noise = float(np.median([p.noise_n for p in res.preps]))
+    params, floored = readable_params(base_paramset(base).__dict__, noise,
+                                      max(float(np.max(p.stage_mm - p.surface_mm))
+                                          for p in res.preps))
     return _clean({
         "schema": CONFIG_SCHEMA, "source": "nte-discrepancy", "model": 2,
-        "params": base_paramset(base).__dict__, "r_n2": noise ** 2, "noise_n": noise,
+        "params": params, "floored": floored, "r_n2": noise ** 2, "noise_n": noise,
         "surface_mm": [p.surface_mm + float(base.nl["surface"][i])
                        for i, p in enumerate(res.preps)],
         "tare_n": [p.tare_n for p in res.preps],

@@ -322,6 +322,34 @@ def test_export_keeps_the_snapshot_that_replays_best(loop, model):
         (rep["rmse_n"] > 0.15 * rep["peak_n"])
 
 
+def test_a_coefficient_fitted_at_zero_is_written_readable(tmp_path):
+    """The workflow's fit bounds sigma1 and sigma2 at 0 (the artery-filled phantom puts sigma2
+    there); the config it writes must still be read: the coefficient is written at the noise
+    over the deepest point (over beta too for sigma1), listed under "floored", and both readers
+    accept the file; a positive coefficient is left alone."""
+    from reference_py.discrepancy.report import readable_params
+    from reference_py.params import get_preset
+    base = dict(get_preset("paper-10mms").params.__dict__)
+    base["sigma2"] = 0.0
+    params, floored = readable_params(base, 0.013, 18.5)
+    assert params["sigma2"] == 0.013 / 18.5
+    assert floored == {"sigma2": {"fitted": 0.0, "written": 0.013 / 18.5}}
+    assert params["sigma1"] == base["sigma1"] and "sigma1" not in floored
+    base["sigma1"] = 0.0
+    params, floored = readable_params(base, 0.013, 18.5)
+    assert params["sigma1"] == 0.013 / (base["beta"] * 18.5) and set(floored) == {"sigma1",
+                                                                                  "sigma2"}
+    f = tmp_path / "floored.json"
+    f.write_text(json.dumps({"schema": "nte-estimator-config/1", "model": 2, "params": params,
+                             "floored": floored}))
+    rec = tmp_path / "rec.csv"
+    subprocess.run([str(VENV_BIN / "nte-ref"), "simulate", "--preset", "paper-10mms", "--depth",
+                    "20", "--dwell", "1", "--out", str(rec)], check=True, capture_output=True)
+    for exe in (ref, crun):
+        r = exe(str(rec), "--config", str(f), "--out", str(tmp_path / "o.csv"))
+        assert r.returncode == 0, r.stderr
+
+
 def test_predict_only_needs_a_config_and_a_surface(loop):
     d = loop["dir"]
     r = ref(str(loop["p1"]), "--model", "2", "--predict-only", "--out", str(d / "n.csv"))
