@@ -299,8 +299,9 @@ def test_c_run_writes_by_the_safe_writer_rules(sim_csv, tmp_path):
 
 
 def test_estimate_exports_what_it_identified(sim_csv, tmp_path, capsys):
-    """--export-config: the final estimates of the identified parameters (the estimate file's
-    last row), the fixed ones at the preset, Model III's constants and strengths."""
+    """--export-config: the identified parameters of the estimate file's row at the snapshot
+    that replayed best (the "replay" block's t_s; export_select.py), the fixed ones at the
+    preset, Model III's constants and strengths."""
     import json
     from reference_py.params import PARAM_NAMES, PRESETS
     out, js = tmp_path / "e.csv", tmp_path / "cfg.json"
@@ -310,10 +311,12 @@ def test_estimate_exports_what_it_identified(sim_csv, tmp_path, capsys):
     assert cfg["schema"] == "nte-estimator-config/1" and cfg["model"] == 3
     assert list(cfg["params"]) == list(PARAM_NAMES)
     header, *rows = out.read_text().splitlines()
-    last = dict(zip(header.split(","), rows[-1].split(",")))
+    chosen = [dict(zip(header.split(","), r.split(","))) for r in rows
+              if float(r.split(",", 1)[0]) == cfg["replay"]["t_s"]]
+    assert len(chosen) == 1
     for name in ("sigma0", "sigma1", "sigma2", "f1", "beta", "g_fast", "g_slow"):
         got = cfg["params"].get(name, cfg["model3"]["strengths"].get(name))
-        assert got == float(last[name]), name
+        assert got == float(chosen[0][name]), name
     assert cfg["params"]["alpha"] == PRESETS["paper-10mms"].params.alpha
     assert cfg["params_sd"]["f2"] == 0.0
     g = cfg["model3"]["strengths"]
