@@ -87,10 +87,11 @@ class ContactOut:
     active_model: int
     surface_raw: int
     tare_raw: int
+    layer: int = 0
 
     def key(self) -> tuple[int, ...]:
         return (self.contact_state, self.surface_valid, self.active_model, self.surface_raw,
-                self.tare_raw)
+                self.tare_raw, self.layer)
 
 
 def param_count(model: int) -> int:
@@ -225,18 +226,23 @@ class NodeMirror:
         self.last_vals = (fh, inn, z)
         self._publish(e, self._t_s(t), float(force), float(d))
         if front_end:
-            self._contact(t, F32(o.surface_mm[0]), F32(o.tare_n[0]), int(o.contact[0]))
+            self._contact(t, F32(o.surface_mm[0]), F32(o.tare_n[0]), int(o.contact[0]),
+                          int(o.layer[0]))
 
-    def _contact(self, t: int, surface: np.float32, tare: np.float32, state: int) -> None:
-        """The node's Contact frame rule: on a change of state, surface validity or surface,
-        else once CONTACT_PERIOD_TICKS of sensor time have passed (or time went back)."""
+    def _contact(self, t: int, surface: np.float32, tare: np.float32, state: int,
+                 layer: int) -> None:
+        """The node's Contact frame rule: on a change of state, layer, surface validity or
+        surface, else once CONTACT_PERIOD_TICKS of sensor time have passed (or time went
+        back)."""
         valid = not bool(np.isnan(surface))
         s_raw = roundf(F32(surface / F32(0.001))) if valid else 0
         t_raw, _ = quantise(tare, 1e-4, -50.0, 50.0)
-        c = ContactOut(int(state == CONTACT_TISSUE), int(valid), self.model - 1, s_raw, t_raw)
+        c = ContactOut(int(state == CONTACT_TISSUE), int(valid), self.model - 1, s_raw, t_raw,
+                       layer)
         if self.contact_last is not None:
             t0, prev = self.contact_last
-            changed = (prev.contact_state != c.contact_state or prev.surface_valid != c.surface_valid
+            changed = (prev.contact_state != c.contact_state or prev.layer != c.layer
+                       or prev.surface_valid != c.surface_valid
                        or self._contact_surface != (float(surface) if valid else 0.0))
             if not changed and 0 <= t - t0 < CONTACT_PERIOD_TICKS:
                 return
@@ -537,7 +543,8 @@ def contact_outputs(db: NteDatabase, messages: Iterable) -> tuple[list[ContactOu
         raw = db.db.get_message_by_name(name).decode(bytes(m.data), scaling=False,
                                                      decode_choices=False)
         out.append(ContactOut(int(raw["ContactState"]), int(raw["SurfaceValid"]),
-                              int(raw["ActiveModel"]), int(raw["Surface"]), int(raw["Tare"])))
+                              int(raw["ActiveModel"]), int(raw["Surface"]), int(raw["Tare"]),
+                              int(raw["Layer"])))
     return out, bad
 
 

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .config import EstimatorConfig, check_nominal
+from .layers import RuptureDetector
 from .contact import ContactFrontEnd
 from .ekf import Matrix, joseph_update, positive_definite, predict_covariance
 from .fmath import Array, Real
@@ -48,6 +49,8 @@ STATUS_DIVERGED = 1 << 11       # a predicted force or z left its range (_in_ran
 #                                 reset, z at its steady state; never published out of range
 STATUS_NAMES = ("init", "rejected", "gated", "filter_reset", "gap", "out_of_tissue", "clipped",
                 "floored", "sign_uncertain")
+STATUS_RUPTURE = 1 << 12        # Model III: a layer's rupture was found at this sample
+#                                 (layers.py; the layer index advanced)
 
 # Counters of rejected samples, by cause
 REJECT_NONFINITE, REJECT_RANGE, REJECT_TIME = 0, 1, 2
@@ -67,6 +70,8 @@ class StepOutput:
     surface_mm: Array | None = None
     tare_n: Array | None = None
     contact: Array | None = None
+    # Model III's layer index (layers.py; 0 for Models I and II and with the layers off)
+    layer: Array | None = None
 
 
 def relax_count(cfg: EstimatorConfig) -> int:
@@ -125,6 +130,9 @@ class FilterBank:
         # the surface and tare front end, at the start of every sample's processing
         self.contact = (ContactFrontEnd(R, cfg.contact, cfg.r_n2, cfg.v_still_mm_s, self.batch)
                         if cfg.contact.enabled else None)
+        # Model III's layer index: a rupture detector on filter 1's innovations
+        self.layers = (RuptureDetector(R, self.batch, cfg.v_still_mm_s)
+                       if self.m3 and cfg.layers else None)
         self.reset()
         self.initial_theta = self.th
 
@@ -151,6 +159,8 @@ class FilterBank:
         self.gated_run = [np.zeros(B, dtype=np.int64) for _ in self.subsets]
         if self.contact is not None:
             self.contact.reset()
+        if self.layers is not None:
+            self.layers.reset()
         self.last = StepOutput(R.full(B, 0.0), R.full(B, 0.0), R.full(B, 0.0), R.full(B, 0.0),
                                np.zeros(B, dtype=np.uint32),
                                R.arr(np.zeros((len(self.identified), B))),
@@ -225,6 +235,14 @@ class FilterBank:
         else:
             out.surface_mm, out.tare_n = R.full(self.batch, 0.0), R.full(self.batch, 0.0)
             out.contact = np.zeros(self.batch, dtype=np.uint32)
+        if self.layers is not None:
+            # after the bank's step, on what it was fed (layers.py)
+            sigma = (self.contact.noise_sigma() if self.contact is not None
+                     else np.sqrt(R.full(self.batch, 0.0) + c.r))
+            out.layer, rupture = self.layers.step(valid, run, l_in, v, out.innovation, sigma)
+            out.status = out.status | np.where(rupture, np.uint32(STATUS_RUPTURE), np.uint32(0))
+        else:
+            out.layer = np.zeros(self.batch, dtype=np.uint32)
         self.t_prev = np.where(valid, t_us, self.t_prev)
         self.l_prev = np.where(valid, l_in, self.l_prev)
         self.initialised = self.initialised | valid

@@ -155,6 +155,7 @@ class EstimatorConfig:
     relax_branches: int = 2            # 1: the fast branch only; 2: fast and slow
     tau_fast_s: float = 0.3            # time constant of the fast branch, s, > 0, <= 3600
     tau_slow_s: float = 3.0            # of the slow branch, s, > 0, <= 3600
+    layers: bool = True                # the layer index: a rupture detector (layers.py)
     # the surface and tare front end (contact.py); off by default.  On, the depth column is the
     # stage position, accepted within [-depth_max_mm, depth_max_mm] (depth_min_mm unused)
     contact: ContactConfig = field(default_factory=ContactConfig)

@@ -93,7 +93,9 @@ class ContactFrontEnd:
         self.she = R.full(B, 0.0)
         self.surface = R.full(B, math.nan)        # NaN until a surface is found
 
-    def _sigma(self) -> Array:
+    def noise_sigma(self) -> Array:
+        """The force noise's standard deviation learned in the air, N (never below the bank's
+        sqrt(r_n2); held in contact)."""
         return np.sqrt(np.where(self.ms > self.r, self.ms, self.r))
 
     def _threshold(self, sigma: Array) -> Array:
@@ -105,7 +107,7 @@ class ContactFrontEnd:
         force f N.  Returns the tissue depth (mm, >= 0) and the tare-free force (N)."""
         R, cfg = self.R, self.cfg
         zero = R.c(0.0)
-        sigma = self._sigma()
+        sigma = self.noise_sigma()
         thr = self._threshold(sigma)
         e = f - self.tare
         air = mask & ~self.contact

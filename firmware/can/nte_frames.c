@@ -557,6 +557,9 @@ nte_frames_err_t nte_frames_encode_contact(const nte_frames_contact_t* in, nte_e
     if ((in->contact_state > (uint8_t)NTE_FRAMES_CONTACT_TISSUE) || (in->active_model > 2u)) {
         return nte_frames_err_selector;
     }
+    if (in->layer > NTE_FRAMES_LAYER_MAX) {
+        return nte_frames_err_range;
+    }
     if (!isfinite(in->tare_n) || (in->surface_valid && !isfinite(in->surface_mm))) {
         return nte_frames_err_not_finite;
     }
@@ -569,6 +572,7 @@ nte_frames_err_t nte_frames_encode_contact(const nte_frames_contact_t* in, nte_e
     m.contact_state = in->contact_state;
     m.surface_valid = in->surface_valid ? 1u : 0u;
     m.active_model = in->active_model;
+    m.layer = in->layer;
     m.surface = in->surface_valid ? nte_can_contact_surface_encode(in->surface_mm) : 0;
     if (!nte_can_contact_surface_is_in_range(m.surface)) {
         return nte_frames_err_range;
@@ -603,6 +607,7 @@ nte_frames_err_t nte_frames_decode_contact(nte_e2e_rx_t* e2e, const uint8_t* dat
     out->contact_state = m.contact_state;
     out->surface_valid = (m.surface_valid != 0u);
     out->active_model = m.active_model;
+    out->layer = m.layer;
     out->surface_mm = nte_can_contact_surface_decode(m.surface);
     out->tare_n = nte_can_contact_tare_decode(m.tare);
     return nte_frames_ok;

@@ -193,7 +193,12 @@ typedef struct {
     float surface_mm;       /**< Surface, stage position mm, -500..500 (an error beyond), 1 um
                                  resolution; must be finite when surface_valid. */
     float tare_n;           /**< Tare, N; clamped to +-50 N, 0.1 mN resolution. */
+    uint8_t layer;          /**< Model III's layer index, 0..NTE_FRAMES_LAYER_MAX (an error
+                                 beyond; the estimator's is 0..NTE_LAYER_MAX - 1). */
 } nte_frames_contact_t;
+
+/** Largest layer index the Contact frame carries (its 3-bit Layer signal). */
+#define NTE_FRAMES_LAYER_MAX 7u
 
 /** Sender clock unwrapper: use ONE for all streams stamped by the same clock. */
 typedef struct {

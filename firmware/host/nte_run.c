@@ -6,7 +6,7 @@
  *   nte-run FILE.csv --model 1|2|3 [--estimator bank|robust] [--preset NAME]
  *           [--profile default|paper] [--init-seed K] [--init-factor F] [--schedule all|rotate]
  *           [--precision P] [--presliding-mm MM] [--tau-fast S] [--tau-slow S]
- *           [--relax-branches 1|2] [--no-relaxation] [--no-direction-memory]
+ *           [--relax-branches 1|2] [--no-relaxation] [--no-direction-memory] [--no-layers]
  *           [--contact on|off] [--surface MM] [--config FILE.json] [--predict-only]
  *           [--export-config FILE.json] --out EST.csv
  *
@@ -57,6 +57,7 @@ typedef struct args_t {
     double tau_slow_s;
     int relax_branches;
     int relaxation;
+    int layers;
     int direction_memory;
     int contact;    /* the contact front end: -1 not asked, 0 off, 1 on */
     double surface; /* --surface MM, NaN: find it */
@@ -85,7 +86,7 @@ static void help(void)
            "       [--profile default|paper] [--init-seed K] [--init-factor F]\n"
            "       [--schedule all|rotate] [--precision " PRECISION "]\n"
            "       [--presliding-mm MM] [--tau-fast S] [--tau-slow S] [--relax-branches 1|2]\n"
-           "       [--no-relaxation] [--no-direction-memory] [--contact on|off]\n"
+           "       [--no-relaxation] [--no-direction-memory] [--no-layers] [--contact on|off]\n"
            "       [--surface MM] [--config FILE.json] [--predict-only]\n"
            "       [--export-config FILE.json] --out EST.csv\n"
            "\n"
@@ -118,6 +119,8 @@ static void help(void)
            "  --no-relaxation        Model III: no relaxation branches (default: on)\n"
            "  --no-direction-memory  Model III: tanh(v/eps) instead of the direction state\n"
            "                         (default: on)\n"
+           "  --no-layers            Model III: no layer index (default: on: a rupture\n"
+           "                         detector on the innovations; adds the column layer)\n"
            "  --contact on|off       the surface and tare front end (default: on for --model 3\n"
            "                         unless --predict-only, off for 1 and 2): depth is\n"
            "                         the stage position, the needle starts in the air; adds\n"
@@ -158,6 +161,7 @@ static int parse_args(int argc, char** argv, args_t* a)
     a->tau_slow_s = 3.0;
     a->relax_branches = 2;
     a->relaxation = 1;
+    a->layers = 1;
     a->direction_memory = 1;
     a->contact = -1;
     a->surface = (double)NAN; /* NAN is a float: said explicitly for -Wdouble-promotion */
@@ -187,6 +191,10 @@ static int parse_args(int argc, char** argv, args_t* a)
         }
         if (strcmp(opt, "--no-direction-memory") == 0) {
             a->direction_memory = 0;
+            continue;
+        }
+        if (strcmp(opt, "--no-layers") == 0) {
+            a->layers = 0;
             continue;
         }
         if (strcmp(opt, "--predict-only") == 0) {
@@ -483,8 +491,9 @@ static int run(const args_t* a, const out_t* out, const nte_trial_t* tr, nte_t* 
     for (size_t j = 0U; j < np; j++) {
         fprintf(fh, ",%s,%s_sd", nte_param_name(pe[j].id), nte_param_name(pe[j].id));
     }
-    fprintf(fh, "%s%s\n", (a->robust != 0) ? ",confidence" : "",
-            (a->contact == 1) ? ",surface_mm,tare_n,contact" : "");
+    const int with_layer = (a->model == 3) && (a->layers != 0);
+    fprintf(fh, "%s%s%s\n", (a->robust != 0) ? ",confidence" : "",
+            (a->contact == 1) ? ",surface_mm,tare_n,contact" : "", with_layer ? ",layer" : "");
     for (size_t k = 0U; k < tr->n; k++) {
         nte_sample_t s;
         nte_output_t o;
@@ -520,6 +529,9 @@ static int run(const args_t* a, const out_t* out, const nte_trial_t* tr, nte_t* 
         if (a->contact == 1) {
             fprintf(fh, "," REAL_FMT "," REAL_FMT ",%d", (double)o.surface_mm, (double)o.tare_n,
                     (int)o.contact);
+        }
+        if (with_layer) {
+            fprintf(fh, ",%u", (unsigned)o.layer);
         }
         fprintf(fh, "\n");
     }
@@ -727,6 +739,7 @@ int main(int argc, char** argv)
     cfg.tau_slow_s = (nte_real_t)a.tau_slow_s;
     cfg.relax_branches = a.relax_branches;
     cfg.relaxation = a.relaxation != 0;
+    cfg.layers = a.layers != 0;
     cfg.direction_memory = a.direction_memory != 0;
     /* the identified part of f1, computed in double as the reference does, rounded once */
     const double kappa = (start[4] < 0.0) ? 1.0 : 0.0;

@@ -164,6 +164,20 @@
  *   contact.
  *   Cost per sample: about 30 flops, 1 sqrt and 2 divisions (4 more at the sample that
  *   finds the surface); memory: nte_contact_t in the instance.
+ *
+ * THE LAYER INDEX (Model III with cfg.layers; reference_py/layers.py)
+ *   A membrane tears and the force drops by 0.5-3 N within a few samples, far below the
+ *   one-step prediction.  A one-sided CUSUM of filter 1's innovation in units of the sensor
+ *   noise (nu = innovation / sigma, sigma the contact front end's noise learned in the air, or
+ *   sqrt(r_n2) with it off), g <- max(0, g - nu - NTE_K_LAYER_DRIFT_SIGMA), counts a
+ *   rupture when g exceeds NTE_K_LAYER_THRESHOLD_SIGMA (20 noise standard deviations) and
+ *   advances nte_output_t.layer (at most NTE_LAYER_MAX - 1; NTE_STATUS_RUPTURE at that
+ *   sample).  It watches only while the needle moves in (velocity > v_still_mm_s) deeper than
+ *   NTE_K_LAYER_HOLDOFF_MM (1.5 mm) below the surface and the previous rupture (the contact
+ *   onset and the bank's re-adaptation after a drop make negative innovations too); out of the
+ *   tissue the index returns to 0.  Measured on held-out phantom records by
+ *   tests/python/test_layers.py (README).  It does not change the estimate.  Cost per
+ *   sample: 1 sqrt, 1 division, 3 flops; memory: nte_layers_t in the instance.
  */
 #ifndef NTE_H
 #define NTE_H
@@ -225,6 +239,8 @@ typedef enum nte_param_id_t {
 /** Every parameter: the seven of the force model (Models I, II) and Model III's two
  *  relaxation strengths. */
 #define NTE_PARAM_COUNT 9
+/** Layers the index counts, 0..NTE_LAYER_MAX - 1 (reference_py/layers.py LAYER_MAX). */
+#define NTE_LAYER_MAX 4U
 /** At most this many parameters are identified (Model I: six, Model II: five, Model III:
  *  seven). */
 #define NTE_IDENTIFIED_MAX 7
@@ -299,6 +315,9 @@ typedef enum nte_err_t {
                                              saturated at +-force_max_n (NaN: 0).  A
                                              published force_hat_n never leaves
                                              +-force_max_n. */
+#define NTE_STATUS_RUPTURE (1U << 12U) /**< Model III: a layer's rupture was found at this
+                                           sample (nte_output_t.layer advanced; THE LAYER
+                                           INDEX below) */
 
 /* Causes of a rejected sample (same values as reference_py/bank.py REJECT_*). */
 #define NTE_REJECT_NONFINITE 0 /**< depth, velocity or force NaN or infinite */
@@ -419,6 +438,8 @@ typedef struct nte_config_t {
     nte_real_t force_max_n;     /**< [50] accepted |force| and the physical range of every
                                      predicted and published force, N, > 0 */
     /* Model III (reference_py/MODEL.md §3b); Models I and II ignore these fields */
+    bool layers;                /**< [true] Model III: the layer index (a rupture detector on
+                                     filter 1's innovations; THE LAYER INDEX above) */
     bool direction_memory;      /**< [true] the direction state s (travelled distance, Dahl)
                                      replaces tanh(v/eps); no sign inflation of R then */
     bool relaxation;            /**< [true] relaxation branches take sum g_i m_i off the
@@ -482,6 +503,9 @@ typedef struct nte_output_t {
     nte_real_t tare_n;           /**< the tare subtracted from the force, N (learned in the
                                       air, held in contact) */
     nte_contact_state_t contact; /**< air or tissue */
+    uint32_t layer;              /**< Model III with cfg.layers: the layer the tip is in,
+                                      0..NTE_LAYER_MAX - 1 (0 from the surface to the first
+                                      rupture; 0 again out of the tissue); 0 otherwise */
 } nte_output_t;
 
 /* ---------------------------------------------------------------------------------------- */
@@ -519,6 +543,13 @@ typedef struct nte_robust_t {
     nte_real_t v_try[NTE_IDENTIFIED_MAX]; /**< trial point */
 } nte_robust_t;
 #endif
+
+/** Model III's rupture detector (internal; reference_py/layers.py RuptureDetector). */
+typedef struct nte_layers_t {
+    nte_real_t g;       /**< one-sided CUSUM of -innovation/sigma, noise standard deviations */
+    nte_real_t last_mm; /**< depth below the surface of the previous rupture (0: the surface) */
+    uint32_t layer;     /**< 0..NTE_LAYER_MAX - 1 */
+} nte_layers_t;
 
 /** The contact front end's state (internal; reference_py/contact.py ContactFrontEnd). */
 typedef struct nte_contact_t {
@@ -568,6 +599,7 @@ typedef struct nte_t {
     nte_robust_t robust;
 #endif
     nte_contact_t contact;
+    nte_layers_t layers;
 } nte_t;
 
 /**

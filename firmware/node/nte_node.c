@@ -288,8 +288,10 @@ static void nte_node_publish_contact(nte_node_t* self, uint32_t t, const nte_out
     c.active_model = (uint8_t)(self->model - 1);
     c.surface_mm = c.surface_valid ? (float)o->surface_mm : 0.0f;
     c.tare_n = (float)o->tare_n;
+    c.layer = (uint8_t)o->layer;
     const bool changed = !self->contact_sent ||
                          (c.contact_state != self->contact.contact_state) ||
+                         (c.layer != self->contact.layer) ||
                          (c.surface_valid != self->contact.surface_valid) ||
                          (c.surface_mm < self->contact.surface_mm) ||
                          (c.surface_mm > self->contact.surface_mm); /* finite: 0 when invalid */

@@ -18,7 +18,8 @@
  *   the surface from the force onset (nte.h, THE CONTACT FRONT END; estimator[2].contact).
  *   The Estimate's InTissue bit is then the front end's contact state (not depth > 0).  After
  *   an estimator step (not after a stale hold) a Contact frame is sent when its contact state,
- *   surface validity or surface differs from the last Contact frame sent, or when the force
+ *   layer index (nte.h, THE LAYER INDEX), surface validity or surface differs from the last
+ *   Contact frame sent, or when the force
  *   sample is at least NTE_NODE_CONTACT_PERIOD_US of sensor time after the last one (10 Hz):
  *   the decision uses the frames' SensorTime only, so a replay is deterministic.  Heartbeat
  *   ActiveModel 2.  Models I and II send no Contact frame and cycle Params 0..6 as before.

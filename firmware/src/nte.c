@@ -3,12 +3,13 @@
  * the estimator), nte_get_params, nte_param_name.  The reference composes the same way:
  * FilterBank.step validates the sample, passes it through the contact front end when it is
  * on (nte_contact.c: stage -> tissue depth, force -> force - tare) and advances the bank
- * (nte_bank.c); RobustEstimator.step runs the bank's step, then its own (nte_robust.c) on
- * what the bank was given.  This file uses the three components; the bank knows nothing of
- * the other two.
+ * (nte_bank.c), then, in Model III, the layer index (nte_layers.c); RobustEstimator.step
+ * runs the bank's step, then its own (nte_robust.c) on what the bank was given.  This file
+ * uses the four components; the bank knows nothing of the others.
  */
 #include "nte_bank.h"
 #include "nte_contact.h"
+#include "nte_layers.h"
 #include "nte_robust.h"
 
 static const char* const param_names[NTE_PARAM_COUNT] = {
@@ -37,6 +38,8 @@ static void start(nte_t* self)
     nte_bank_start(self);
     nte_contact_start(self);
     publish_contact(self);
+    nte_layers_start(self);
+    self->last.layer = 0U;
 #if NTE_ROBUST_BUFFER_LEN > 0
     nte_robust_start(self);
 #endif
@@ -103,6 +106,10 @@ nte_err_t nte_step(nte_t* self, const nte_sample_t* sample, nte_output_t* out)
             nte_contact_step(self, l_in, v, y, &fed.depth_mm, &fed.force_n);
         }
         nte_bank_advance(self, first, dt, fed.depth_mm, v, fed.force_n, &self->last);
+        if ((cfg->model == 3) && cfg->layers) {
+            /* after the bank's step, on what it was fed (nte_layers.c) */
+            nte_layers_step(self, !first, fed.depth_mm, v, &self->last);
+        }
         if (first) {
             self->last.status |= NTE_STATUS_INIT;
         } else {

@@ -34,6 +34,7 @@ static void set_common(nte_config_t* cfg, const int32_t model, const nte_schedul
     cfg->speed_max_mm_s = NTE_K_DEF_SPEED_MAX_MM_S;
     cfg->force_max_n = NTE_K_DEF_FORCE_MAX_N;
     cfg->direction_memory = true;
+    cfg->layers = true;
     cfg->relaxation = true;
     cfg->relax_branches = 2;
     cfg->presliding_mm = NTE_K_DEF_PRESLIDING_MM;

@@ -48,14 +48,20 @@ static nte_real_t extrapolate(const nte_contact_t* c, const nte_real_t x)
     return nte_isfinite(s) ? s : c->x0;
 }
 
+nte_real_t nte_contact_noise_sigma(const nte_t* self)
+{
+    /* the noise is never taken below the bank's own measurement noise */
+    const nte_real_t ms = self->contact.ms;
+    return nte_sqrt((ms > self->cfg.r_n2) ? ms : self->cfg.r_n2);
+}
+
 void nte_contact_step(nte_t* self, const nte_real_t x, const nte_real_t v, const nte_real_t f,
                       nte_real_t* depth, nte_real_t* force)
 {
     const nte_contact_config_t* cc = &self->cfg.contact;
     nte_contact_t* c = &self->contact;
     const nte_real_t zero = NTE_C(0.0);
-    /* the noise is never taken below the bank's own measurement noise */
-    const nte_real_t sigma = nte_sqrt((c->ms > self->cfg.r_n2) ? c->ms : self->cfg.r_n2);
+    const nte_real_t sigma = nte_contact_noise_sigma(self);
     const nte_real_t kt = cc->k_sigma * sigma;
     const nte_real_t thr = (kt > cc->floor_n) ? kt : cc->floor_n;
     const nte_real_t e = f - c->tare;

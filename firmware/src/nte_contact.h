@@ -20,6 +20,10 @@ void nte_contact_start(nte_t* self);
 void nte_contact_step(nte_t* self, nte_real_t x, nte_real_t v, nte_real_t f, nte_real_t* depth,
                       nte_real_t* force);
 
+/** ContactFrontEnd.noise_sigma: the force noise's standard deviation learned in the air, N
+ *  (never below sqrt(r_n2); held in contact).  Cost: 1 sqrt. */
+nte_real_t nte_contact_noise_sigma(const nte_t* self);
+
 /** The published surface_mm, tare_n and contact state into *out (ContactFrontEnd.published). */
 void nte_contact_publish(const nte_t* self, nte_output_t* out);
 

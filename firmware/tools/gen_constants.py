@@ -21,7 +21,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
-from reference_py import config, params, rk3, robust  # noqa: E402
+from reference_py import config, layers, params, rk3, robust  # noqa: E402
 from reference_py.fmath import F32, F64  # noqa: E402
 
 LIB_HEADER = ROOT / "firmware" / "src" / "nte_constants.h"
@@ -91,6 +91,10 @@ def lib_header() -> str:
         rows.append(pair("NTE_K_CON_" + f.upper(), v, v))
     for f, hi in {**config.CONTACT_POSITIVE_BOUNDS, **config.CONTACT_NONNEGATIVE_BOUNDS}.items():
         rows.append(pair("NTE_K_RANGE_CON_" + f.upper() + "_MAX", hi, hi))
+    # Model III's rupture detector (reference_py/layers.py)
+    for name in ("DRIFT_SIGMA", "THRESHOLD_SIGMA", "HOLDOFF_MM"):
+        v = float(getattr(layers, name))
+        rows.append(pair("NTE_K_LAYER_" + name, v, v))
     rows.append(pair("NTE_K_ROB_COST_HUGE", robust.COST_HUGE, robust.COST_HUGE))
     rows.append(pair("NTE_K_ROB_SURE", 0.99, 0.99))
     rows.append(pair("NTE_K_ROB_LAMBDA_MIN", 1e-7, 1e-7))

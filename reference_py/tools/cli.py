@@ -5,7 +5,7 @@
     nte-ref estimate FILE.csv --model 1|2|3 [--estimator bank|robust] [--preset NAME]
                      [--init-seed K] [--init-factor F] [--precision float64|float32]
                      [--schedule all|rotate] [--profile default|paper] [--presliding-mm MM]
-                     [--tau-fast S] [--tau-slow S] [--relax-branches 1|2] [--no-relaxation]
+                     [--tau-fast S] [--tau-slow S] [--relax-branches 1|2] [--no-relaxation] [--no-layers]
                      [--no-direction-memory] --out EST.csv [--plot EST.png]
     nte-ref evaluate [--preset NAME] [--model 1|2] [--factor F] [--seeds N] [--precision P]
                      [--profile P] [--schedule S] [--estimator E] [--cycles C]
@@ -204,6 +204,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="no relaxation branches (default: on)")
     m3.add_argument("--no-direction-memory", action="store_true",
                     help="tanh(v/eps) instead of the direction state (default: on)")
+    m3.add_argument("--no-layers", action="store_true",
+                    help="no layer index (default: on: a rupture detector on the "
+                         "innovations; adds the column layer)")
     add_unit_arguments(e)
     e.add_argument("--contact", choices=("on", "off"), default=None,
                    help="the surface and tare front end (default: on for --model 3 unless "
@@ -389,6 +392,8 @@ def model3_overrides(a: argparse.Namespace, fc: "FileConfig | None" = None) -> d
         out["relaxation"] = False
     if a.no_direction_memory:
         out["direction_memory"] = False
+    if getattr(a, "no_layers", False):
+        out["layers"] = False
     if getattr(a, "predict_only", False):
         out["predict_only"] = True
     return out

@@ -33,6 +33,7 @@ class EstimateRun:
     # the contact front end, when on: surface_mm (stage mm, NaN until found), tare_n (N), state
     contact: tuple[Array, Array, Array] | None = None
     config: EstimatorConfig | None = None   # the configuration the estimator ran with
+    layer: Array | None = None  # Model III's layer index (layers on), per sample
 
 
 def make_config(preset: Preset, model: int, profile: str, schedule: str,
@@ -79,6 +80,7 @@ def run_estimate(trial: Trial, preset: Preset, model: int, estimator: str = "ban
     conf = np.zeros(n, dtype=R.dtype) if estimator == "robust" else None
     cont = ((np.zeros(n, dtype=R.dtype), np.zeros(n, dtype=R.dtype), np.zeros(n, dtype=np.uint32))
             if cfg.contact.enabled else None)
+    layer = np.zeros(n, dtype=np.uint32) if (model == 3 and cfg.layers) else None
     it = range(n)
     if progress:
         from tqdm import tqdm
@@ -94,8 +96,10 @@ def run_estimate(trial: Trial, preset: Preset, model: int, estimator: str = "ban
             conf[k] = est.confidence[0]  # type: ignore[union-attr]
         if cont is not None:
             cont[0][k], cont[1][k], cont[2][k] = o.surface_mm[0], o.tare_n[0], o.contact[0]
+        if layer is not None:
+            layer[k] = o.layer[0]
     return EstimateRun(precision, model, trial.t_s, trial.depth_mm, trial.force_n, fh, z, inn, st,
-                       pars, sds, names, conf, cont, cfg)
+                       pars, sds, names, conf, cont, cfg, layer)
 
 
 #: the estimator configuration files' schema (the discrepancy workflow writes the same one;
@@ -152,6 +156,8 @@ def estimate_csv_lines(run: EstimateRun) -> list[str]:
         header.append("confidence")
     if run.contact is not None:
         header += ["surface_mm", "tare_n", "contact"]
+    if run.layer is not None:
+        header.append("layer")
     lines = [",".join(header)]
     p = run.precision
     for k in range(len(run.t_s)):
@@ -165,6 +171,8 @@ def estimate_csv_lines(run: EstimateRun) -> list[str]:
         if run.contact is not None:
             cells += [format_real(run.contact[0][k], p), format_real(run.contact[1][k], p),
                       "%d" % int(run.contact[2][k])]
+        if run.layer is not None:
+            cells.append("%d" % int(run.layer[k]))
         lines.append(",".join(cells))
     return lines
 

@@ -124,12 +124,12 @@ static const signal_t heartbeat_signals[] = {
 
 MSG(contact)
 SIG(contact, crc) SIG(contact, counter) SIG(contact, contact_state) SIG(contact, surface_valid)
-SIG(contact, active_model) SIG(contact, surface) SIG(contact, tare)
+SIG(contact, active_model) SIG(contact, surface) SIG(contact, tare) SIG(contact, layer)
 static const signal_t contact_signals[] = {
     ENTRY(contact, crc, "Crc"), ENTRY(contact, counter, "Counter"),
     ENTRY(contact, contact_state, "ContactState"), ENTRY(contact, surface_valid, "SurfaceValid"),
     ENTRY(contact, active_model, "ActiveModel"), ENTRY(contact, surface, "Surface"),
-    ENTRY(contact, tare, "Tare")};
+    ENTRY(contact, tare, "Tare"), ENTRY(contact, layer, "Layer")};
 
 #define COUNT(a) (sizeof(a) / sizeof((a)[0]))
 static const message_t messages[] = {

@@ -400,26 +400,30 @@ static void test_contact(void** state)
     for (i = 0; i < sizeof surfaces / sizeof surfaces[0]; ++i) {
         for (j = 0; j < sizeof tares / sizeof tares[0]; ++j) {
             nte_frames_contact_t in = {(uint8_t)(j % 2u), (i % 3u) != 0u, 2u, surfaces[i],
-                                       tares[j]};
+                                       tares[j], (uint8_t)((i + j) % (NTE_FRAMES_LAYER_MAX + 1u))};
             assert_int_equal(nte_frames_encode_contact(&in, &l.tx, l.frame), nte_frames_ok);
             assert_int_equal(nte_frames_decode_contact(&l.rx, l.frame, 8, &out, NULL, NULL),
                              nte_frames_ok);
             assert_int_equal(out.contact_state, in.contact_state);
             assert_int_equal(out.surface_valid, in.surface_valid);
             assert_int_equal(out.active_model, 2u);
+            assert_int_equal(out.layer, in.layer);
             /* half a 1 um step, half a 0.1 mN step, plus float rounding */
             assert_near(out.surface_mm, in.surface_valid ? in.surface_mm : 0.0f, 5e-4 + 5e-5);
             assert_near(out.tare_n, in.tare_n, 5e-5 + 5e-6);
         }
     }
     {
-        nte_frames_contact_t far = {0u, true, 2u, 500.01f, 0.0f};
-        nte_frames_contact_t nan_surface = {0u, true, 2u, NAN, 0.0f};
-        nte_frames_contact_t nan_ignored = {0u, false, 2u, NAN, 0.01f};
-        nte_frames_contact_t nan_tare = {0u, false, 2u, 0.0f, NAN};
-        nte_frames_contact_t big_tare = {1u, false, 2u, 0.0f, 80.0f};
-        nte_frames_contact_t bad_state = {2u, false, 2u, 0.0f, 0.0f};
-        nte_frames_contact_t bad_model = {0u, false, 3u, 0.0f, 0.0f};
+        nte_frames_contact_t far = {0u, true, 2u, 500.01f, 0.0f, 0u};
+        nte_frames_contact_t nan_surface = {0u, true, 2u, NAN, 0.0f, 0u};
+        nte_frames_contact_t nan_ignored = {0u, false, 2u, NAN, 0.01f, 0u};
+        nte_frames_contact_t nan_tare = {0u, false, 2u, 0.0f, NAN, 0u};
+        nte_frames_contact_t big_tare = {1u, false, 2u, 0.0f, 80.0f, 0u};
+        nte_frames_contact_t bad_state = {2u, false, 2u, 0.0f, 0.0f, 0u};
+        nte_frames_contact_t bad_model = {0u, false, 3u, 0.0f, 0.0f, 0u};
+        nte_frames_contact_t bad_layer = {0u, false, 2u, 0.0f, 0.0f, NTE_FRAMES_LAYER_MAX + 1u};
+        assert_int_equal(nte_frames_encode_contact(&bad_layer, &l.tx, l.frame),
+                         nte_frames_err_range);
         assert_int_equal(nte_frames_encode_contact(&far, &l.tx, l.frame), nte_frames_err_range);
         assert_int_equal(nte_frames_encode_contact(&nan_surface, &l.tx, l.frame),
                          nte_frames_err_not_finite);

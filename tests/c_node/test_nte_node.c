@@ -1051,6 +1051,7 @@ static void test_model3_params_contact(void** state)
                 assert_true(fabsf(c.surface_mm) <= 0.0f);
             }
             assert_true(fabsf(c.tare_n - (float)o->tare_n) <= 0.00005f + 1e-6f);
+            assert_int_equal(c.layer, o->layer);
         } else {
             assert_int_equal(fr->id, BASE + NTE_FRAMES_OFFSET_HEARTBEAT);
         }
@@ -1067,7 +1068,7 @@ static void test_model3_params_contact(void** state)
             if (!expect) {
                 const nte_output_t* a = &ro[last];
                 const nte_output_t* c = &ro[i];
-                expect = (a->contact != c->contact) ||
+                expect = (a->contact != c->contact) || (a->layer != c->layer) ||
                          (isnan(a->surface_mm) != isnan(c->surface_mm)) ||
                          (!isnan(c->surface_mm) && !isnan(a->surface_mm) &&
                           (((float)a->surface_mm < (float)c->surface_mm) ||

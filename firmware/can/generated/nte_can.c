@@ -1935,6 +1935,7 @@ int nte_can_contact_pack(
     dst_p[4] |= pack_left_shift_u32(tare, 4u, 0xf0u);
     dst_p[5] |= pack_right_shift_u32(tare, 4u, 0xffu);
     dst_p[6] |= pack_right_shift_u32(tare, 12u, 0xffu);
+    dst_p[7] |= pack_left_shift_u8(src_p->layer, 0u, 0x07u);
 
     return (8);
 }
@@ -1974,6 +1975,7 @@ int nte_can_contact_unpack(
     }
 
     dst_p->tare = (int32_t)tare;
+    dst_p->layer = unpack_right_shift_u8(src_p[7], 0u, 0x07u);
 
     return (0);
 }
@@ -2127,4 +2129,24 @@ bool nte_can_contact_tare_is_in_range(int32_t value)
 bool nte_can_contact_tare_is_in_phys_range(float value)
 {
     return ((value >= -50.0f) && (value <= 50.0f));
+}
+
+uint8_t nte_can_contact_layer_encode(float value)
+{
+    return (uint8_t)(cantools_unsigned_from_double(roundf(value)));
+}
+
+float nte_can_contact_layer_decode(uint8_t value)
+{
+    return ((float)value);
+}
+
+bool nte_can_contact_layer_is_in_range(uint8_t value)
+{
+    return (value <= 7u);
+}
+
+bool nte_can_contact_layer_is_in_phys_range(float value)
+{
+    return ((value >= 0.0f) && (value <= 7.0f));
 }

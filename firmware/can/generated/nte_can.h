@@ -190,6 +190,7 @@ extern "C" {
 #define NTE_CAN_CONTACT_ACTIVE_MODEL_NAME "ActiveModel"
 #define NTE_CAN_CONTACT_SURFACE_NAME "Surface"
 #define NTE_CAN_CONTACT_TARE_NAME "Tare"
+#define NTE_CAN_CONTACT_LAYER_NAME "Layer"
 
 /**
  * Signals in message Depth.
@@ -691,7 +692,7 @@ struct nte_can_heartbeat_t {
 /**
  * Signals in message Contact.
  *
- * Model III's contact front end (sent only while it runs, i.e. in Model III): after an estimator step whose contact state or surface differs from the last Contact frame's, and otherwise every 100 ms of sensor time (the force sample's SensorTime, so a replay is deterministic). Id offset 0x13.
+ * Model III's contact front end (sent only while it runs, i.e. in Model III): after an estimator step whose contact state, surface or layer differs from the last Contact frame's, and otherwise every 100 ms of sensor time (the force sample's SensorTime, so a replay is deterministic). Id offset 0x13.
  *
  * All signal values are as on the CAN bus.
  */
@@ -754,6 +755,15 @@ struct nte_can_contact_t {
      * Offset: 0
      */
     int32_t tare;
+
+    /**
+     * Model III's layer index (nte.h THE LAYER INDEX): 0 from the surface to the first rupture found, +1 at each rupture (at most NTE_LAYER_MAX - 1 = 3), 0 again out of the tissue; a change is sent at once.
+     *
+     * Range: 0..7 (0..7 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    uint8_t layer;
 };
 
 /**
@@ -3494,6 +3504,46 @@ bool nte_can_contact_tare_is_in_range(int32_t value);
  * @return true if in range, false otherwise.
  */
 bool nte_can_contact_tare_is_in_phys_range(float value);
+
+/**
+ * Encode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to encode.
+ *
+ * @return Encoded signal.
+ */
+uint8_t nte_can_contact_layer_encode(float value);
+
+/**
+ * Decode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to decode.
+ *
+ * @return Decoded signal.
+ */
+float nte_can_contact_layer_decode(uint8_t value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_contact_layer_is_in_range(uint8_t value);
+
+/**
+ * Check that given physical value is in allowed range before encoding.
+ *
+ * Use this BEFORE calling _encode() to avoid silent integer overflow:
+ *   encode(-1.0) on a [0,100] signal wraps to 255 and passes is_in_range().
+ *   is_in_phys_range(-1.0) correctly returns false.
+ *
+ * @param[in] value Physical signal value to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_contact_layer_is_in_phys_range(float value);
 
 
 #ifdef __cplusplus
