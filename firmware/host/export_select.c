@@ -3,6 +3,7 @@
  * depth alone.  Twin: reference_py/tools/export_select.py.
  */
 #include "export_select.h"
+#include "starts.h"
 
 #include <math.h>
 #include <string.h>
@@ -40,24 +41,24 @@ void nte_export_snapshot_values(const nte_export_snapshot_t* s, const double fix
 }
 
 /* The configuration a reader of the exported file builds (nte_run.c main): the exported values
- * as the nominal, rounded once to the working precision; the identified part of f1 computed in
- * double; the strengths as given; predict-only; the known surface. */
-static void reader_config(const nte_config_t* run_cfg, const double params[7], const double g[2],
-                          size_t n_g, double surface_mm, nte_config_t* cfg)
+ * as the nominal (nte_set_nominal, as main does); the strengths as given; predict-only; the
+ * known surface.  Returns -1 when the values are refused (not expected: the run accepted
+ * values of the same form). */
+static int reader_config(const nte_config_t* run_cfg, const double params[7], const double g[2],
+                         size_t n_g, double surface_mm, nte_config_t* cfg)
 {
     *cfg = *run_cfg;
-    for (size_t j = 0U; j < 7U; j++) {
-        cfg->nominal[j] = (nte_real_t)params[j];
+    if (nte_set_nominal(cfg, params) != 0) {
+        return -1;
     }
     for (size_t k = 0U; k < n_g; k++) {
         cfg->nominal[7U + k] = (nte_real_t)g[k];
     }
-    const double kappa = (params[4] < 0.0) ? 1.0 : 0.0;
-    cfg->f1_excess = (nte_real_t)(params[3] - (kappa * (-params[4])));
     cfg->predict_only = true;
     if (cfg->contact.enabled) {
         cfg->contact.surface_mm = (nte_real_t)surface_mm;
     }
+    return 0;
 }
 
 int nte_export_choose(const nte_config_t* run_cfg, const nte_trial_t* tr,
@@ -83,8 +84,8 @@ int nte_export_choose(const nte_config_t* run_cfg, const nte_trial_t* tr,
         size_t n_g = 0U;
         nte_export_snapshot_values(&snaps[c], fixed, model, params, sd, g, g_sd, g_name, &n_g);
         nte_config_t cfg;
-        reader_config(run_cfg, params, g, n_g, surface_mm, &cfg);
-        if (nte_init(scratch, &cfg) != nte_err_ok) {
+        if ((reader_config(run_cfg, params, g, n_g, surface_mm, &cfg) != 0) ||
+            (nte_init(scratch, &cfg) != nte_err_ok)) {
             return -1;
         }
         double sum = 0.0;

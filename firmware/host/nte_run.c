@@ -723,8 +723,9 @@ int main(int argc, char** argv)
     cfg.beta0 = (nte_real_t)values[6];
     /* the seven force-model parameters; Model III's relaxation strengths keep the
      * configuration's nominal values (the starts move only the seven) */
-    for (size_t j = 0U; j < 7U; j++) {
-        cfg.nominal[j] = (nte_real_t)start[j];
+    if (nte_set_nominal(&cfg, start) != 0) {
+        nte_trial_free(&tr);
+        return bad("nominal f1 must exceed -f2 (g(0) = f1 + f2 must be positive)");
     }
     if (have_fc && fc.has_strengths) {
         cfg.nominal[7] = (nte_real_t)fc.g[0];
@@ -741,14 +742,6 @@ int main(int argc, char** argv)
     cfg.relaxation = a.relaxation != 0;
     cfg.layers = a.layers != 0;
     cfg.direction_memory = a.direction_memory != 0;
-    /* the identified part of f1, computed in double as the reference does, rounded once */
-    const double kappa = (start[4] < 0.0) ? 1.0 : 0.0;
-    const double excess = start[3] - (kappa * (-start[4]));
-    if (!(excess > 0.0)) {
-        nte_trial_free(&tr);
-        return bad("nominal f1 must exceed -f2 (g(0) = f1 + f2 must be positive)");
-    }
-    cfg.f1_excess = (nte_real_t)excess;
     cfg.estimator = (a.robust != 0) ? nte_estimator_robust : nte_estimator_bank;
     cfg.contact.enabled = (a.contact == 1);
     cfg.contact.surface_mm = (nte_real_t)a.surface;
