@@ -10,7 +10,9 @@ Reading (:func:`read_table`, :func:`read_trial`)
     ``Trial.columns`` and otherwise ignored.  Every cell must be a decimal number (``1``,
     ``-0.5``, ``2.5e-3``; no hex, no ``_``), finite (``nan``, ``inf`` and overflowing values are
     refused), and ``t_s`` must increase strictly.  A column named in ``sparse`` may have empty
-    cells (no sample on that line; stored as NaN, see ``Trial.present``).  A blank line is an
+    cells (no sample on that line; stored as NaN, see ``Trial.present``); one named in
+    ``nan_ok`` may hold ``nan`` (the estimate file's ``surface_mm`` before a surface is found;
+    stored as NaN).  A blank line is an
     error.  Every refusal is a :class:`CsvError` whose message has one form::
 
         FILE:LINE: column 'NAME': reason        (or FILE:LINE: reason, or FILE: reason)
@@ -39,6 +41,7 @@ OPTIONAL = ("velocity_mm_s",)
 
 _NUMBER = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?")
 _NOT_FINITE = re.compile(r"[+-]?(nan|inf|infinity)", re.IGNORECASE)
+_NAN = re.compile(r"[+-]?nan", re.IGNORECASE)
 
 
 class CsvError(ValueError):
@@ -84,7 +87,8 @@ def parse_cell(name: str, lineno: int, col: str, text: str) -> float:
 
 
 def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
-               sparse: Sequence[str] = (), increasing: str | None = "t_s") -> Table:
+               sparse: Sequence[str] = (), increasing: str | None = "t_s",
+               nan_ok: Sequence[str] = ()) -> Table:
     """Read a numeric CSV by the rules of this module (see the module's docstring)."""
     name = str(path)
     try:
@@ -113,6 +117,7 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
     prev_t = -math.inf
     t_index = -1
     sparse_idx: set[int] = set()
+    nan_idx: set[int] = set()
     try:
         with fh:
             for cells in csv.reader(numbered()):
@@ -131,11 +136,13 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
                                        f"name in the header")
                     t_index = header.index(increasing) if increasing in header else -1
                     sparse_idx = {header.index(c) for c in sparse if c in header}
+                    nan_idx = {header.index(c) for c in nan_ok if c in header}
                     continue
                 if len(cells) != len(header):
                     raise CsvError(f"{name}:{lineno}: expected {len(header)} cells, found "
                                    f"{len(cells)}")
-                row = [math.nan if (i in sparse_idx and cell.strip() == "")
+                row = [math.nan if ((i in sparse_idx and cell.strip() == "")
+                                    or (i in nan_idx and _NAN.fullmatch(cell.strip())))
                        else parse_cell(name, lineno, col, cell)
                        for i, (col, cell) in enumerate(zip(header, cells))]
                 if t_index >= 0:
