@@ -7,6 +7,8 @@
                      [--schedule all|rotate] [--profile default|paper] [--presliding-mm MM]
                      [--tau-fast S] [--tau-slow S] [--relax-branches 1|2] [--no-relaxation] [--no-layers]
                      [--no-direction-memory] --out EST.csv [--plot EST.png]
+    nte-ref plot EST.csv [EST.csv ...] [--label TEXT ...] [--input IN.csv]
+                 [--truth TRUTH.json | --truth-preset NAME] [--title TEXT] --out FIG.png
     nte-ref evaluate [--preset NAME] [--model 1|2] [--factor F] [--seeds N] [--precision P]
                      [--profile P] [--schedule S] [--estimator E] [--cycles C]
                      [--matrix | --robust-matrix]
@@ -234,6 +236,37 @@ def build_parser() -> argparse.ArgumentParser:
                         "their sd, Model III's constants) as an estimator configuration, "
                         "schema nte-estimator-config/1 (default: none)")
 
+    pt = sub.add_parser("plot", help="draw estimate files (nte-ref estimate's or nte-run's) "
+                        "against time and depth, overlaid",
+                        description="Draw one or more estimate files of one insertion (the "
+                                    "reference's or nte-run's): force, prediction and error "
+                                    "against time (dwell shaded, reversals marked) and, with "
+                                    "--input, against depth; every parameter with its +-3 sigma "
+                                    "band against time, the true value as a line with a truth. "
+                                    "Prints the innovation RMS per phase of every file.")
+    pt.add_argument("estimates", nargs="+", metavar="EST.csv",
+                    help="estimate files (t_s, force_hat_n, innovation_n, status, NAME, "
+                         "NAME_sd, ...), one colour each")
+    pt.add_argument("--label", action="append", metavar="TEXT",
+                    help="legend name of each file, once per file in order (default: the "
+                         "model, from the parameter columns)")
+    pt.add_argument("--input", metavar="IN.csv",
+                    help="the insertion the estimates were made from: adds the measured force, "
+                         "the true force (its force_true_n column), the depth panels and the "
+                         "phases from its motion (default: none)")
+    truth = pt.add_mutually_exclusive_group()
+    truth.add_argument("--truth", metavar="TRUTH.json",
+                       help="a phantom's truth (nte-ref phantom's FILE.truth.json: phases, "
+                            "ruptures, the Maxwell shares, the noise) or an estimator "
+                            "configuration (its params as lines) (default: none)")
+    truth.add_argument("--truth-preset", metavar="NAME",
+                       help=f"the true parameters of a simulated record, one of {presets} "
+                            f"(default: none)")
+    pt.add_argument("--title", default="", metavar="TEXT", help="figure title (default: none)")
+    pt.add_argument("--out", required=True, metavar="FIG.png",
+                    help="the figure to write (format from the suffix: .png, .pdf or .svg)")
+    add_unit_arguments(pt)
+
     v = sub.add_parser("evaluate", help="estimation quality over many seeds (printed table)",
                        description="Simulate the quality scenario (LSPB to 50 mm, 1 s dwell, "
                                    "200 Hz, 2 mN noise) for N seeds and print the metrics.")
@@ -375,6 +408,52 @@ def _estimate(a: argparse.Namespace) -> int:
     return 0
 
 
+def _plot(a: argparse.Namespace) -> int:
+    import os
+    from pathlib import Path
+
+    from . import plotting as pl
+
+    if a.label is not None and len(a.label) != len(a.estimates):
+        raise ValueError(f"argument --label: {len(a.label)} label(s) for {len(a.estimates)} "
+                         f"estimate file(s): give one per file, in order, or none")
+    fmt = Path(a.out).suffix.lstrip(".").lower()
+    if fmt not in pl.FORMATS:
+        raise ValueError(f"argument --out: {a.out}: the format is taken from the suffix: "
+                         f"{', '.join('.' + f for f in pl.FORMATS)}")
+    inputs = [*a.estimates, *(p for p in (a.input, a.truth) if p)]
+    for path in inputs:
+        if os.path.exists(path) and os.path.realpath(path) == os.path.realpath(a.out):
+            raise ValueError(f"argument --out: {a.out} is also an input")
+    with Outputs() as outs:
+        out = outs.add(a.out, "--out")
+        labels = a.label or [None] * len(a.estimates)
+        series = [pl.read_estimate(p, lb) for p, lb in zip(a.estimates, labels)]
+        trial = pl.read_input(a.input, units_from(a)) if a.input else None
+        if trial is not None:
+            for s in series:
+                pl.check_same_record(s, trial)
+        truth = pl.read_truth(a.truth) if a.truth else None
+        if a.truth_preset:
+            try:
+                truth = pl.truth_from_preset(a.truth_preset)
+            except (KeyError, ValueError) as exc:
+                raise ValueError(f"argument --truth-preset: {exc}") from None
+        if truth is not None:
+            n, what = ((len(trial.t_s), a.input) if trial is not None
+                       else (len(series[0].t_s), a.estimates[0]))
+            pl.check_truth(truth, n, what)
+        data = pl.FigureData(series, trial, truth)
+        pl.save_figure(pl.build_figure(data, a.title), out)
+        outs.commit()
+    for line in pl.phase_summary(data):
+        print(line)
+    print(f"wrote {a.out} ({len(series)} estimate file(s)"
+          + (f", input {a.input}" if a.input else "")
+          + (f", truth {truth.source}" if truth is not None else "") + ")")
+    return 0
+
+
 def model3_overrides(a: argparse.Namespace, fc: "FileConfig | None" = None) -> dict[str, object]:
     """Model III's configuration fields (and r_n2, predict_only) from the configuration file
     ``fc`` and the estimate flags: the defaults, then the file, then the flags given."""
@@ -470,7 +549,8 @@ def _bench(a: argparse.Namespace) -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    handlers = {"simulate": _simulate, "estimate": _estimate, "evaluate": _evaluate,
+    handlers = {"simulate": _simulate, "estimate": _estimate, "plot": _plot,
+                "evaluate": _evaluate,
                 "bench": _bench, "phantom": phantom.run,
                 "fixedpoint": fixedpoint.run, "plausible": plausible.main_run}
     try:
