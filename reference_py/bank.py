@@ -19,7 +19,7 @@ Everything runs on a batch axis: element b of every array is an independent run.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -51,6 +51,8 @@ STATUS_NAMES = ("init", "rejected", "gated", "filter_reset", "gap", "out_of_tiss
                 "floored", "sign_uncertain")
 STATUS_RUPTURE = 1 << 12        # Model III: a layer's rupture was found at this sample
 #                                 (layers.py; the layer index advanced)
+STATUS_PREDICT_ONLY = 1 << 13   # processed in predict-only mode (cfg.predict_only or
+#                                 set_predict_only): the model alone, force not read
 
 # Counters of rejected samples, by cause
 REJECT_NONFINITE, REJECT_RANGE, REJECT_TIME = 0, 1, 2
@@ -193,6 +195,19 @@ class FilterBank:
             self.gated_run[i] = np.where(mask, 0, self.gated_run[i])
 
     # ------------------------------------------------------------------------------------
+    def set_predict_only(self, on: bool) -> None:
+        """Predict-only mode on or off from the next sample, for every run of the batch (the
+        C library's nte_set_predict_only, nte.h THE PREDICT-ONLY MODE): on, every filter
+        predicts and none updates, the parameters stay as identified so far, the force is not
+        read; off, the filters update again from the state reached.  Nothing else changes here
+        (z, memories, parameters, covariances kept).  Writes cfg.predict_only, so the mode
+        persists across reset()."""
+        self.cfg = replace(self.cfg, predict_only=bool(on))
+
+    @property
+    def predict_only(self) -> bool:
+        return bool(self.cfg.predict_only)
+
     def step(self, t_us: Array, depth: Array, velocity: Array, force: Array) -> StepOutput:
         """One sample: time in integer microseconds, depth mm, velocity mm/s, force N."""
         R, c = self.R, self.c
@@ -200,6 +215,12 @@ class FilterBank:
         l_in = np.asarray(depth, dtype=R.dtype)
         v = np.asarray(velocity, dtype=R.dtype)
         y = np.asarray(force, dtype=R.dtype)
+        po = self.cfg.predict_only
+        if po:
+            # the force is not read (a broken sensor's value rejects nothing)
+            y = R.full(self.batch, 0.0)
+        if self.contact is not None:
+            self.contact.predict_only = po
         with np.errstate(all="ignore"):
             finite = np.isfinite(l_in) & np.isfinite(v) & np.isfinite(y)
             if self.contact is None:
@@ -227,6 +248,8 @@ class FilterBank:
             self.fed = (l_in, y)   # what the bank was given (the robust estimator records it)
         status = np.where(valid, out.status, np.uint32(STATUS_REJECTED))
         status = status | np.where(first, np.uint32(STATUS_INIT), np.uint32(0))
+        if po:
+            status = status | np.uint32(STATUS_PREDICT_ONLY)
         out = StepOutput(*(np.where(valid, new, old) if name != "status" else status
                            for name, new, old in zip(StepOutput.__dataclass_fields__,
                                                      _fields(out), _fields(self.last))))

@@ -40,6 +40,10 @@ and the force back near the tare (|e| <= thr).  The learning then starts again f
 A known surface (surface_mm finite, e.g. a robot registered to the tissue) replaces the
 detection: CONTACT while x > surface_mm, AIR otherwise; the tare is learned in the air as above.
 
+In predict-only mode (the bank's predict_only: the force is not read) nothing here looks at the
+force: the tare and the noise are held, no contact is looked for (unless the surface is known),
+and a contact ends when the stage is back at the surface, whatever the force.
+
 Limits: a record must start in the air (what is learned first is the tare), contact is looked
 for only while the stage moves inward, and a record whose stage never returns to the surface
 stays in contact.
@@ -75,6 +79,8 @@ class ContactFrontEnd:
         self.r = R.c(r_n2)
         self.v_still = R.c(v_still_mm_s)
         self.surface_cfg = R.c(cfg.surface_mm)
+        #: predict-only mode (set by the bank before each step): the force is not looked at
+        self.predict_only = False
         self.reset()
 
     def reset(self) -> None:
@@ -111,12 +117,15 @@ class ContactFrontEnd:
         thr = self._threshold(sigma)
         e = f - self.tare
         air = mask & ~self.contact
+        po = bool(self.predict_only)
         if self.known:
             below = x > self.surface_cfg
             enter = air & below
-            learn = air & ~below
+            learn = air & ~below & (not po)
             leave = mask & self.contact & ~below
         else:
+            # predict-only: nothing of the air branch runs (no learning, no detection)
+            air = air & (not po)
             inward = v > self.v_still
             armed = self.n >= cfg.learn_samples
             # the onset segment: inward samples above the tare, up to this one
@@ -142,7 +151,7 @@ class ContactFrontEnd:
             above = armed & inward & (e > thr)
             self.run = np.where(air, np.where(above, self.run + 1, 0), self.run)
             enter = air & (self.run >= cfg.run_samples)
-            leave = mask & self.contact & ~(x > self.surface) & (np.abs(e) <= thr)
+            leave = mask & self.contact & ~(x > self.surface) & ((np.abs(e) <= thr) | po)
         # learn the tare and the noise
         n_new = np.minimum(self.n + 1, cfg.tare_samples)
         self.n = np.where(learn, n_new, self.n)

@@ -93,6 +93,15 @@ class RobustEstimator:
         self.names = MODEL_PARAMS[cfg.model]
         self.reset_record()
 
+    def set_predict_only(self, on: bool) -> None:
+        """Predict-only mode on or off from the next sample (the bank's; nte.h
+        nte_set_predict_only)."""
+        self.bank.set_predict_only(on)
+
+    @property
+    def predict_only(self) -> bool:
+        return self.bank.predict_only
+
     def reset(self) -> None:
         """Back to the configured nominal: the bank's reset plus an empty record."""
         self.bank.reset()
@@ -110,6 +119,8 @@ class RobustEstimator:
         self.prev_theta = self._theta_list(self.bank.th)  # start (b) of the next refinement
         self.has_refined = np.zeros(B, dtype=bool)
         self.converged = np.zeros(B, dtype=bool)
+        # predict-only was on during this insertion: not recorded further, not refined
+        self.tainted = np.zeros(B, dtype=bool)
         self.confidence = R.full(B, 0.0)
         # the latest sample at the surface: the anchor (z = 0) of the next insertion's record
         self.last_surface = (np.zeros(B, dtype=np.int64), R.full(B, 0.0), R.full(B, 0.0),
@@ -120,18 +131,25 @@ class RobustEstimator:
         R = self.R
         out = self.bank.step(t_us, depth, velocity, force)
         valid = (out.status & np.uint32(STATUS_REJECTED)) == 0
+        po = self.bank.predict_only
         if self.bank.contact is not None:
             # the record holds what the bank was given: tissue depth, tare-free force
             depth, force = self.bank.fed
+        elif po:
+            force = R.full(self.batch, 0.0)   # predict-only: the force is not read
         l = R.arr(depth)
         at_surface = valid & ~(l > R.c(0.0))
         entering = valid & (l > R.c(0.0)) & ~self.inside
         leaving = at_surface & self.inside
         # a new insertion starts from the last surface sample (z = 0 there)
         self._restart_buffer(entering, t_us)
-        self._record(valid & (self.inside | entering), t_us, depth, velocity, force)
+        # an insertion during which predict-only was on is neither recorded further nor
+        # refined (nte.h THE PREDICT-ONLY MODE)
+        self.tainted = np.where(entering, False, self.tainted) | po
+        self._record(valid & (self.inside | entering) & ~self.tainted, t_us, depth, velocity,
+                     force)
         self.inside = (self.inside | entering) & ~at_surface
-        refined = leaving & (self.count >= self.rcfg.min_entries)
+        refined = leaving & ~self.tainted & (self.count >= self.rcfg.min_entries)
         if np.any(refined):
             with np.errstate(all="ignore"):   # trial steps may overflow; they are rejected
                 self._refine(refined)

@@ -178,6 +178,35 @@
  *   tissue the index returns to 0.  Measured on held-out phantom records by
  *   tests/python/test_layers.py (README).  It does not change the estimate.  Cost per
  *   sample: 1 sqrt, 1 division, 3 flops; memory: nte_layers_t in the instance.
+ *
+ * THE PREDICT-ONLY MODE (sensorless prediction; cfg.predict_only, nte_set_predict_only)
+ *   For a force sensor that fails (or is taken away) mid-insertion: the estimate goes on from
+ *   the model alone with the parameters identified so far.  In the mode, per sample: every
+ *   filter of the bank predicts and none updates (no Joseph update, no gate, innovation_n and
+ *   nis 0); the parameters (every u, hence every identified value nte_get_params reports)
+ *   stay where the last update left them; z and Model III's direction state and relaxation
+ *   memories propagate with the depth and time as usual; the covariances keep their
+ *   prediction F P F^T + Q (their uncertainty grows while nothing is measured, so the
+ *   filters re-converge at once when the mode ends).  Which parameters drive the prediction:
+ *   the bank's one shared model, into which each filter writes its own subset (Table I) at
+ *   its update -- so after a switch every parameter keeps the value of the filter that owns
+ *   it, as published by the last sample; z is filter 1's prediction (guarded, like every
+ *   prior: out of range it restarts at its steady state).  The published force_hat_n is that
+ *   model's output; status carries NTE_STATUS_PREDICT_ONLY.
+ *   sample.force_n is not read in the mode (taken as 0: a NaN or out-of-range force from a
+ *   broken sensor does not reject the sample; the first sample's innovation_n, y - force_hat,
+ *   is then -force_hat).  The contact front end (cfg.contact) does not look at the force
+ *   either: the tare and the noise are held (no learning), no new contact is looked for
+ *   unless the surface is known (cfg.contact.surface_mm: contact while the stage is beyond
+ *   it), and a contact ends when the stage is back at the surface (the force condition is
+ *   dropped).  Without a known surface a predict-only needle that is in the air stays there
+ *   (force 0): the surface cannot be found without a force.  The robust estimator records
+ *   no sample of an insertion during which the mode was on at any time, and does not refine
+ *   at its end (its record would be incomplete); the next insertion is recorded again.
+ *   Switching off at a sample makes that sample an ordinary update step from the predicted
+ *   state (the gate may refuse the first innovations if the model drifted; it reopens after
+ *   gate_reopen_after of them).  Cost in the mode: the bank's predictions without the
+ *   updates, less than a normal step.
  */
 #ifndef NTE_H
 #define NTE_H
@@ -318,6 +347,13 @@ typedef enum nte_err_t {
 #define NTE_STATUS_RUPTURE (1U << 12U) /**< Model III: a layer's rupture was found at this
                                            sample (nte_output_t.layer advanced; THE LAYER
                                            INDEX below) */
+#define NTE_STATUS_PREDICT_ONLY (1U << 13U) /**< the sample was processed in predict-only
+                                                mode (cfg.predict_only or
+                                                nte_set_predict_only): the published force
+                                                is the model's alone, no parameter moved,
+                                                sample.force_n was not read (THE
+                                                PREDICT-ONLY MODE above); set on rejected
+                                                samples too while the mode is on */
 
 /* Causes of a rejected sample (same values as reference_py/bank.py REJECT_*). */
 #define NTE_REJECT_NONFINITE 0 /**< depth, velocity or force NaN or infinite */
@@ -409,13 +445,14 @@ typedef struct nte_config_t {
     int32_t substeps;           /**< [1] RK3 sub-steps per sample, 1..16 (cost linear) */
     int32_t gate_reopen_after;  /**< [10] after this many gated updates accept one, 1..1000 */
     bool sign_inflation;        /**< [true] inflate R where the smooth sign may be wrong */
-    bool predict_only;          /**< [false] the model alone (sensorless prediction, the
-                                     paper's atlas): every filter predicts, none updates,
-                                     z and the memories propagate, the parameters stay at
-                                     nominal and the force input is ignored (give 0);
-                                     innovation_n is 0.  Bank only (the robust
-                                     estimator's refinement would move the parameters).
-                                     Sits in sign_inflation's padding: no size change */
+    bool predict_only;          /**< [false] start in predict-only mode: the model alone
+                                     (sensorless prediction, the paper's atlas) from the
+                                     nominal values; every filter predicts, none updates,
+                                     z and the memories propagate and sample.force_n is
+                                     not read (THE PREDICT-ONLY MODE above; switch it at
+                                     run time with nte_set_predict_only, which writes this
+                                     field).  Sits in sign_inflation's padding: no size
+                                     change */
     nte_real_t eps_mm_s;        /**< [0.5] smooth-sign width, s(v) = tanh(v/eps), mm/s, > 0 */
     nte_real_t beta0;           /**< [0.0255] Model I's fixed beta, > 0 (Model II ignores it) */
     nte_real_t r_n2;            /**< [4e-6] measurement noise variance, N^2, > 0 */
@@ -532,6 +569,8 @@ typedef struct nte_robust_t {
     bool inside;            /**< needle in the tissue */
     bool has_refined;
     bool converged;
+    bool tainted;           /**< predict-only mode was on during this insertion: not
+                                 recorded, no refinement at its end */
     nte_real_t confidence;
     nte_real_t prev_theta[NTE_PARAM_COUNT]; /**< start (b) of the next refinement */
     /* Levenberg-Marquardt workspace: J^T J and J^T r at the current and the trial point */
@@ -620,6 +659,23 @@ nte_err_t nte_reset(nte_t* self);
  * the call at the sample that ends an insertion.  Returns nte_err_ok or nte_err_null_argument.
  */
 nte_err_t nte_step(nte_t* self, const nte_sample_t* sample, nte_output_t* out);
+
+/**
+ * Switch predict-only mode on (true) or off (false) at run time, between two nte_step calls
+ * (THE PREDICT-ONLY MODE above): on, the next samples are predicted by the model alone with
+ * the parameters identified so far and sample.force_n is not read; off, the filters update
+ * again from the state reached.  Nothing else changes at the call: z, the memories, the
+ * parameters and the covariances are kept, the time line carries on.  Writes
+ * self->cfg.predict_only, so the mode persists across nte_reset.  Cost: O(1).  Returns
+ * nte_err_ok or nte_err_null_argument.  reference_py FilterBank.set_predict_only (and
+ * RobustEstimator.set_predict_only) is its twin: a switch at the same sample gives the same
+ * bits.
+ */
+nte_err_t nte_set_predict_only(nte_t* self, bool on);
+
+/** Whether predict-only mode is on (cfg.predict_only or the last nte_set_predict_only);
+ *  false for NULL.  Cost: O(1). */
+bool nte_predict_only(const nte_t* self);
 
 /**
  * The identified parameters (Model I: sigma0, sigma1, sigma2, f1, f2, alpha; Model II: sigma0,

@@ -1,6 +1,6 @@
 /*
  * The public API of nte.h: nte_init, nte_reset, nte_step (sample validation and dispatch to
- * the estimator), nte_get_params, nte_param_name.  The reference composes the same way:
+ * the estimator), nte_set_predict_only, nte_predict_only, nte_get_params, nte_param_name.  The reference composes the same way:
  * FilterBank.step validates the sample, passes it through the contact front end when it is
  * on (nte_contact.c: stage -> tissue depth, force -> force - tare) and advances the bank
  * (nte_bank.c), then, in Model III, the layer index (nte_layers.c); RobustEstimator.step
@@ -81,7 +81,8 @@ nte_err_t nte_step(nte_t* self, const nte_sample_t* sample, nte_output_t* out)
     const nte_config_t* cfg = &self->cfg;
     const nte_real_t l_in = sample->depth_mm;
     const nte_real_t v = sample->velocity_mm_s;
-    const nte_real_t y = sample->force_n;
+    /* predict-only: the force is not read (a broken sensor's value rejects nothing) */
+    const nte_real_t y = cfg->predict_only ? NTE_C(0.0) : sample->force_n;
     const bool finite = nte_isfinite(l_in) && nte_isfinite(v) && nte_isfinite(y);
     /* with the contact front end the depth is the stage position: its origin is arbitrary and
      * the air gap is no error, so it is accepted within +-depth_max_mm */
@@ -89,6 +90,7 @@ nte_err_t nte_step(nte_t* self, const nte_sample_t* sample, nte_output_t* out)
     const bool in_range = (l_in >= l_min) && (l_in <= cfg->depth_max_mm) &&
                           (nte_abs(v) <= cfg->speed_max_mm_s) && (nte_abs(y) <= cfg->force_max_n);
     nte_sample_t fed = *sample; /* what the bank (and the robust estimator) is given */
+    fed.force_n = y;
     const bool later = (!self->initialised) || (sample->t_us > self->t_prev_us);
     const bool valid = finite && in_range && later;
     if (!finite) {
@@ -122,6 +124,9 @@ nte_err_t nte_step(nte_t* self, const nte_sample_t* sample, nte_output_t* out)
     if (!valid) {
         self->last.status = NTE_STATUS_REJECTED;
     }
+    if (cfg->predict_only) {
+        self->last.status |= NTE_STATUS_PREDICT_ONLY;
+    }
     publish_contact(self);
 #if NTE_ROBUST_BUFFER_LEN > 0
     if (cfg->estimator == nte_estimator_robust) {
@@ -134,6 +139,20 @@ nte_err_t nte_step(nte_t* self, const nte_sample_t* sample, nte_output_t* out)
         *out = self->last;
     }
     return nte_err_ok;
+}
+
+nte_err_t nte_set_predict_only(nte_t* self, const bool on)
+{
+    if (self == NULL) {
+        return nte_err_null_argument;
+    }
+    self->cfg.predict_only = on;
+    return nte_err_ok;
+}
+
+bool nte_predict_only(const nte_t* self)
+{
+    return (self != NULL) && self->cfg.predict_only;
 }
 
 size_t nte_get_params(const nte_t* self, nte_param_estimate_t* out, const size_t capacity)

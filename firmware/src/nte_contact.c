@@ -67,16 +67,18 @@ void nte_contact_step(nte_t* self, const nte_real_t x, const nte_real_t v, const
     const nte_real_t e = f - c->tare;
     const bool air = !c->in_contact;
     const bool known = nte_isfinite(cc->surface_mm);
+    /* predict-only: the force is not looked at (nte.h THE PREDICT-ONLY MODE) */
+    const bool po = self->cfg.predict_only;
     bool enter = false;
     bool learn = false;
     bool leave = false;
     if (known) {
         const bool below = x > cc->surface_mm;
         enter = air && below;
-        learn = air && !below;
+        learn = air && !below && !po;
         leave = c->in_contact && !below;
     } else {
-        if (air) {
+        if (air && !po) {
             const bool inward = v > self->cfg.v_still_mm_s;
             const bool armed = c->n >= cc->learn_samples;
             /* the onset segment: inward samples above the tare, up to this one */
@@ -107,7 +109,7 @@ void nte_contact_step(nte_t* self, const nte_real_t x, const nte_real_t v, const
             c->run = above ? (c->run + 1) : 0;
             enter = c->run >= cc->run_samples;
         }
-        leave = c->in_contact && !(x > c->surface) && (nte_abs(e) <= thr);
+        leave = c->in_contact && !(x > c->surface) && (po || (nte_abs(e) <= thr));
     }
     if (learn) {
         /* a plain mean of the first tare_samples samples, then an exponential average */

@@ -71,6 +71,7 @@ void nte_robust_start(nte_t* self)
     rb->inside = false;
     rb->has_refined = false;
     rb->converged = false;
+    rb->tainted = false;
     rb->confidence = NTE_C(0.0);
     /* the anchor of a first insertion that starts in the tissue: t = 0 and zeros */
     rb->anchor_t_us = 0;
@@ -326,12 +327,17 @@ uint32_t nte_robust_step(nte_t* self, const nte_sample_t* sample, const bool val
     const bool leaving = at_surface && rb->inside;
     if (entering) {
         restart_buffer(rb);
+        rb->tainted = false;
     }
-    if (valid && (rb->inside || entering)) {
+    /* an insertion during which predict-only was on is neither recorded further nor refined
+     * (nte.h THE PREDICT-ONLY MODE) */
+    rb->tainted = rb->tainted || self->cfg.predict_only;
+    if (valid && (rb->inside || entering) && !rb->tainted) {
         record(rb, (uint32_t)self->cfg.robust.buffer_len, sample);
     }
     rb->inside = (rb->inside || entering) && !at_surface;
-    const bool refined = leaving && (rb->count >= (uint32_t)self->cfg.robust.min_entries);
+    const bool refined = leaving && !rb->tainted &&
+                         (rb->count >= (uint32_t)self->cfg.robust.min_entries);
     if (refined) {
         refine(self);
     }
