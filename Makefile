@@ -87,3 +87,9 @@ test: venv build board products clang
 
 clean:
 	rm -rf build out
+
+# the README's figures (reference_py/figures/*.png) from the commands in
+# reference_py/figures/make_figures.sh (about a minute)
+.PHONY: figures
+figures: venv
+	reference_py/figures/make_figures.sh
