@@ -45,13 +45,17 @@ def c_est(sim):
 @pytest.fixture(scope="module")
 def phantom(tmp_path_factory):
     """A small phantom record (skin-on-muscle, 50 Hz, 12 mm stroke, 1 s dwell), its truth and a
-    Model III estimate (with the contact front end)."""
+    Model III estimate (with the contact front end; estimate --plot draws it too)."""
     d = tmp_path_factory.mktemp("plot_phantom")
     assert main(["phantom", "skin-on-muscle", "--seed", "3", "--rate", "50", "--stroke", "12",
                  "--dwell", "1", "--out", str(d / "rec.csv")]) == 0
     assert main(["estimate", str(d / "rec.csv"), "--model", "3", "--out",
-                 str(d / "m3.csv")]) == 0
+                 str(d / "m3.csv"), "--plot", str(d / "m3.png")]) == 0
     return d
+
+
+def test_estimate_plot_draws_model3_with_the_front_end(phantom):
+    assert (phantom / "m3.png").stat().st_size > 20000
 
 
 @pytest.fixture
@@ -223,6 +227,29 @@ def test_phantom_truth(phantom, tmp_path, drawn, capsys):
     assert out[0].startswith("Model III: innovation RMS / noise: insertion ")
     assert ", dwell " in out[0] and ", retraction " in out[0]
     assert out[1] == "noise: 12 mN (the truth's)"
+
+
+def test_nte_run_model3_surface_nan(phantom, tmp_path, drawn):
+    """nte-run's Model III file (surface_mm is nan until the surface is found) beside the
+    reference's: both read, both predictions on the measured force's scale."""
+    if not NTE_RUN.exists():
+        pytest.skip(f"{NTE_RUN} missing: build the firmware first (cmake --build build/host)")
+    c3 = tmp_path / "c3.csv"
+    r = subprocess.run([str(NTE_RUN), str(phantom / "rec.csv"), "--model", "3", "--out",
+                        str(c3)], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    assert "nan" in c3.read_text().splitlines()[1]
+    assert main(["plot", str(c3), str(phantom / "m3.csv"), "--label", "C", "--label", "ref",
+                 "--input", str(phantom / "rec.csv"), "--truth",
+                 str(phantom / "rec.truth.json"), "--out", str(tmp_path / "c3.png")]) == 0
+    (fig,) = drawn
+    ft = _axes(fig)["force_time"]
+    assert [ln.get_label() for ln in _series(ft)] == \
+        ["measured", "true force", "C prediction", "ref prediction"]
+    assert np.allclose(_by_label(ft, "C prediction").get_ydata(),
+                       _column(c3, "force_hat_n") + _column(c3, "tare_n"), rtol=0, atol=1e-6)
+    _check_time_axis(ft, _column(phantom / "rec.csv", "t_s"))
+    _check_bands(fig, c3, ("sigma0", "g_fast", "g_slow"), 0)
 
 
 def _refused(capsys, args, tmp_path):
