@@ -410,8 +410,8 @@ def build_figure(data: FigureData, title: str = "") -> "Figure":
     time_cols = slice(0, 1) if depth else slice(0, 2)
     ax_ft = fig.add_subplot(gs[0, time_cols], label="force_time")
     ax_et = fig.add_subplot(gs[1, time_cols], label="error_time", sharex=ax_ft)
-    for ax, x_of in ((ax_ft, "time"), (ax_et, "time")):
-        _phase_marks(ax, data, legend=ax is ax_ft)
+    _phase_marks(ax_ft, data, legend=True)
+    _phase_marks(ax_et, data, legend=False)
     _force_panel(ax_ft, data, "time")
     _error_panel(ax_et, data, "time")
     ax_et.set_xlabel("time (s)")
