@@ -219,16 +219,20 @@ nte_frames_err_t nte_frames_encode_force(const nte_frames_force_t* in, nte_e2e_t
     if ((in == NULL) || (e2e == NULL) || (out == NULL)) {
         return nte_frames_err_null;
     }
-    if (!isfinite(in->force_n)) {
+    /* a sample flagged faulty carries no force: a non-finite or out-of-range one is sent 0 */
+    const bool usable = isfinite(in->force_n) &&
+                        nte_frames_within(in->force_n, -NTE_FRAMES_FORCE_MAX_N,
+                                          NTE_FRAMES_FORCE_MAX_N, 0.00005f);
+    if (!in->sensor_fault && !isfinite(in->force_n)) {
         return nte_frames_err_not_finite;
     }
-    if (!nte_frames_within(in->force_n, -NTE_FRAMES_FORCE_MAX_N, NTE_FRAMES_FORCE_MAX_N,
-                           0.00005f)) {
+    if (!in->sensor_fault && !usable) {
         return nte_frames_err_range;
     }
     (void)nte_can_force_init(&m);
-    m.force = nte_can_force_force_encode(in->force_n);
+    m.force = nte_can_force_force_encode(usable ? in->force_n : 0.0f);
     m.sensor_time = in->time_ticks;
+    m.sensor_fault = in->sensor_fault ? 1u : 0u;
     if (!nte_can_force_force_is_in_range(m.force)) {
         return nte_frames_err_range;
     }
@@ -250,8 +254,12 @@ nte_frames_err_t nte_frames_decode_force(nte_e2e_rx_t* e2e, const uint8_t* data,
         return err;
     }
     (void)nte_can_force_unpack(&m, data, length);
+    out->sensor_fault = (m.sensor_fault != 0u);
     if (!nte_can_force_force_is_in_range(m.force)) {
-        return nte_frames_err_range;
+        if (!out->sensor_fault) {
+            return nte_frames_err_range;
+        }
+        m.force = 0; /* flagged faulty: its value is not used, its range not checked */
     }
     out->force_n = nte_can_force_force_decode(m.force);
     out->time_ticks = m.sensor_time;
@@ -260,11 +268,13 @@ nte_frames_err_t nte_frames_decode_force(nte_e2e_rx_t* e2e, const uint8_t* data,
 
 /* ----------------------------------------------------------------------------- command */
 
-static bool nte_frames_command_ok(uint8_t model_sel, uint8_t estimator_sel, uint8_t adapt_cmd)
+static bool nte_frames_command_ok(uint8_t model_sel, uint8_t estimator_sel, uint8_t adapt_cmd,
+                                  uint8_t force_source)
 {
     return (model_sel <= (uint8_t)NTE_FRAMES_MODEL_III) &&
            (estimator_sel <= (uint8_t)NTE_FRAMES_ESTIMATOR_ROBUST) &&
-           (adapt_cmd <= (uint8_t)NTE_FRAMES_ADAPT_RESUME);
+           (adapt_cmd <= (uint8_t)NTE_FRAMES_ADAPT_RESUME) &&
+           (force_source <= (uint8_t)NTE_FRAMES_FORCE_SOURCE_MODEL);
 }
 
 nte_frames_err_t nte_frames_encode_command(const nte_frames_command_t* in, nte_e2e_tx_t* e2e,
@@ -274,7 +284,8 @@ nte_frames_err_t nte_frames_encode_command(const nte_frames_command_t* in, nte_e
     if ((in == NULL) || (e2e == NULL) || (out == NULL)) {
         return nte_frames_err_null;
     }
-    if (!nte_frames_command_ok(in->model_sel, in->estimator_sel, in->adapt_cmd)) {
+    if (!nte_frames_command_ok(in->model_sel, in->estimator_sel, in->adapt_cmd,
+                               in->force_source)) {
         return nte_frames_err_selector;
     }
     (void)nte_can_command_init(&m);
@@ -282,6 +293,7 @@ nte_frames_err_t nte_frames_encode_command(const nte_frames_command_t* in, nte_e
     m.model_sel = in->model_sel;
     m.estimator_sel = in->estimator_sel;
     m.adapt_cmd = in->adapt_cmd;
+    m.force_source = in->force_source;
     (void)nte_can_command_pack(out, &m, NTE_FRAMES_LENGTH);
     return nte_frames_protect(e2e, nte_frames_kind_command, out);
 }
@@ -300,13 +312,14 @@ nte_frames_err_t nte_frames_decode_command(nte_e2e_rx_t* e2e, const uint8_t* dat
         return err;
     }
     (void)nte_can_command_unpack(&m, data, length);
-    if (!nte_frames_command_ok(m.model_sel, m.estimator_sel, m.adapt_cmd)) {
+    if (!nte_frames_command_ok(m.model_sel, m.estimator_sel, m.adapt_cmd, m.force_source)) {
         return nte_frames_err_selector;
     }
     out->reset = (m.reset != 0u);
     out->model_sel = m.model_sel;
     out->estimator_sel = m.estimator_sel;
     out->adapt_cmd = m.adapt_cmd;
+    out->force_source = m.force_source;
     return nte_frames_ok;
 }
 

@@ -118,6 +118,12 @@ enum {
 enum {
     NTE_FRAMES_ADAPT_KEEP = 0, NTE_FRAMES_ADAPT_FREEZE = 1, NTE_FRAMES_ADAPT_RESUME = 2
 };
+/** Command.ForceSource: 1 = identify from the force sensor, 2 = predict from the model alone
+ *  (predict-only). */
+enum {
+    NTE_FRAMES_FORCE_SOURCE_KEEP = 0, NTE_FRAMES_FORCE_SOURCE_SENSOR = 1,
+    NTE_FRAMES_FORCE_SOURCE_MODEL = 2
+};
 /** Parameter indices of the Params frame (nte.h nte_param_id_t order).  Models I and II
  *  publish 0..6 (NTE_FRAMES_PARAM_COUNT_MODEL_II), Model III 0..8 (NTE_FRAMES_PARAM_COUNT). */
 enum {
@@ -140,8 +146,10 @@ typedef struct {
 
 /** Force sample (input). */
 typedef struct {
-    float force_n;         /**< -50 .. 50 N, 0.1 mN resolution. */
+    float force_n;         /**< -50 .. 50 N, 0.1 mN resolution; with sensor_fault any value
+                                (a non-finite or out-of-range one is sent, and decoded, as 0). */
     uint16_t time_ticks;   /**< Same clock as the depth samples. */
+    bool sensor_fault;     /**< The sensor's driver flags the sample bad (SensorFault). */
 } nte_frames_force_t;
 
 /** Command (input). */
@@ -150,6 +158,7 @@ typedef struct {
     uint8_t model_sel;      /**< NTE_FRAMES_MODEL_*. */
     uint8_t estimator_sel;  /**< NTE_FRAMES_ESTIMATOR_*. */
     uint8_t adapt_cmd;      /**< NTE_FRAMES_ADAPT_*. */
+    uint8_t force_source;   /**< NTE_FRAMES_FORCE_SOURCE_*. */
 } nte_frames_command_t;
 
 /** Estimate (output, one per force sample). */
@@ -159,7 +168,8 @@ typedef struct {
                               0.4 mN resolution. */
     float z;             /**< Internal state z; clamped to -8.192..8.1915, 5e-4 resolution. */
     bool in_tissue;      /**< Depth > 0. */
-    bool adapting;       /**< Parameter adaptation running (not frozen). */
+    bool adapting;       /**< Parameter adaptation running (not frozen); false: predict-only,
+                              the force is the model's alone. */
     bool saturated;      /**< Encode: ORed with "a value was clamped"; decode: as received. */
     bool fault;          /**< The estimator rejected its update. */
     bool stale;          /**< No recent depth: the estimate is held, not updated. */

@@ -67,17 +67,19 @@ static const signal_t depth_signals[] = {
 
 MSG(force)
 SIG(force, crc) SIG(force, counter) SIG(force, force) SIG(force, sensor_time)
+SIG(force, sensor_fault)
 static const signal_t force_signals[] = {
     ENTRY(force, crc, "Crc"), ENTRY(force, counter, "Counter"), ENTRY(force, force, "Force"),
-    ENTRY(force, sensor_time, "SensorTime")};
+    ENTRY(force, sensor_time, "SensorTime"), ENTRY(force, sensor_fault, "SensorFault")};
 
 MSG(command)
 SIG(command, crc) SIG(command, counter) SIG(command, reset) SIG(command, model_sel)
-SIG(command, estimator_sel) SIG(command, adapt_cmd)
+SIG(command, estimator_sel) SIG(command, adapt_cmd) SIG(command, force_source)
 static const signal_t command_signals[] = {
     ENTRY(command, crc, "Crc"), ENTRY(command, counter, "Counter"),
     ENTRY(command, reset, "Reset"), ENTRY(command, model_sel, "ModelSel"),
-    ENTRY(command, estimator_sel, "EstimatorSel"), ENTRY(command, adapt_cmd, "AdaptCmd")};
+    ENTRY(command, estimator_sel, "EstimatorSel"), ENTRY(command, adapt_cmd, "AdaptCmd"),
+    ENTRY(command, force_source, "ForceSource")};
 
 MSG(estimate)
 SIG(estimate, crc) SIG(estimate, counter) SIG(estimate, in_tissue) SIG(estimate, adapting)

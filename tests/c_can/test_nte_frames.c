@@ -134,7 +134,7 @@ static void test_decode_range_error(void** state)
 static void test_decode_e2e_errors(void** state)
 {
     link_t l;
-    nte_frames_force_t in = {1.2345f, 100u};
+    nte_frames_force_t in = {1.2345f, 100u, false};
     nte_frames_force_t out;
     nte_e2e_result_t r;
     uint8_t lost;
@@ -174,12 +174,12 @@ static void test_force_ends(void** state)
     static const float forces[] = {-50.0f, -49.9999f, -0.0001f, 0.0f, 0.0001f, 49.9999f, 50.0f};
     link_t l;
     size_t i;
-    nte_frames_force_t over = {50.0001f, 0};
-    nte_frames_force_t under = {-50.0001f, 0};
+    nte_frames_force_t over = {50.0001f, 0, false};
+    nte_frames_force_t under = {-50.0001f, 0, false};
     (void)state;
     link_init(&l, nte_frames_kind_force);
     for (i = 0; i < sizeof forces / sizeof forces[0]; ++i) {
-        nte_frames_force_t in = {forces[i], (uint16_t)(i * 9000u)};
+        nte_frames_force_t in = {forces[i], (uint16_t)(i * 9000u), false};
         nte_frames_force_t out;
         assert_int_equal(nte_frames_encode_force(&in, &l.tx, l.frame), nte_frames_ok);
         assert_int_equal(nte_frames_decode_force(&l.rx, l.frame, 8, &out, NULL, NULL),
@@ -189,6 +189,70 @@ static void test_force_ends(void** state)
     }
     assert_int_equal(nte_frames_encode_force(&over, &l.tx, l.frame), nte_frames_err_range);
     assert_int_equal(nte_frames_encode_force(&under, &l.tx, l.frame), nte_frames_err_range);
+}
+
+/* SensorFault: a flagged sample may carry any force (sent and decoded as 0 when unusable);
+ * an unflagged out-of-range one is still refused; ForceSource 3 is a selector error. */
+static void test_sensor_fault_and_force_source(void** state)
+{
+    link_t l;
+    nte_frames_force_t out;
+    (void)state;
+    link_init(&l, nte_frames_kind_force);
+    const nte_frames_force_t good = {1.5f, 7u, false};
+    const nte_frames_force_t flagged = {2.5f, 8u, true};
+    const nte_frames_force_t broken = {(float)NAN, 9u, true};
+    const nte_frames_force_t over = {80.0f, 10u, true};
+    const nte_frames_force_t over_unflagged = {80.0f, 11u, false};
+    assert_int_equal(nte_frames_encode_force(&good, &l.tx, l.frame), nte_frames_ok);
+    assert_int_equal(l.frame[6], 0u); /* bit 48 clear: the frame of a sender before the signal */
+    assert_int_equal(nte_frames_decode_force(&l.rx, l.frame, 8, &out, NULL, NULL), nte_frames_ok);
+    assert_false(out.sensor_fault);
+    assert_int_equal(nte_frames_encode_force(&flagged, &l.tx, l.frame), nte_frames_ok);
+    assert_int_equal(l.frame[6] & 1u, 1u);
+    assert_int_equal(nte_frames_decode_force(&l.rx, l.frame, 8, &out, NULL, NULL), nte_frames_ok);
+    assert_true(out.sensor_fault);
+    assert_near(out.force_n, 2.5, 1e-6);
+    assert_int_equal(out.time_ticks, 8u);
+    assert_int_equal(nte_frames_encode_force(&broken, &l.tx, l.frame), nte_frames_ok);
+    assert_int_equal(nte_frames_decode_force(&l.rx, l.frame, 8, &out, NULL, NULL), nte_frames_ok);
+    assert_true(out.sensor_fault);
+    assert_true(fabsf(out.force_n) < 1e-9f);
+    assert_int_equal(nte_frames_encode_force(&over, &l.tx, l.frame), nte_frames_ok);
+    assert_int_equal(nte_frames_decode_force(&l.rx, l.frame, 8, &out, NULL, NULL), nte_frames_ok);
+    assert_true(out.sensor_fault);
+    assert_true(fabsf(out.force_n) < 1e-9f);
+    assert_int_equal(nte_frames_encode_force(&over_unflagged, &l.tx, l.frame),
+                     nte_frames_err_range);
+    /* a received raw force beyond the DBC range with SensorFault set is accepted (as 0) */
+    memset(l.frame, 0, 8);
+    l.frame[3] = 0x7Fu; /* Force raw 0x7F000 >> ... = 520192 > 500000 */
+    l.frame[6] = 0x01u;
+    assert_int_equal(nte_e2e_protect(&l.tx, l.frame, 8), nte_e2e_ok);
+    assert_int_equal(nte_frames_decode_force(&l.rx, l.frame, 8, &out, NULL, NULL), nte_frames_ok);
+    assert_true(out.sensor_fault);
+    assert_true(fabsf(out.force_n) < 1e-9f);
+    l.frame[6] = 0x00u;
+    assert_int_equal(nte_e2e_protect(&l.tx, l.frame, 8), nte_e2e_ok);
+    assert_int_equal(nte_frames_decode_force(&l.rx, l.frame, 8, &out, NULL, NULL),
+                     nte_frames_err_range);
+    {
+        link_t c;
+        const nte_frames_command_t bad = {false, 0u, 0u, 0u, 3u};
+        nte_frames_command_t co;
+        link_init(&c, nte_frames_kind_command);
+        assert_int_equal(nte_frames_encode_command(&bad, &c.tx, c.frame), nte_frames_err_selector);
+        memset(c.frame, 0, 8);
+        c.frame[2] = 0x30u; /* ForceSource = 3 (bits 20..21) */
+        assert_int_equal(nte_e2e_protect(&c.tx, c.frame, 8), nte_e2e_ok);
+        assert_int_equal(nte_frames_decode_command(&c.rx, c.frame, 8, &co, NULL, NULL),
+                         nte_frames_err_selector);
+        c.frame[2] = 0x20u; /* ForceSource = 2: the model alone */
+        assert_int_equal(nte_e2e_protect(&c.tx, c.frame, 8), nte_e2e_ok);
+        assert_int_equal(nte_frames_decode_command(&c.rx, c.frame, 8, &co, NULL, NULL),
+                         nte_frames_ok);
+        assert_int_equal(co.force_source, NTE_FRAMES_FORCE_SOURCE_MODEL);
+    }
 }
 
 static void test_command_all_values(void** state)
@@ -204,7 +268,8 @@ static void test_command_all_values(void** state)
         for (m = 0; m < 4u; ++m) {
             for (e = 0; e < 4u; ++e) {
                 for (a = 0; a < 4u; ++a) {
-                    nte_frames_command_t in = {reset != 0u, (uint8_t)m, (uint8_t)e, (uint8_t)a};
+                    nte_frames_command_t in = {reset != 0u, (uint8_t)m, (uint8_t)e, (uint8_t)a,
+                                               (uint8_t)((m + e + a) % 3u)};
                     nte_frames_command_t out;
                     nte_frames_err_t err = nte_frames_encode_command(&in, &l.tx, l.frame);
                     if ((e == 3u) || (a == 3u)) { /* ModelSel 3 = Model III is valid */
@@ -218,6 +283,7 @@ static void test_command_all_values(void** state)
                     assert_int_equal(out.model_sel, m);
                     assert_int_equal(out.estimator_sel, e);
                     assert_int_equal(out.adapt_cmd, a);
+                    assert_int_equal(out.force_source, in.force_source);
                 }
             }
         }
@@ -485,6 +551,7 @@ int main(void)
         cmocka_unit_test(test_decode_e2e_errors),
         cmocka_unit_test(test_force_ends),
         cmocka_unit_test(test_command_all_values),
+        cmocka_unit_test(test_sensor_fault_and_force_source),
         cmocka_unit_test(test_estimate_clamp_and_flags),
         cmocka_unit_test(test_params),
         cmocka_unit_test(test_heartbeat),

@@ -196,9 +196,13 @@ def test_encode_decode_vectors_match_cantools(ctool: CTool, db) -> None:
     dec_lines = [f"DEC {m.name} {d.hex()}" for m, _, d in expect]
     dec = ctool.run(dec_lines)
     n_checked = 0
+    orders: dict[str, list[str]] = {}
     for (msg, v, data), enc, vals in zip(expect, got, dec):
         assert enc[0] == data.hex(), f"{msg.name} {v}: C {enc[0]} cantools {data.hex()}"
-        order = ctool.run([f"SIGNALS {msg.name}"])[0] if n_checked == 0 else order
+        # each message's own signal order (the C tool's SIGNALS answer)
+        if msg.name not in orders:
+            orders[msg.name] = ctool.run([f"SIGNALS {msg.name}"])[0]
+        order = orders[msg.name]
         py = msg.decode(data, decode_choices=False, scaling=True)
         for name, cval in zip(order, vals):
             if name not in py:

@@ -332,6 +332,7 @@ int nte_can_force_pack(
     dst_p[3] |= pack_right_shift_u32(force, 12u, 0xffu);
     dst_p[4] |= pack_left_shift_u16(src_p->sensor_time, 0u, 0xffu);
     dst_p[5] |= pack_right_shift_u16(src_p->sensor_time, 8u, 0xffu);
+    dst_p[6] |= pack_left_shift_u8(src_p->sensor_fault, 0u, 0x01u);
 
     return (8);
 }
@@ -360,6 +361,7 @@ int nte_can_force_unpack(
     dst_p->force = (int32_t)force;
     dst_p->sensor_time = unpack_right_shift_u16(src_p[4], 0u, 0xffu);
     dst_p->sensor_time |= unpack_left_shift_u16(src_p[5], 8u, 0xffu);
+    dst_p->sensor_fault = unpack_right_shift_u8(src_p[6], 0u, 0x01u);
 
     return (0);
 }
@@ -457,6 +459,26 @@ bool nte_can_force_sensor_time_is_in_phys_range(float value)
     return ((value >= 0.0f) && (value <= 6.5535f));
 }
 
+uint8_t nte_can_force_sensor_fault_encode(float value)
+{
+    return (uint8_t)(cantools_unsigned_from_double(roundf(value)));
+}
+
+float nte_can_force_sensor_fault_decode(uint8_t value)
+{
+    return ((float)value);
+}
+
+bool nte_can_force_sensor_fault_is_in_range(uint8_t value)
+{
+    return (value <= 1u);
+}
+
+bool nte_can_force_sensor_fault_is_in_phys_range(float value)
+{
+    return ((value >= 0.0f) && (value <= 1.0f));
+}
+
 int nte_can_command_pack(
     uint8_t *dst_p,
     const struct nte_can_command_t *src_p,
@@ -474,6 +496,7 @@ int nte_can_command_pack(
     dst_p[1] |= pack_left_shift_u8(src_p->model_sel, 5u, 0x60u);
     dst_p[2] |= pack_left_shift_u8(src_p->estimator_sel, 0u, 0x03u);
     dst_p[2] |= pack_left_shift_u8(src_p->adapt_cmd, 2u, 0x0cu);
+    dst_p[2] |= pack_left_shift_u8(src_p->force_source, 4u, 0x30u);
 
     return (8);
 }
@@ -493,6 +516,7 @@ int nte_can_command_unpack(
     dst_p->model_sel = unpack_right_shift_u8(src_p[1], 5u, 0x60u);
     dst_p->estimator_sel = unpack_right_shift_u8(src_p[2], 0u, 0x03u);
     dst_p->adapt_cmd = unpack_right_shift_u8(src_p[2], 2u, 0x0cu);
+    dst_p->force_source = unpack_right_shift_u8(src_p[2], 4u, 0x30u);
 
     return (0);
 }
@@ -624,6 +648,26 @@ bool nte_can_command_adapt_cmd_is_in_range(uint8_t value)
 }
 
 bool nte_can_command_adapt_cmd_is_in_phys_range(float value)
+{
+    return ((value >= 0.0f) && (value <= 2.0f));
+}
+
+uint8_t nte_can_command_force_source_encode(float value)
+{
+    return (uint8_t)(cantools_unsigned_from_double(roundf(value)));
+}
+
+float nte_can_command_force_source_decode(uint8_t value)
+{
+    return ((float)value);
+}
+
+bool nte_can_command_force_source_is_in_range(uint8_t value)
+{
+    return (value <= 2u);
+}
+
+bool nte_can_command_force_source_is_in_phys_range(float value)
 {
     return ((value >= 0.0f) && (value <= 2.0f));
 }

@@ -93,6 +93,10 @@ extern "C" {
 #define NTE_CAN_COMMAND_ADAPT_CMD_FREEZE_CHOICE (1u)
 #define NTE_CAN_COMMAND_ADAPT_CMD_RESUME_CHOICE (2u)
 
+#define NTE_CAN_COMMAND_FORCE_SOURCE_KEEP_CHOICE (0u)
+#define NTE_CAN_COMMAND_FORCE_SOURCE_SENSOR_CHOICE (1u)
+#define NTE_CAN_COMMAND_FORCE_SOURCE_MODEL_CHOICE (2u)
+
 #define NTE_CAN_PARAMS_PARAM_INDEX_SIGMA0_CHOICE (0u)
 #define NTE_CAN_PARAMS_PARAM_INDEX_SIGMA1_CHOICE (1u)
 #define NTE_CAN_PARAMS_PARAM_INDEX_SIGMA2_CHOICE (2u)
@@ -137,12 +141,14 @@ extern "C" {
 #define NTE_CAN_FORCE_COUNTER_NAME "Counter"
 #define NTE_CAN_FORCE_FORCE_NAME "Force"
 #define NTE_CAN_FORCE_SENSOR_TIME_NAME "SensorTime"
+#define NTE_CAN_FORCE_SENSOR_FAULT_NAME "SensorFault"
 #define NTE_CAN_COMMAND_CRC_NAME "Crc"
 #define NTE_CAN_COMMAND_COUNTER_NAME "Counter"
 #define NTE_CAN_COMMAND_RESET_NAME "Reset"
 #define NTE_CAN_COMMAND_MODEL_SEL_NAME "ModelSel"
 #define NTE_CAN_COMMAND_ESTIMATOR_SEL_NAME "EstimatorSel"
 #define NTE_CAN_COMMAND_ADAPT_CMD_NAME "AdaptCmd"
+#define NTE_CAN_COMMAND_FORCE_SOURCE_NAME "ForceSource"
 #define NTE_CAN_ESTIMATE_CRC_NAME "Crc"
 #define NTE_CAN_ESTIMATE_COUNTER_NAME "Counter"
 #define NTE_CAN_ESTIMATE_IN_TISSUE_NAME "InTissue"
@@ -285,6 +291,15 @@ struct nte_can_force_t {
      * Offset: 0
      */
     uint16_t sensor_time;
+
+    /**
+     * 1 = the force sensor's driver knows this sample is bad (overload, broken cable, failed self-test): the node does not read Force and predicts from the model alone (predict-only) while the flag is set, with the parameters identified so far; the first fault-free frame returns to identification unless Command.ForceSource = 2 holds predict-only. 0 = valid (every sender before this signal).
+     *
+     * Range: 0..1 (0..1 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    uint8_t sensor_fault;
 };
 
 /**
@@ -344,12 +359,21 @@ struct nte_can_command_t {
      * Offset: 0
      */
     uint8_t adapt_cmd;
+
+    /**
+     * 0 = keep, 1 = sensor: identify from the force sensor (ends a commanded predict-only; the sensor's own faults still switch automatically), 2 = model alone: predict-only (the force is not read, the parameters identified so far are kept, an Estimate per Depth frame) until ForceSource 1 or a model change, reset or restart. Accepted in tissue (a failing sensor must be bridged mid-insertion).
+     *
+     * Range: 0..2 (0..2 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    uint8_t force_source;
 };
 
 /**
  * Signals in message Estimate.
  *
- * Estimate after each force measurement update (200 Hz), in the order of the force samples. Id offset 0x10.
+ * Estimate after each force measurement update (200 Hz), in the order of the force samples; in predict-only mode (Adapting = 0) after each Depth frame instead (1 kHz), the force samples being unread. Id offset 0x10.
  *
  * All signal values are as on the CAN bus.
  */
@@ -378,7 +402,7 @@ struct nte_can_estimate_t {
     uint8_t in_tissue;
 
     /**
-     * 1 = parameters are being adapted, 0 = frozen.
+     * 1 = parameters are being adapted from the force sensor; 0 = frozen: the node is in predict-only mode and ForceEst is the model's alone with the parameters identified so far, Innovation 0 (by Command.ForceSource = 2, while Force.SensorFault = 1, or while no Force frame came within the node's depth timeout as Depth frames go on: a lost sensor).
      *
      * Range: 0..1 (0..1 -)
      * Scale: 1
@@ -1201,6 +1225,46 @@ bool nte_can_force_sensor_time_is_in_range(uint16_t value);
 bool nte_can_force_sensor_time_is_in_phys_range(float value);
 
 /**
+ * Encode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to encode.
+ *
+ * @return Encoded signal.
+ */
+uint8_t nte_can_force_sensor_fault_encode(float value);
+
+/**
+ * Decode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to decode.
+ *
+ * @return Decoded signal.
+ */
+float nte_can_force_sensor_fault_decode(uint8_t value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_force_sensor_fault_is_in_range(uint8_t value);
+
+/**
+ * Check that given physical value is in allowed range before encoding.
+ *
+ * Use this BEFORE calling _encode() to avoid silent integer overflow:
+ *   encode(-1.0) on a [0,100] signal wraps to 255 and passes is_in_range().
+ *   is_in_phys_range(-1.0) correctly returns false.
+ *
+ * @param[in] value Physical signal value to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_force_sensor_fault_is_in_phys_range(float value);
+
+/**
  * Pack message Command.
  *
  * @param[out] dst_p Buffer to pack the message into.
@@ -1476,6 +1540,46 @@ bool nte_can_command_adapt_cmd_is_in_range(uint8_t value);
  * @return true if in range, false otherwise.
  */
 bool nte_can_command_adapt_cmd_is_in_phys_range(float value);
+
+/**
+ * Encode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to encode.
+ *
+ * @return Encoded signal.
+ */
+uint8_t nte_can_command_force_source_encode(float value);
+
+/**
+ * Decode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to decode.
+ *
+ * @return Decoded signal.
+ */
+float nte_can_command_force_source_decode(uint8_t value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_command_force_source_is_in_range(uint8_t value);
+
+/**
+ * Check that given physical value is in allowed range before encoding.
+ *
+ * Use this BEFORE calling _encode() to avoid silent integer overflow:
+ *   encode(-1.0) on a [0,100] signal wraps to 255 and passes is_in_range().
+ *   is_in_phys_range(-1.0) correctly returns false.
+ *
+ * @param[in] value Physical signal value to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_command_force_source_is_in_phys_range(float value);
 
 /**
  * Pack message Estimate.
