@@ -2,6 +2,8 @@
 
     nte-bench replay FILE.csv|FILE.log --channel vcan0 [--interface socketcan|slcan]
                      [--speed X] [--depth-rate HZ] [--player python|canplayer] --out DIR
+                     [--force-source T:sensor|model ...] [--sensor-fault T0:T1 ...]
+                     [--sensor-lost T0:T1 ...]
     nte-bench check DIR [--model 1|2|3] [--preset NAME]
     nte-bench send FILE.csv [--channel vcan0] [--speed X] [--force-every N]
                    [--record-csv FILE] [--record-log FILE]
@@ -16,6 +18,10 @@ frames with it raw value for raw value, writes DIR/summary.json, DIR/force.png a
 DIR/params.png (parameters with +-3 sigma bands), and prints the final parameters.
 --model 3 (the node started with --model 3): Model III with the contact front end, the CSV's
 depth column the stage position; the Contact frames are compared too.
+The force sensor's failures (the node's predict-only mode, nte_node.h PREDICT-ONLY): replay
+--force-source T:model (or T:sensor) sends a Command with ForceSource at scenario time T s;
+--sensor-fault T0:T1 sets SensorFault on the Force frames in [T0, T1) s (the driver flags them
+bad); --sensor-lost T0:T1 leaves those Force frames out (a lost sensor).  Each may repeat.
 replay --no-check stops after recording (DIR/record.json added); check DIR then does the
 comparison and figures where no bus is needed -- on the host, when the bus lives in a slower
 virtual machine (host_bench/with-vcan).
@@ -101,6 +107,46 @@ def scenario_frames(csv_path: str, db: NteDatabase, depth_rate_hz: float,
             msg = tx.message("Force", {"Force": clip("Force", a), "SensorTime": st})
         out.append((k * TICK_S, msg))
     return out
+
+
+def sensor_failures(frames: list[tuple[float, can.Message]], db: NteDatabase,
+                    commands: Sequence[tuple[float, str]] = (),
+                    faults: Sequence[tuple[float, float]] = (),
+                    lost: Sequence[tuple[float, float]] = ()) -> list[tuple[float, can.Message]]:
+    """`frames` with the force sensor's failures of replay's options (host_bench.faults):
+    SensorFault on the Force frames in the `faults` spans, the Force frames of the `lost` spans
+    left out, ForceSource Commands at the `commands` times (s, scenario time)."""
+    from .faults import force_source_commands, sensor_fault, sensor_lost
+    if faults:
+        frames = sensor_fault(frames, db, list(faults))
+    if lost:
+        frames = sensor_lost(frames, db, list(lost))
+    if commands:
+        frames = force_source_commands(frames, db, list(commands))
+    return frames
+
+
+def _time_source(text: str) -> tuple[float, str]:
+    t, sep, src = text.partition(":")
+    try:
+        ts = float(t)
+    except ValueError:
+        ts = float("nan")
+    if not sep or src not in ("sensor", "model") or not ts >= 0.0:
+        raise argparse.ArgumentTypeError(f"expected T:sensor or T:model with T >= 0 s "
+                                         f"(got {text!r})")
+    return ts, src
+
+
+def _span(text: str) -> tuple[float, float]:
+    a, sep, b = text.partition(":")
+    try:
+        t0, t1 = float(a), float(b)
+    except ValueError:
+        t0 = t1 = float("nan")
+    if not sep or not 0.0 <= t0 < t1:
+        raise argparse.ArgumentTypeError(f"expected T0:T1 with 0 <= T0 < T1 s (got {text!r})")
+    return t0, t1
 
 
 def log_frames(path: str) -> list[tuple[float, can.Message]]:
@@ -289,6 +335,7 @@ def cmd_replay(a: argparse.Namespace) -> int:
         frames = log_frames(a.file)
     else:
         frames = scenario_frames(a.file, db, a.depth_rate, clipped, units_from(a))
+    frames = sensor_failures(frames, db, a.force_source, a.sensor_fault, a.sensor_lost)
     for sig, n in sorted(clipped.items()):
         lo, hi = db.signal_range("Force" if sig == "Force" else "Depth", sig)
         print(f"nte-bench: warning: {n} {sig} value(s) outside the DBC range "
@@ -505,6 +552,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="who sends: python-can, or can-utils canplayer (full rate)")
     _node_flags(r)
     add_unit_arguments(r)
+    r.add_argument("--force-source", type=_time_source, action="append", default=[],
+                   metavar="T:SOURCE", help="send a Command with ForceSource SOURCE (sensor: "
+                   "identify, model: predict-only) at scenario time T s; may repeat")
+    r.add_argument("--sensor-fault", type=_span, action="append", default=[], metavar="T0:T1",
+                   help="set SensorFault on the Force frames in [T0, T1) s; may repeat")
+    r.add_argument("--sensor-lost", type=_span, action="append", default=[], metavar="T0:T1",
+                   help="leave out the Force frames in [T0, T1) s (a lost sensor); may repeat")
     r.add_argument("--no-plot", action="store_true", help="do not draw force.png, params.png")
     r.add_argument("--no-check", action="store_true",
                    help="send and record only (input.log, node.log, node.csv, record.json); "

@@ -122,12 +122,18 @@ class NteDatabase:
         return self._by_id.get(can_id)
 
     def encode(self, name: str, signals: Mapping[str, Any], counter: int) -> bytes:
-        """Pack `signals` (physical values; Crc/Counter not needed), set the counter, add the CRC.
-        Raises ValueError (cantools' strict range check) for an out-of-range value."""
+        """Pack `signals` (physical values; Crc/Counter not needed; any other signal not given
+        is 0 in a frame without multiplexer), set the counter, add the CRC.  Raises ValueError (cantools' strict range check) for an out-of-range value."""
         if not 0 <= counter < COUNTER_MODULUS:
             raise ValueError(f"counter {counter} outside 0..14")
         msg = self.db.get_message_by_name(name)
         values = dict(signals)
+        if not msg.is_multiplexed():
+            # a signal not given is 0: the value of "not in use" for every signal added to a
+            # frame later (Force.SensorFault, Command.ForceSource), so older callers send the
+            # frames they always sent
+            for sig in msg.signals:
+                values.setdefault(sig.name, 0)
         values["Crc"] = 0
         values["Counter"] = counter
         data = bytearray(msg.encode(values, scaling=True, strict=True))

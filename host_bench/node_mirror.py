@@ -9,6 +9,9 @@ time in float32 (same operations, same order), the stale rule, the Command frame
 reference_py's FilterBank in float32 with the node's configuration.  Its outputs are encoded
 as the C frame layer encodes them (float32 division by the scale, round half away from zero,
 clamping to the signal's range), so the node's frames are expected to match bit for bit.
+Predict-only (nte_node.h PREDICT-ONLY) as the node: Command.ForceSource 2/1, force samples
+flagged SensorFault, and a lost force sensor bridged by steps on the depth stream; Adapting 0
+while the model alone publishes.
 Model III (``model=3`` or a Command with ModelSel 3) runs with the contact front end on, as the
 node does: Params cycle 0..8 (7 g_fast, 8 g_slow), InTissue is the front end's contact state,
 and the Contact frames (``contacts``) follow the node's rule (nte_node.h, MODEL III).
@@ -38,6 +41,9 @@ VELOCITY_RAW = (-50000, 50000)
 FORCE_RAW = (-500000, 500000)
 #: Contact frames: at least every this many sensor ticks when nothing changes (100 ms)
 CONTACT_PERIOD_TICKS = 1000
+#: steps on the Depth stream while the force sensor is lost: at least this many sensor ticks
+#: apart (nte_node.h NTE_NODE_PREDICT_PERIOD_US, 5 ms)
+PREDICT_PERIOD_TICKS = 50
 
 
 def roundf(x: np.float32) -> int:
@@ -130,6 +136,14 @@ class NodeMirror:
         self.param_next = 0
         self.last_command_us: int | None = None
         self._last_cmd_status = "ok"
+        # predict-only (nte_node.h PREDICT-ONLY): commanded, the mode of the last step, whether
+        # that step was on the depth stream, its time; and the node's counters of it
+        self.force_cmd_model = False
+        self.predicting = False
+        self.depth_stepped = False
+        self.step_t: int | None = None
+        self.depth_since_force: int | None = None   # first depth sample after the newest force
+        self.predict_counts = {"predict_on": 0, "predict_off": 0, "predict_depth_steps": 0}
         self._start(self.model)
 
     # ------------------------------------------------------------------ estimator
@@ -209,7 +223,16 @@ class NodeMirror:
         e.saturated = int(c0 or c1 or c2)
         self._publish(e, self._t_s(t), float(force), float("nan"))
 
-    def _step(self, t: int, force: np.float32, d: np.float32, v: np.float32) -> None:
+    def _step(self, t: int, force: np.float32, d: np.float32, v: np.float32,
+              fault: bool = False, on_depth: bool = False) -> None:
+        po = self.force_cmd_model or fault or on_depth
+        if po != self.predicting:
+            self.predict_counts["predict_on" if po else "predict_off"] += 1
+            self.predicting = po
+        self.bank.set_predict_only(po)
+        self.step_t = t
+        self.depth_stepped = on_depth
+        force = F32(0.0) if po else force
         o = self.bank.step(np.array([t * TICK_US], dtype=np.int64), np.array([d], dtype=F32),
                            np.array([v], dtype=F32), np.array([force], dtype=F32))
         self.stepped = True
@@ -221,7 +244,8 @@ class NodeMirror:
         zr, c2 = quantise(z, 5e-4, -8.192, 8.1915)
         front_end = self.cfg.contact.enabled
         in_tissue = int(o.contact[0] == CONTACT_TISSUE) if front_end else int(d > 0)
-        e = EstimateOut(fr, ir, zr, in_tissue, 1, int(c0 or c1 or c2), int((st & 2) != 0), 0)
+        e = EstimateOut(fr, ir, zr, in_tissue, int(not po), int(c0 or c1 or c2),
+                        int((st & 2) != 0), 0)
         self.last = e
         self.last_vals = (fh, inn, z)
         self._publish(e, self._t_s(t), float(force), float(d))
@@ -257,8 +281,12 @@ class NodeMirror:
         return (t - 65536) * 1e-4
 
     # ------------------------------------------------------------------ force scheduling
-    def _decide(self, t: int, force: np.float32) -> bool:
+    def _decide(self, t: int, force: np.float32, fault: bool = False) -> bool:
         timeout = self.depth_timeout_us // TICK_US
+        if self.depth_stepped and t <= self.step_t:
+            # the estimator predicted past this sample on the depth stream (sensor lost)
+            self._hold(t, force)
+            return True
         if not self.depth:
             if self.last_force_t is not None and self.last_force_t - t > timeout:
                 self._hold(t, force)
@@ -280,12 +308,12 @@ class NodeMirror:
                 if t - a[0] > timeout:
                     self._hold(t, force)
                 elif a[0] == t:
-                    self._step(t, force, a[1], a[2])
+                    self._step(t, force, a[1], a[2], fault)
                 else:
                     w = F32(F32(t - a[0]) / F32(b[0] - a[0]))
                     d = F32(a[1] + F32(w * F32(b[1] - a[1])))
                     v = F32(a[2] + F32(w * F32(b[2] - a[2])))
-                    self._step(t, force, d, v)
+                    self._step(t, force, d, v, fault)
                 return True
             b = a
         self._hold(t, force)
@@ -293,10 +321,22 @@ class NodeMirror:
 
     def _process(self) -> None:
         while self.forces:
-            t, f = self.forces[0]
-            if not self._decide(t, f):
+            t, f, fault = self.forces[0]
+            if not self._decide(t, f, fault):
                 return
             self.forces.pop(0)
+
+    def _depth_predict(self) -> None:
+        """The node's nte_node_depth_predict: a sensor lost for longer than the timeout (no
+        force sample waiting) is bridged by a predict-only step on the newest depth sample."""
+        timeout = self.depth_timeout_us // TICK_US
+        t, d, v = self.depth[-1]
+        if (self.last_force_t is None or self.forces or self.depth_since_force is None
+                or t - self.depth_since_force <= timeout
+                or (self.step_t is not None and t - self.step_t < PREDICT_PERIOD_TICKS)):
+            return
+        self.predict_counts["predict_depth_steps"] += 1
+        self._step(t, F32(0.0), d, v, True, True)
 
     # ------------------------------------------------------------------ input
     def _unwrap(self, raw: int, clock: tuple[int | None, int] | None = None) -> tuple[int, int]:
@@ -345,9 +385,12 @@ class NodeMirror:
                 return "out_of_range", after, None
             return status, after, (raw_t, F32(F32(dr) * F32(0.001)), F32(F32(vr) * F32(0.01)))
         fr = int(sig["Force"])
+        fault = int(sig.get("SensorFault", 0)) != 0
         if not FORCE_RAW[0] <= fr <= FORCE_RAW[1]:
-            return "out_of_range", after, None
-        return status, after, (raw_t, F32(F32(fr) * F32(0.0001)), F32(0.0))
+            if not fault:
+                return "out_of_range", after, None
+            fr = 0   # flagged faulty: its value is not used, its range not checked
+        return status, after, (raw_t, F32(F32(fr) * F32(0.0001)), F32(1.0 if fault else 0.0))
 
     def _newest(self, name: str) -> int | None:
         if name == "Depth":
@@ -359,16 +402,23 @@ class NodeMirror:
             self.depth.append((t, a, b))
             if len(self.depth) > 32:
                 self.depth.pop(0)
+            if self.depth_since_force is None:
+                self.depth_since_force = t
         else:
             if len(self.forces) >= 16:
                 self._count("queue_overflow")
                 return
             self.last_force_t = t
-            self.forces.append((t, a))
+            self.depth_since_force = None
+            self.forces.append((t, a, bool(b > F32(0.5))))
         self._process()
+        if name == "Depth":
+            self._depth_predict()
 
     def _resync(self, name: str, t: int) -> None:
         self._count("time_resync")
+        if name == "Depth":
+            self.depth_since_force = None   # a lost sensor is judged on the new timeline
         newest = self._newest(name)
         if newest is None or t > newest:
             return
@@ -376,7 +426,7 @@ class NodeMirror:
             self.depth = []
         else:
             while self.forces:
-                tf, f = self.forces.pop(0)
+                tf, f, _ = self.forces.pop(0)
                 self._hold(tf, f)
             self.last_force_t = None
 
@@ -462,7 +512,8 @@ class NodeMirror:
     def _on_command(self, sig: dict, t_us: int | None) -> None:
         """The node's command rules (nte_node.h, COMMANDS): applied entirely or not at all."""
         if not (0 <= int(sig["ModelSel"]) <= 3
-                and all(0 <= int(sig[k]) <= 2 for k in ("EstimatorSel", "AdaptCmd"))):
+                and all(0 <= int(sig.get(k, 0)) <= 2
+                        for k in ("EstimatorSel", "AdaptCmd", "ForceSource"))):
             self._count("out_of_range")
             return
         if self._last_cmd_status == "skipped":
@@ -484,6 +535,10 @@ class NodeMirror:
             return
         if restart:
             self._start(model, estimator)
+        source = int(sig.get("ForceSource", 0))
+        if source:
+            # accepted in tissue: a failing sensor is bridged mid-insertion (nte_node.h)
+            self.force_cmd_model = source == 2
         if int(sig["Reset"]):
             self.bank.reset()
             self.stepped = False

@@ -331,16 +331,31 @@ static void nte_node_hold(nte_node_t* self)
     nte_node_publish_params(self);
 }
 
+/* One estimator step at sensor time f->t; predict-only when commanded, when the sample is
+ * flagged faulty, or for a step on the depth stream (`on_depth`; PREDICT-ONLY in nte_node.h). */
 static void nte_node_step(nte_node_t* self, const nte_node_force_t* f, float depth_mm,
-                          float velocity_mm_s)
+                          float velocity_mm_s, bool on_depth)
 {
     nte_sample_t s;
     nte_output_t o;
     nte_frames_estimate_t e;
+    const bool po = self->force_cmd_model || f->fault || on_depth;
+    if (po != self->predicting) {
+        if (po) {
+            self->counters.predict_on++;
+        } else {
+            self->counters.predict_off++;
+        }
+        self->predicting = po;
+    }
+    (void)nte_set_predict_only(&self->est, po);
+    self->have_step = true;
+    self->step_t = f->t;
+    self->depth_stepped = on_depth;
     s.t_us = (int64_t)f->t * (int64_t)NTE_NODE_TICK_US;
     s.depth_mm = (nte_real_t)depth_mm;
     s.velocity_mm_s = (nte_real_t)velocity_mm_s;
-    s.force_n = (nte_real_t)f->force_n;
+    s.force_n = po ? (nte_real_t)0.0f : (nte_real_t)f->force_n;
     const uint64_t t0 = self->port.now_us(self->port.ctx);
     (void)nte_step(&self->est, &s, &o);
     const uint64_t dt = self->port.now_us(self->port.ctx) - t0;
@@ -356,7 +371,7 @@ static void nte_node_step(nte_node_t* self, const nte_node_force_t* f, float dep
     const bool front_end = self->cfg.estimator[self->model - 1].contact.enabled;
     /* with the contact front end the depth is the stage position: its contact state decides */
     e.in_tissue = front_end ? (o.contact == nte_contact_tissue) : (depth_mm > 0.0f);
-    e.adapting = true;
+    e.adapting = !po;
     e.fault = (o.status & NTE_STATUS_REJECTED) != 0u;
     e.stale = false;
     self->state = e.fault ? nte_node_state_fault : nte_node_state_running;
@@ -372,6 +387,11 @@ static void nte_node_step(nte_node_t* self, const nte_node_force_t* f, float dep
 static int nte_node_decide(nte_node_t* self, const nte_node_force_t* f)
 {
     const int32_t timeout = (int32_t)(self->cfg.depth_timeout_us / NTE_NODE_TICK_US);
+    if (self->depth_stepped && (nte_node_tdiff(f->t, self->step_t) <= 0)) {
+        /* the estimator predicted past this sample on the depth stream (sensor lost) */
+        nte_node_hold(self);
+        return 1;
+    }
     if (self->depth_count == 0u) {
         /* no depth yet: wait until the force samples span more than the timeout */
         if (nte_node_tdiff(self->last_force_t, f->t) > timeout) {
@@ -407,13 +427,13 @@ static int nte_node_decide(nte_node_t* self, const nte_node_force_t* f)
             if (nte_node_tdiff(f->t, a->t) > timeout) {
                 nte_node_hold(self);
             } else if (a->t == f->t) {
-                nte_node_step(self, f, a->depth_mm, a->velocity_mm_s);
+                nte_node_step(self, f, a->depth_mm, a->velocity_mm_s, false);
             } else {
                 const float w = (float)nte_node_tdiff(f->t, a->t) /
                                 (float)nte_node_tdiff(b->t, a->t);
                 const float d = a->depth_mm + (w * (b->depth_mm - a->depth_mm));
                 const float v = a->velocity_mm_s + (w * (b->velocity_mm_s - a->velocity_mm_s));
-                nte_node_step(self, f, d, v);
+                nte_node_step(self, f, d, v, false);
             }
             return 1;
         }
@@ -422,6 +442,26 @@ static int nte_node_decide(nte_node_t* self, const nte_node_force_t* f)
     /* t_f is older than the whole depth history */
     nte_node_hold(self);
     return 1;
+}
+
+/* PREDICT-ONLY (c): after the depth sample `d` and the forces it decided, a sensor lost for
+ * longer than the timeout -- depth samples received over more than the timeout since the last
+ * force sample, none waiting -- is bridged by a step on the depth stream. */
+static void nte_node_depth_predict(nte_node_t* self, const nte_node_depth_t* d)
+{
+    const int32_t timeout = (int32_t)(self->cfg.depth_timeout_us / NTE_NODE_TICK_US);
+    const int32_t period = (int32_t)(NTE_NODE_PREDICT_PERIOD_US / NTE_NODE_TICK_US);
+    if (!self->have_force || (self->force_count > 0u) || !self->depth_since_force ||
+        (nte_node_tdiff(d->t, self->depth_since_force_t) <= timeout) ||
+        (self->have_step && (nte_node_tdiff(d->t, self->step_t) < period))) {
+        return;
+    }
+    nte_node_force_t f;
+    f.t = d->t;
+    f.force_n = 0.0f;
+    f.fault = true;
+    self->counters.predict_depth_steps++;
+    nte_node_step(self, &f, d->depth_mm, d->velocity_mm_s, true);
 }
 
 static void nte_node_process_forces(nte_node_t* self)
@@ -468,7 +508,7 @@ static bool nte_node_decoded(nte_node_t* self, nte_frames_err_t err, nte_e2e_res
 typedef struct nte_node_in_t {
     uint16_t raw_t;
     float a; /* depth_mm or force_n */
-    float b; /* velocity_mm_s (depth only) */
+    float b; /* velocity_mm_s (depth); force: 1 = SensorFault set */
 } nte_node_in_t;
 
 /* Decode a depth (stream 0) or force (stream 1) frame with the E2E state `rx`. */
@@ -492,6 +532,7 @@ static nte_frames_err_t nte_node_decode_sample(uint32_t stream, nte_e2e_rx_t* rx
         if (err == nte_frames_ok) {
             in->raw_t = f.time_ticks;
             in->a = f.force_n;
+            in->b = f.sensor_fault ? 1.0f : 0.0f;
         }
     }
     return err;
@@ -522,6 +563,10 @@ static void nte_node_store(nte_node_t* self, uint32_t stream, uint32_t t, float 
         if (self->depth_count < (uint32_t)NTE_NODE_DEPTH_HISTORY) {
             self->depth_count++;
         }
+        if (!self->depth_since_force) {
+            self->depth_since_force = true;
+            self->depth_since_force_t = t;
+        }
     } else {
         if (self->force_count >= (uint32_t)NTE_NODE_FORCE_QUEUE) {
             nte_node_count(self, nte_node_ev_queue_overflow);
@@ -529,13 +574,18 @@ static void nte_node_store(nte_node_t* self, uint32_t stream, uint32_t t, float 
         }
         self->have_force = true;
         self->last_force_t = t;
+        self->depth_since_force = false;
         const uint32_t k = (self->force_head + self->force_count) % (uint32_t)NTE_NODE_FORCE_QUEUE;
         self->force[k].t = t;
         self->force[k].force_n = a;
+        self->force[k].fault = b > 0.5f;
         self->force_count++;
     }
     self->counters.rx_accepted[stream]++;
     nte_node_process_forces(self);
+    if (stream == NTE_NODE_IN_DEPTH) {
+        nte_node_depth_predict(self, nte_node_depth_at(self, 0u));
+    }
 }
 
 /* A confirmed jump of the sensor clock to time t: a jump back restarts the stream's timeline
@@ -544,6 +594,10 @@ static void nte_node_resync(nte_node_t* self, uint32_t stream, uint32_t t)
 {
     uint32_t newest = 0u;
     nte_node_count(self, nte_node_ev_time_resync);
+    if (stream == NTE_NODE_IN_DEPTH) {
+        /* the depth stream starts afresh: a lost force sensor is judged on its new timeline */
+        self->depth_since_force = false;
+    }
     if (!nte_node_newest(self, stream, &newest) || (nte_node_tdiff(t, newest) > 0)) {
         return;
     }
@@ -688,6 +742,10 @@ static void nte_node_on_command(nte_node_t* self, const nte_node_frame_t* fr)
         (restart && !nte_node_start_model(self, model, estimator))) {
         nte_node_count(self, nte_node_ev_command_refused);
         return;
+    }
+    if (c.force_source != NTE_FRAMES_FORCE_SOURCE_KEEP) {
+        /* accepted in tissue: a failing sensor is bridged mid-insertion (nte_node.h) */
+        self->force_cmd_model = (c.force_source == NTE_FRAMES_FORCE_SOURCE_MODEL);
     }
     if (c.reset) {
         (void)nte_reset(&self->est);

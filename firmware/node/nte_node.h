@@ -57,7 +57,8 @@
  *   bank/robust re-initialise the estimator with that model and estimator (the configured
  *   nominal values; the robust estimator refines after each insertion: nte.h; Model III with
  *   the robust estimator is refused, command_refused, as nte_init refuses it); Reset restarts
- *   the running one.  "Out of tissue" below is the last Estimate's InTissue bit: in Model III
+ *   the running one; ForceSource 2 / 1 switches predict-only on / off (see PREDICT-ONLY).
+ *   "Out of tissue" below is the last Estimate's InTissue bit: in Model III
  *   the contact front end's state (see MODEL III).
  *   Rules: (1) the E2E counter must be the successor of the last command's: a replayed frame
  *   (stale counter) or one after a lost command is ignored (command_stale; the sender repeats
@@ -69,6 +70,35 @@
  *   (the library cannot hold its parameters); resume is accepted and changes nothing.  E2E
  *   protects integrity (corruption, loss, repetition), not authenticity: any sender on the bus
  *   can compute the CRC and follow the counter.  Protect the bus, or add a MAC, if that matters.
+ *
+ * PREDICT-ONLY (the model alone: a force sensor that fails or is switched off; nte.h THE
+ * PREDICT-ONLY MODE)
+ *   The node runs the estimator in predict-only mode -- the force is not read, the parameters
+ *   identified so far are kept, z and the memories go on with the depth -- in three cases:
+ *   (a) commanded: Command.ForceSource 2 (the model) until ForceSource 1 (the sensor); the
+ *       command follows the COMMANDS rules (counter, rate limit) and is accepted in tissue, a
+ *       failing sensor having to be bridged mid-insertion; it outlives model changes and resets;
+ *   (b) a force sample whose SensorFault bit is set (its driver knows it is bad; its value is not
+ *       range-checked or read): that sample is processed in predict-only, in its place in the
+ *       force stream (interpolated depth, stale rule, one Estimate), so a stretch of flagged
+ *       frames is a stretch of predictions and the first unflagged frame identifies again;
+ *   (c) a lost sensor: Depth samples received over more than `depth_timeout_us` (sensor time,
+ *       from the first depth sample after the newest force sample to this one), no force
+ *       sample waiting, once a force sample was seen (a pause of both streams, or a confirmed
+ *       jump of the depth clock, starts that span afresh).  The force
+ *       samples then carry no schedule, so the node steps on the Depth stream: at such a depth
+ *       sample, if it is at least NTE_NODE_PREDICT_PERIOD_US (sensor time) after the last step,
+ *       one predict-only step at that sample's own time, depth and velocity, then the Estimate
+ *       and Params (and Model III's Contact) as after any step.  A force sample that comes back
+ *       is processed as usual if it is later than that last step, else held (Stale, counted
+ *       stale): the estimator's time line cannot go back.  After a loss longer than
+ *       `resync_gap_us` the first returning force sample is a time jump, confirmed by the next
+ *       (TIME JUMPS): the depth stream steps on meanwhile, and that first one is published
+ *       stale.
+ *   In every case the Estimate's Adapting bit is 0 (1 otherwise) and Innovation 0.  Every change
+ *   of the mode between two steps is counted (nte_node_counters_t predict_on, predict_off;
+ *   predict_depth_steps counts the steps of case (c)).  Switching back resumes identification
+ *   from the state reached (nte.h).
  *
  * THE PORT INTERFACE (bring the node to a board by writing these three functions)
  *   nte_node_port_t holds three function pointers and a context pointer passed back to each:
@@ -192,8 +222,12 @@ typedef struct nte_node_counters_t {
     uint32_t rx_accepted[3];               /**< accepted depth, force, command frames */
     uint32_t tx[4];                        /**< sent estimate, params, heartbeat, contact
                                                 frames */
-    uint32_t steps;                        /**< estimator steps (non-stale force samples) */
+    uint32_t steps;                        /**< estimator steps (non-stale force samples,
+                                                and the depth samples of PREDICT-ONLY (c)) */
     uint32_t commands_applied;             /**< commands carried out */
+    uint32_t predict_on;                   /**< steps that entered predict-only mode */
+    uint32_t predict_off;                  /**< steps that left it (identifying again) */
+    uint32_t predict_depth_steps;          /**< steps on Depth samples, the sensor lost */
 } nte_node_counters_t;
 
 /** Node tuning; fill with nte_node_config_default, then change what you need. */
@@ -223,6 +257,10 @@ typedef enum nte_node_err_t {
     nte_node_err_estimator = -3   /**< an estimator configuration fails nte_config_check */
 } nte_node_err_t;
 
+/** Sensor time between two steps on the Depth stream while the force sensor is lost
+ *  (PREDICT-ONLY (c)), us: 200 Hz, the Force frame's cycle time. */
+#define NTE_NODE_PREDICT_PERIOD_US 5000u
+
 /** Sensor time between two Contact frames when nothing changes (Model III), us (10 Hz). */
 #define NTE_NODE_CONTACT_PERIOD_US 100000u
 
@@ -242,6 +280,7 @@ typedef struct nte_node_depth_t {
 typedef struct nte_node_force_t {
     uint32_t t;
     float force_n;
+    bool fault;        /**< SensorFault: processed in predict-only, force not read */
 } nte_node_force_t;
 
 /** A sample held for a time jump, with the E2E state and clock it would commit. */
@@ -253,7 +292,7 @@ typedef struct nte_node_pending_t {
     nte_e2e_result_t e2e;
     uint8_t lost;
     float a;                   /**< depth_mm or force_n */
-    float b;                   /**< velocity_mm_s (depth) */
+    float b;                   /**< velocity_mm_s (depth); force: 1 = SensorFault, 0 = not */
 } nte_node_pending_t;
 
 /** One node.  Every field except `counters` is private. */
@@ -283,6 +322,13 @@ typedef struct nte_node_t {
     uint32_t contact_t;           /* sensor ticks of the force sample of the last one */
     nte_frames_contact_t contact; /* its content */
     nte_node_state_t state;
+    bool force_cmd_model;         /* Command.ForceSource 2 in force (PREDICT-ONLY (a)) */
+    bool predicting;              /* the mode of the last step */
+    bool depth_stepped;           /* the last step was on a depth sample (PREDICT-ONLY (c)) */
+    bool have_step;
+    uint32_t step_t;              /* sensor ticks of the last step */
+    bool depth_since_force;       /* a depth sample came after the newest force sample ... */
+    uint32_t depth_since_force_t; /* ... the first of them, sensor ticks */
     uint64_t t_start_us;
     uint64_t next_heartbeat_us;
     uint32_t step_time_max_us;

@@ -228,11 +228,13 @@ static void write_stats(const nte_node_t* n, const nte_port_socketcan_t* port, F
             "}, \"frames_lost\": %u, \"rx_accepted\": {\"depth\": %u, \"force\": %u, "
             "\"command\": %u}, \"tx\": {\"estimate\": %u, \"params\": %u, \"heartbeat\": %u, "
             "\"contact\": %u}, "
-            "\"steps\": %u, \"commands_applied\": %u, \"model\": %d, \"state\": %d, "
-            "\"send_enobufs\": %u, \"last_errno\": %d}\n",
+            "\"steps\": %u, \"commands_applied\": %u, \"predict_on\": %u, "
+            "\"predict_off\": %u, \"predict_depth_steps\": %u, \"model\": %d, "
+            "\"state\": %d, \"send_enobufs\": %u, \"last_errno\": %d}\n",
             (unsigned)c->frames_lost, (unsigned)c->rx_accepted[0], (unsigned)c->rx_accepted[1],
             (unsigned)c->rx_accepted[2], (unsigned)c->tx[0], (unsigned)c->tx[1],
             (unsigned)c->tx[2], (unsigned)c->tx[3], (unsigned)c->steps, (unsigned)c->commands_applied,
+            (unsigned)c->predict_on, (unsigned)c->predict_off, (unsigned)c->predict_depth_steps,
             (int)nte_node_model(n), (int)nte_node_state(n), (unsigned)port->send_errors_enobufs,
             port->last_errno);
 }
