@@ -332,13 +332,15 @@ static void nte_node_hold(nte_node_t* self)
 }
 
 /* One estimator step at sensor time f->t; predict-only when commanded, when the sample is
- * flagged faulty, or for a step on the depth stream (`on_depth`; PREDICT-ONLY in nte_node.h). */
+ * flagged faulty, or for a step on the depth stream (f->on_depth; PREDICT-ONLY in
+ * nte_node.h). */
 static void nte_node_step(nte_node_t* self, const nte_node_force_t* f, float depth_mm,
-                          float velocity_mm_s, bool on_depth)
+                          float velocity_mm_s)
 {
     nte_sample_t s;
     nte_output_t o;
     nte_frames_estimate_t e;
+    const bool on_depth = f->on_depth;
     const bool po = self->force_cmd_model || f->fault || on_depth;
     if (po != self->predicting) {
         if (po) {
@@ -427,13 +429,13 @@ static int nte_node_decide(nte_node_t* self, const nte_node_force_t* f)
             if (nte_node_tdiff(f->t, a->t) > timeout) {
                 nte_node_hold(self);
             } else if (a->t == f->t) {
-                nte_node_step(self, f, a->depth_mm, a->velocity_mm_s, false);
+                nte_node_step(self, f, a->depth_mm, a->velocity_mm_s);
             } else {
                 const float w = (float)nte_node_tdiff(f->t, a->t) /
                                 (float)nte_node_tdiff(b->t, a->t);
                 const float d = a->depth_mm + (w * (b->depth_mm - a->depth_mm));
                 const float v = a->velocity_mm_s + (w * (b->velocity_mm_s - a->velocity_mm_s));
-                nte_node_step(self, f, d, v, false);
+                nte_node_step(self, f, d, v);
             }
             return 1;
         }
@@ -444,24 +446,27 @@ static int nte_node_decide(nte_node_t* self, const nte_node_force_t* f)
     return 1;
 }
 
-/* PREDICT-ONLY (c): after the depth sample `d` and the forces it decided, a sensor lost for
- * longer than the timeout -- depth samples received over more than the timeout since the last
- * force sample, none waiting -- is bridged by a step on the depth stream. */
-static void nte_node_depth_predict(nte_node_t* self, const nte_node_depth_t* d)
+/* PREDICT-ONLY (c): at the depth sample at time t, once the forces it decided are done, a
+ * sensor lost for longer than the timeout -- depth samples received over more than the timeout
+ * since the last force sample, none waiting -- is bridged by a step on the depth stream: an
+ * entry of the force queue at t marked on_depth (decided like a force sample at a depth
+ * sample's own time, so one call site steps the estimator). */
+static void nte_node_depth_predict(nte_node_t* self, uint32_t t)
 {
     const int32_t timeout = (int32_t)(self->cfg.depth_timeout_us / NTE_NODE_TICK_US);
     const int32_t period = (int32_t)(NTE_NODE_PREDICT_PERIOD_US / NTE_NODE_TICK_US);
     if (!self->have_force || (self->force_count > 0u) || !self->depth_since_force ||
-        (nte_node_tdiff(d->t, self->depth_since_force_t) <= timeout) ||
-        (self->have_step && (nte_node_tdiff(d->t, self->step_t) < period))) {
+        (nte_node_tdiff(t, self->depth_since_force_t) <= timeout) ||
+        (self->have_step && (nte_node_tdiff(t, self->step_t) < period))) {
         return;
     }
-    nte_node_force_t f;
-    f.t = d->t;
-    f.force_n = 0.0f;
-    f.fault = true;
+    nte_node_force_t* f = &self->force[self->force_head];
+    f->t = t;
+    f->force_n = 0.0f;
+    f->fault = true;
+    f->on_depth = true;
+    self->force_count = 1u;
     self->counters.predict_depth_steps++;
-    nte_node_step(self, &f, d->depth_mm, d->velocity_mm_s, true);
 }
 
 static void nte_node_process_forces(nte_node_t* self)
@@ -567,6 +572,9 @@ static void nte_node_store(nte_node_t* self, uint32_t stream, uint32_t t, float 
             self->depth_since_force = true;
             self->depth_since_force_t = t;
         }
+        self->counters.rx_accepted[stream]++;
+        nte_node_process_forces(self);
+        nte_node_depth_predict(self, t);
     } else {
         if (self->force_count >= (uint32_t)NTE_NODE_FORCE_QUEUE) {
             nte_node_count(self, nte_node_ev_queue_overflow);
@@ -579,13 +587,11 @@ static void nte_node_store(nte_node_t* self, uint32_t stream, uint32_t t, float 
         self->force[k].t = t;
         self->force[k].force_n = a;
         self->force[k].fault = b > 0.5f;
+        self->force[k].on_depth = false;
         self->force_count++;
+        self->counters.rx_accepted[stream]++;
     }
-    self->counters.rx_accepted[stream]++;
     nte_node_process_forces(self);
-    if (stream == NTE_NODE_IN_DEPTH) {
-        nte_node_depth_predict(self, nte_node_depth_at(self, 0u));
-    }
 }
 
 /* A confirmed jump of the sensor clock to time t: a jump back restarts the stream's timeline

@@ -281,6 +281,8 @@ typedef struct nte_node_force_t {
     uint32_t t;
     float force_n;
     bool fault;        /**< SensorFault: processed in predict-only, force not read */
+    bool on_depth;     /**< not a force sample: a step on the depth stream at a depth
+                            sample's time (PREDICT-ONLY (c)) */
 } nte_node_force_t;
 
 /** A sample held for a time jump, with the E2E state and clock it would commit. */

@@ -135,6 +135,15 @@ case_model3() {
     stop "$node_pid" >/dev/null
 }
 
+case_predict_only() {
+    # the paper scenario's first seconds with ForceSource commands, a SensorFault stretch and
+    # a lost force sensor in the input log; the mirror is fed the node's own received log
+    start_node po --record "$OUT/po.sent.log" --received "$OUT/po.recv.log" || return 1
+    play "$OUT/po_in.log" || return 1
+    sleep 0.5
+    stop "$node_pid" >/dev/null
+}
+
 case_no_iface() {
     "$NODE" --iface vcan9 2>"$OUT/noif.err"
     echo $? >"$OUT/noif.exit"

@@ -24,11 +24,18 @@ from host_bench.node_mirror import NodeMirror, compare, contact_outputs, node_ou
 
 DB = NteDatabase()
 INPUT_IDS = {DB.frame_id(n) for n in ("Depth", "Force", "Command")}
-CASES = ("full_rate", "bad_traffic", "cangen", "burst", "enobufs", "no_iface", "model3")
+CASES = ("full_rate", "bad_traffic", "cangen", "burst", "enobufs", "no_iface", "model3",
+         "predict_only")
 #: the model3 case: the first seconds of phantom lab seed 101 (stage moves at 1.0 s, touches the
 #: surface, 6.48 mm, at 4.3 s), a Command selecting Model III at 0.5 s (in the air)
 MODEL3_WINDOW_S = 5.5
 MODEL3_COMMAND_S = 0.5
+#: the predict_only case: the paper scenario's first PO_WINDOW_S seconds, ForceSource model and
+#: sensor commands (in tissue), a SensorFault stretch and a lost force sensor (s)
+PO_WINDOW_S = 6.5
+PO_COMMANDS = [(2.0, "model"), (3.0, "sensor")]
+PO_FAULTS = [(4.0, 4.5)]
+PO_LOST = [(5.0, 5.5)]
 
 
 def capture(path: Path) -> list[can.Message]:
@@ -82,6 +89,7 @@ def prepare(out: Path) -> None:
     frames, rep = burst(paper, DB, seed=2026)
     write_candump(out / "burst_in.log", frames, "vcan0", 1.0)
     write_candump(out / "model3_in.log", model3_frames(out), "vcan0", 1.0)
+    write_candump(out / "po_in.log", predict_only_frames(out), "vcan0", 1.0)
     (out / "burst_report.json").write_text(json.dumps({
         "random": rep.random_frames, "crafted": rep.crafted_forward + rep.crafted_backward,
         "total": rep.total, "sent": len(frames)}))
@@ -100,6 +108,14 @@ def model3_frames(out: Path) -> list:
     cmd = DB.sender().message("Command", {"Reset": 0, "ModelSel": 3, "EstimatorSel": 0,
                                           "AdaptCmd": 0})
     return sorted(frames + [(MODEL3_COMMAND_S, cmd)], key=lambda e: e[0])
+
+
+def predict_only_frames(out: Path) -> list:
+    """The paper scenario's first PO_WINDOW_S seconds with the force sensor's failures of
+    nte-bench replay's options (host_bench.cli.sensor_failures)."""
+    from host_bench.cli import sensor_failures
+    frames = [(t, m) for t, m in paper_frames(out) if t <= PO_WINDOW_S]
+    return sensor_failures(frames, DB, PO_COMMANDS, PO_FAULTS, PO_LOST)
 
 
 def _bad_traffic_frames() -> tuple[list, dict]:
@@ -319,12 +335,34 @@ def model3(out: Path) -> dict:
     return res
 
 
+def predict_only(out: Path) -> dict:
+    """Predict-only on the bus: the mirror fed what the node received (its own log, port clock
+    times: the commands' rate limit) must give what it sent, bit for bit, and its counters."""
+    recv = capture(out / "po.recv.log")
+    sent = capture(out / "po.sent.log")
+    mirror = NodeMirror(model=2).feed_all(recv)
+    est, par, bad = node_outputs(DB, sent)
+    res = compare(mirror, est, par)
+    res["output_e2e_errors"] = bad
+    res["mirror_events"] = mirror.events
+    res["mirror_predict"] = mirror.predict_counts
+    res["stats"] = json.loads((out / "po.stats.json").read_text())
+    frames = predict_only_frames(out)
+    res["sent"] = len(frames)
+    res["received"] = len(recv)
+    res["genuine_received"] = sorted((m.arbitration_id, bytes(m.data)) for m in recv) == \
+        sorted((m.arbitration_id, bytes(m.data)) for _, m in frames)
+    res["predicted"] = sum(1 - e.adapting for e in est)
+    return res
+
+
 def no_iface(out: Path) -> dict:
     return {"exit": int((out / "noif.exit").read_text()), "stderr": (out / "noif.err").read_text()}
 
 
 ANALYSE = {"full_rate": full_rate, "bad_traffic": bad_traffic, "cangen": cangen,
-           "burst": burst_case, "enobufs": enobufs, "no_iface": no_iface, "model3": model3}
+           "burst": burst_case, "enobufs": enobufs, "no_iface": no_iface, "model3": model3,
+           "predict_only": predict_only}
 
 
 def analyse(out: Path, case: str) -> dict:

@@ -18,6 +18,8 @@ compares with the reference after, on the host.
   equal the burst-free reference.
 - enobufs: send() fails with ENOBUFS for 1 s (LD_PRELOAD shim): counted, the node carries on.
 - no_iface: an absent interface gives exit status 4 and a clear message.
+- predict_only: the paper scenario's first 6.5 s with Command ForceSource model / sensor, a
+  SensorFault stretch and a lost force sensor: the node equals the mirror bit for bit.
 - model3: the first 5.5 s of phantom lab seed 101 (stage position, raw force with its tare) to a
   Model II node, a Command selecting Model III at 0.5 s (in the air): applied; the node's
   Estimate, Params (0..8) and Contact frames equal the mirror's bit for bit.
@@ -192,6 +194,22 @@ def test_model3_selected_by_command_equals_mirror(results: dict) -> None:
     assert len(r["surfaces_mm"]) == 1 and abs(r["surfaces_mm"][0] - 6.475) < 0.2
     hb = r["heartbeat_models"]
     assert hb and hb[-1] == 2 and set(hb) <= {1, 2} and hb == sorted(hb)
+
+
+def test_predict_only_on_the_bus_equals_mirror(results: dict) -> None:
+    """ForceSource model (2.0 s) and sensor (3.0 s) in tissue, SensorFault 4.0-4.5 s, the force
+    sensor lost 5.0-5.5 s, played in real time on vcan0: every genuine frame received, the
+    node's Estimate and Params frames equal the mirror's on what it received, and so do the
+    predict-only counters (three switches each way, steps on the depth stream)."""
+    r = _ok(results, "predict_only")
+    assert r["genuine_received"] and r["received"] == r["sent"]
+    _exact(r)
+    _events_equal_mirror(r)
+    st = r["stats"]
+    assert st["commands_applied"] == 2 and st["events"]["command_refused"] == 0
+    assert {k: st[k] for k in r["mirror_predict"]} == r["mirror_predict"]
+    assert st["predict_on"] == st["predict_off"] == 3 and st["predict_depth_steps"] > 50
+    assert r["predicted"] > 200 + 100 + 50
 
 
 def test_absent_interface(results: dict) -> None:
