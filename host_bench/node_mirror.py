@@ -232,7 +232,6 @@ class NodeMirror:
         self.bank.set_predict_only(po)
         self.step_t = t
         self.depth_stepped = on_depth
-        force = F32(0.0) if po else force
         o = self.bank.step(np.array([t * TICK_US], dtype=np.int64), np.array([d], dtype=F32),
                            np.array([v], dtype=F32), np.array([force], dtype=F32))
         self.stepped = True
@@ -283,10 +282,6 @@ class NodeMirror:
     # ------------------------------------------------------------------ force scheduling
     def _decide(self, t: int, force: np.float32, fault: bool = False) -> bool:
         timeout = self.depth_timeout_us // TICK_US
-        if self.depth_stepped and t <= self.step_t:
-            # the estimator predicted past this sample on the depth stream (sensor lost)
-            self._hold(t, force)
-            return True
         if not self.depth:
             if self.last_force_t is not None and self.last_force_t - t > timeout:
                 self._hold(t, force)
@@ -305,7 +300,9 @@ class NodeMirror:
         b = self.depth[-1]
         for a in reversed(self.depth):
             if a[0] <= t:
-                if t - a[0] > timeout:
+                # stale, or the estimator predicted past this sample on the depth stream (the
+                # sensor was lost: that step's depth sample is at or after t, so we are here)
+                if t - a[0] > timeout or (self.depth_stepped and t <= self.step_t):
                     self._hold(t, force)
                 elif a[0] == t:
                     self._step(t, force, a[1], a[2], fault)
@@ -386,10 +383,8 @@ class NodeMirror:
             return status, after, (raw_t, F32(F32(dr) * F32(0.001)), F32(F32(vr) * F32(0.01)))
         fr = int(sig["Force"])
         fault = int(sig.get("SensorFault", 0)) != 0
-        if not FORCE_RAW[0] <= fr <= FORCE_RAW[1]:
-            if not fault:
-                return "out_of_range", after, None
-            fr = 0   # flagged faulty: its value is not used, its range not checked
+        if not fault and not FORCE_RAW[0] <= fr <= FORCE_RAW[1]:
+            return "out_of_range", after, None   # flagged faulty: not checked (not used)
         return status, after, (raw_t, F32(F32(fr) * F32(0.0001)), F32(1.0 if fault else 0.0))
 
     def _newest(self, name: str) -> int | None:

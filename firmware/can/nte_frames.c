@@ -255,11 +255,9 @@ nte_frames_err_t nte_frames_decode_force(nte_e2e_rx_t* e2e, const uint8_t* data,
     }
     (void)nte_can_force_unpack(&m, data, length);
     out->sensor_fault = (m.sensor_fault != 0u);
-    if (!nte_can_force_force_is_in_range(m.force)) {
-        if (!out->sensor_fault) {
-            return nte_frames_err_range;
-        }
-        m.force = 0; /* flagged faulty: its value is not used, its range not checked */
+    /* flagged faulty: its value is not used, its range not checked */
+    if (!out->sensor_fault && !nte_can_force_force_is_in_range(m.force)) {
+        return nte_frames_err_range;
     }
     out->force_n = nte_can_force_force_decode(m.force);
     out->time_ticks = m.sensor_time;

@@ -147,7 +147,8 @@ typedef struct {
 /** Force sample (input). */
 typedef struct {
     float force_n;         /**< -50 .. 50 N, 0.1 mN resolution; with sensor_fault any value
-                                (a non-finite or out-of-range one is sent, and decoded, as 0). */
+                                (a non-finite or out-of-range one is sent as 0; a received
+                                raw value is not range-checked: up to +-52.4288 N). */
     uint16_t time_ticks;   /**< Same clock as the depth samples. */
     bool sensor_fault;     /**< The sensor's driver flags the sample bad (SensorFault). */
 } nte_frames_force_t;

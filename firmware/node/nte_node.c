@@ -340,24 +340,19 @@ static void nte_node_step(nte_node_t* self, const nte_node_force_t* f, float dep
     nte_sample_t s;
     nte_output_t o;
     nte_frames_estimate_t e;
-    const bool on_depth = f->on_depth;
-    const bool po = self->force_cmd_model || f->fault || on_depth;
-    if (po != self->predicting) {
-        if (po) {
-            self->counters.predict_on++;
-        } else {
-            self->counters.predict_off++;
-        }
-        self->predicting = po;
-    }
+    /* a step on the depth stream is flagged faulty too (nte_node_depth_predict) */
+    const bool po = self->force_cmd_model || f->fault;
+    self->counters.predict_on += (po && !self->predicting) ? 1u : 0u;
+    self->counters.predict_off += (!po && self->predicting) ? 1u : 0u;
+    self->predicting = po;
     (void)nte_set_predict_only(&self->est, po);
     self->have_step = true;
     self->step_t = f->t;
-    self->depth_stepped = on_depth;
+    self->depth_stepped = f->on_depth;
     s.t_us = (int64_t)f->t * (int64_t)NTE_NODE_TICK_US;
     s.depth_mm = (nte_real_t)depth_mm;
     s.velocity_mm_s = (nte_real_t)velocity_mm_s;
-    s.force_n = po ? (nte_real_t)0.0f : (nte_real_t)f->force_n;
+    s.force_n = (nte_real_t)f->force_n; /* not read in predict-only */
     const uint64_t t0 = self->port.now_us(self->port.ctx);
     (void)nte_step(&self->est, &s, &o);
     const uint64_t dt = self->port.now_us(self->port.ctx) - t0;
@@ -389,11 +384,6 @@ static void nte_node_step(nte_node_t* self, const nte_node_force_t* f, float dep
 static int nte_node_decide(nte_node_t* self, const nte_node_force_t* f)
 {
     const int32_t timeout = (int32_t)(self->cfg.depth_timeout_us / NTE_NODE_TICK_US);
-    if (self->depth_stepped && (nte_node_tdiff(f->t, self->step_t) <= 0)) {
-        /* the estimator predicted past this sample on the depth stream (sensor lost) */
-        nte_node_hold(self);
-        return 1;
-    }
     if (self->depth_count == 0u) {
         /* no depth yet: wait until the force samples span more than the timeout */
         if (nte_node_tdiff(self->last_force_t, f->t) > timeout) {
@@ -426,7 +416,10 @@ static int nte_node_decide(nte_node_t* self, const nte_node_force_t* f)
     for (uint32_t age = 0u; age < self->depth_count; age++) {
         const nte_node_depth_t* a = nte_node_depth_at(self, age);
         if (nte_node_tdiff(a->t, f->t) <= 0) {
-            if (nte_node_tdiff(f->t, a->t) > timeout) {
+            /* stale, or the estimator predicted past this sample on the depth stream (the
+             * sensor was lost: that step's depth sample is at or after t_f, so we are here) */
+            if ((nte_node_tdiff(f->t, a->t) > timeout) ||
+                (self->depth_stepped && (nte_node_tdiff(f->t, self->step_t) <= 0))) {
                 nte_node_hold(self);
             } else if (a->t == f->t) {
                 nte_node_step(self, f, a->depth_mm, a->velocity_mm_s);
@@ -451,14 +444,14 @@ static int nte_node_decide(nte_node_t* self, const nte_node_force_t* f)
  * since the last force sample, none waiting -- is bridged by a step on the depth stream: an
  * entry of the force queue at t marked on_depth (decided like a force sample at a depth
  * sample's own time, so one call site steps the estimator). */
-static void nte_node_depth_predict(nte_node_t* self, uint32_t t)
+static bool nte_node_depth_predict(nte_node_t* self, uint32_t t)
 {
     const int32_t timeout = (int32_t)(self->cfg.depth_timeout_us / NTE_NODE_TICK_US);
     const int32_t period = (int32_t)(NTE_NODE_PREDICT_PERIOD_US / NTE_NODE_TICK_US);
     if (!self->have_force || (self->force_count > 0u) || !self->depth_since_force ||
         (nte_node_tdiff(t, self->depth_since_force_t) <= timeout) ||
         (self->have_step && (nte_node_tdiff(t, self->step_t) < period))) {
-        return;
+        return false;
     }
     nte_node_force_t* f = &self->force[self->force_head];
     f->t = t;
@@ -467,6 +460,7 @@ static void nte_node_depth_predict(nte_node_t* self, uint32_t t)
     f->on_depth = true;
     self->force_count = 1u;
     self->counters.predict_depth_steps++;
+    return true;
 }
 
 static void nte_node_process_forces(nte_node_t* self)
@@ -537,7 +531,7 @@ static nte_frames_err_t nte_node_decode_sample(uint32_t stream, nte_e2e_rx_t* rx
         if (err == nte_frames_ok) {
             in->raw_t = f.time_ticks;
             in->a = f.force_n;
-            in->b = f.sensor_fault ? 1.0f : 0.0f;
+            in->b = (float)(uint32_t)f.sensor_fault;
         }
     }
     return err;
@@ -574,23 +568,25 @@ static void nte_node_store(nte_node_t* self, uint32_t stream, uint32_t t, float 
         }
         self->counters.rx_accepted[stream]++;
         nte_node_process_forces(self);
-        nte_node_depth_predict(self, t);
-    } else {
-        if (self->force_count >= (uint32_t)NTE_NODE_FORCE_QUEUE) {
-            nte_node_count(self, nte_node_ev_queue_overflow);
-            return;
+        if (nte_node_depth_predict(self, t)) {
+            nte_node_process_forces(self); /* the step on the depth stream */
         }
-        self->have_force = true;
-        self->last_force_t = t;
-        self->depth_since_force = false;
-        const uint32_t k = (self->force_head + self->force_count) % (uint32_t)NTE_NODE_FORCE_QUEUE;
-        self->force[k].t = t;
-        self->force[k].force_n = a;
-        self->force[k].fault = b > 0.5f;
-        self->force[k].on_depth = false;
-        self->force_count++;
-        self->counters.rx_accepted[stream]++;
+        return;
     }
+    if (self->force_count >= (uint32_t)NTE_NODE_FORCE_QUEUE) {
+        nte_node_count(self, nte_node_ev_queue_overflow);
+        return;
+    }
+    self->have_force = true;
+    self->last_force_t = t;
+    self->depth_since_force = false;
+    const uint32_t k = (self->force_head + self->force_count) % (uint32_t)NTE_NODE_FORCE_QUEUE;
+    self->force[k].t = t;
+    self->force[k].force_n = a;
+    self->force[k].fault = b > 0.5f;
+    self->force[k].on_depth = false;
+    self->force_count++;
+    self->counters.rx_accepted[stream]++;
     nte_node_process_forces(self);
 }
 

@@ -124,9 +124,7 @@ nte_err_t nte_step(nte_t* self, const nte_sample_t* sample, nte_output_t* out)
     if (!valid) {
         self->last.status = NTE_STATUS_REJECTED;
     }
-    if (cfg->predict_only) {
-        self->last.status |= NTE_STATUS_PREDICT_ONLY;
-    }
+    self->last.status |= cfg->predict_only ? NTE_STATUS_PREDICT_ONLY : 0U;
     publish_contact(self);
 #if NTE_ROBUST_BUFFER_LEN > 0
     if (cfg->estimator == nte_estimator_robust) {

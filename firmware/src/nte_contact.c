@@ -65,20 +65,21 @@ void nte_contact_step(nte_t* self, const nte_real_t x, const nte_real_t v, const
     const nte_real_t kt = cc->k_sigma * sigma;
     const nte_real_t thr = (kt > cc->floor_n) ? kt : cc->floor_n;
     const nte_real_t e = f - c->tare;
-    const bool air = !c->in_contact;
-    const bool known = nte_isfinite(cc->surface_mm);
-    /* predict-only: the force is not looked at (nte.h THE PREDICT-ONLY MODE) */
+    /* predict-only: the force is not looked at (nte.h THE PREDICT-ONLY MODE): nothing is
+     * learned or detected in the air */
     const bool po = self->cfg.predict_only;
+    const bool air = !c->in_contact && !po;
+    const bool known = nte_isfinite(cc->surface_mm);
     bool enter = false;
     bool learn = false;
     bool leave = false;
     if (known) {
         const bool below = x > cc->surface_mm;
-        enter = air && below;
-        learn = air && !below && !po;
+        enter = !c->in_contact && below;
+        learn = air && !below;
         leave = c->in_contact && !below;
     } else {
-        if (air && !po) {
+        if (air) {
             const bool inward = v > self->cfg.v_still_mm_s;
             const bool armed = c->n >= cc->learn_samples;
             /* the onset segment: inward samples above the tare, up to this one */

@@ -96,6 +96,7 @@ static void restart_buffer(nte_robust_t* rb)
     rb->buf[ROW_L][0] = rb->anchor[0];
     rb->buf[ROW_V][0] = rb->anchor[1];
     rb->buf[ROW_F][0] = rb->anchor[2];
+    rb->tainted = false;
 }
 
 /* RobustEstimator._record for a sample inside the tissue (or entering it). */
@@ -327,11 +328,12 @@ uint32_t nte_robust_step(nte_t* self, const nte_sample_t* sample, const bool val
     const bool leaving = at_surface && rb->inside;
     if (entering) {
         restart_buffer(rb);
-        rb->tainted = false;
     }
     /* an insertion during which predict-only was on is neither recorded further nor refined
      * (nte.h THE PREDICT-ONLY MODE) */
-    rb->tainted = rb->tainted || self->cfg.predict_only;
+    if (self->cfg.predict_only) {
+        rb->tainted = true;
+    }
     if (valid && (rb->inside || entering) && !rb->tainted) {
         record(rb, (uint32_t)self->cfg.robust.buffer_len, sample);
     }

@@ -224,14 +224,15 @@ static void test_sensor_fault_and_force_source(void** state)
     assert_true(fabsf(out.force_n) < 1e-9f);
     assert_int_equal(nte_frames_encode_force(&over_unflagged, &l.tx, l.frame),
                      nte_frames_err_range);
-    /* a received raw force beyond the DBC range with SensorFault set is accepted (as 0) */
+    /* a received raw force beyond the DBC range with SensorFault set is accepted (its value
+     * is not used) */
     memset(l.frame, 0, 8);
-    l.frame[3] = 0x7Fu; /* Force raw 0x7F000 >> ... = 520192 > 500000 */
+    l.frame[3] = 0x7Fu; /* Force raw 0x7F << 12 = 520192 > 500000 */
     l.frame[6] = 0x01u;
     assert_int_equal(nte_e2e_protect(&l.tx, l.frame, 8), nte_e2e_ok);
     assert_int_equal(nte_frames_decode_force(&l.rx, l.frame, 8, &out, NULL, NULL), nte_frames_ok);
     assert_true(out.sensor_fault);
-    assert_true(fabsf(out.force_n) < 1e-9f);
+    assert_near(out.force_n, 52.0192, 1e-3);
     l.frame[6] = 0x00u;
     assert_int_equal(nte_e2e_protect(&l.tx, l.frame, 8), nte_e2e_ok);
     assert_int_equal(nte_frames_decode_force(&l.rx, l.frame, 8, &out, NULL, NULL),
