@@ -361,7 +361,7 @@ struct nte_can_command_t {
     uint8_t adapt_cmd;
 
     /**
-     * 0 = keep, 1 = sensor: identify from the force sensor (ends a commanded predict-only; the sensor's own faults still switch automatically), 2 = model alone: predict-only (the force is not read, the parameters identified so far are kept, an Estimate per Depth frame) until ForceSource 1 or a model change, reset or restart. Accepted in tissue (a failing sensor must be bridged mid-insertion).
+     * 0 = keep, 1 = sensor: identify from the force sensor (ends a commanded predict-only; the sensor's own faults still switch automatically), 2 = model alone: predict-only (the force is not read, the parameters identified so far are kept, Estimate.Adapting 0) until ForceSource 1; it outlives model changes and resets. Accepted in tissue (a failing sensor must be bridged mid-insertion).
      *
      * Range: 0..2 (0..2 -)
      * Scale: 1
@@ -373,7 +373,7 @@ struct nte_can_command_t {
 /**
  * Signals in message Estimate.
  *
- * Estimate after each force measurement update (200 Hz), in the order of the force samples; in predict-only mode (Adapting = 0) after each Depth frame instead (1 kHz), the force samples being unread. Id offset 0x10.
+ * Estimate after each force measurement update (200 Hz), in the order of the force samples (also in predict-only mode, Adapting = 0, the force then unread); while the force sensor is lost (no Force frame for longer than the node's depth timeout as Depth frames go on) after a Depth frame every 5 ms of sensor time. Id offset 0x10.
  *
  * All signal values are as on the CAN bus.
  */
