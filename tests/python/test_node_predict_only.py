@@ -161,3 +161,45 @@ def test_model3_phantom_sensor_fault_prediction(tmp_path: Path, phantom) -> None
     assert first.sum() >= 3 and early <= PHANTOM_FIRST_50MS_MAX_N
     # the prediction stays a force of the tissue: positive while going in, finite, bounded
     assert np.all(np.isfinite(f1)) and np.all(np.abs(f1) <= 50.0)
+
+
+def test_bench_options_build_the_failures(tmp_path: Path) -> None:
+    """nte-bench replay --force-source / --sensor-fault / --sensor-lost: parsed (bad values
+    refused, exit 2), and sensor_failures builds the frames: Force frames in the fault span
+    flagged (value kept, CRC valid), those of the lost span gone, one Command per time with
+    counters 0, 1, ... and ForceSource 2 / 1; frames without a failure unchanged."""
+    from host_bench.cli import build_parser
+    p = build_parser()
+    a = p.parse_args(["replay", "x.csv", "--out", str(tmp_path / "o"), "--force-source",
+                      "2:model", "--force-source", "3.5:sensor", "--sensor-fault", "4:4.5",
+                      "--sensor-lost", "5:5.5"])
+    assert a.force_source == [(2.0, "model"), (3.5, "sensor")]
+    assert a.sensor_fault == [(4.0, 4.5)] and a.sensor_lost == [(5.0, 5.5)]
+    for bad in (["--force-source", "2:nope"], ["--force-source", "x:model"],
+                ["--sensor-fault", "5:4"], ["--sensor-lost", "-1:2"]):
+        with pytest.raises(SystemExit) as e:
+            p.parse_args(["replay", "x.csv", "--out", "o", *bad])
+        assert e.value.code == 2
+    csv = tmp_path / "s.csv"
+    csv.write_text("t_s,depth_mm,force_n\n" + "".join(
+        f"{k * 0.005:.3f},{max(0.0, k * 0.05 - 1.0):.3f},{0.01 * k:.4f}\n" for k in range(1400)))
+    clean = scenario_frames(str(csv), DB, 1000.0)
+    frames = sensor_failures(clean, DB, a.force_source, a.sensor_fault, a.sensor_lost)
+    fid, cid = DB.frame_id("Force"), DB.frame_id("Command")
+    rx = DB.receiver()
+    cmds, flagged, n_force = [], 0, 0
+    for t, m in frames:
+        name, sig, status = rx.decode(m.arbitration_id, bytes(m.data))
+        assert sig is not None, (t, name, status)
+        if m.arbitration_id == cid:
+            cmds.append((t, m.data[1] & 0x0F, int(sig["ForceSource"])))
+        elif m.arbitration_id == fid:
+            n_force += 1
+            assert not 5.0 <= t < 5.5
+            flagged += int(sig["SensorFault"])
+            assert bool(sig["SensorFault"]) == (4.0 <= t < 4.5)
+    assert cmds == [(2.0, 0, 2), (3.5, 1, 1)]
+    assert flagged == 100 and n_force == 1400 - 100
+    keep = {(t, bytes(m.data)) for t, m in clean
+            if m.arbitration_id != fid or not (4.0 <= t < 5.5)}
+    assert keep <= {(t, bytes(m.data)) for t, m in frames}
