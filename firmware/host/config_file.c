@@ -66,7 +66,9 @@ int nte_config_file_export_text(const nte_export_t* e, char* buf, size_t cap)
     put(&t, "    \"candidates\": %u,\n", e->replay_candidates);
     put_real(&t, "    ", "rmse_n", e->replay_rmse_n, 0);
     put_real(&t, "    ", "final_rmse_n", e->replay_final_rmse_n, 0);
-    put_real(&t, "    ", "peak_n", e->replay_peak_n, 1);
+    put_real(&t, "    ", "peak_n", e->replay_peak_n, 0);
+    put_real(&t, "    ", "fit_rmse_n", e->fit_rmse_n, 0);
+    put(&t, "    \"fit_passes\": %u\n", e->fit_passes);
     put(&t, "  }%s\n", ((e->model == 3) || e->contact) ? "," : "");
     if (e->model == 3) {
         put(&t, "  \"model3\": {\n    \"direction_memory\": %s,\n",

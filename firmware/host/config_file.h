@@ -12,7 +12,7 @@
 typedef struct nte_export_t {
     const char* source;  /**< "nte-run" */
     int model;
-    double params[7];    /**< the chosen estimates, the fixed ones at their nominal */
+    double params[7];    /**< the chosen estimates fitted, the fixed ones at their nominal */
     double sd[7];        /**< 0 for the fixed ones */
     double r_n2;
     size_t samples;
@@ -22,6 +22,8 @@ typedef struct nte_export_t {
     double replay_rmse_n;       /**< its RMSE against force - tare, N */
     double replay_final_rmse_n; /**< the final estimates' RMSE, N */
     double replay_peak_n;       /**< max |force - tare|, N */
+    double fit_rmse_n;          /**< the fitted values' replay RMSE, N (export_refine.h) */
+    unsigned fit_passes;        /**< the fit's replays */
     /* Model III */
     int direction_memory;
     double presliding_mm;

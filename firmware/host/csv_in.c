@@ -374,3 +374,11 @@ void nte_central_difference(const double* t, const double* x, const size_t n, do
     }
     v[n - 1U] = (x[n - 1U] - x[n - 2U]) / (t[n - 1U] - t[n - 2U]);
 }
+
+void nte_trial_sample(const nte_trial_t* tr, size_t k, int force_ignored, nte_sample_t* s)
+{
+    s->t_us = (int64_t)floor((tr->t_s[k] * 1e6) + 0.5);
+    s->depth_mm = (nte_real_t)tr->depth_mm[k];
+    s->velocity_mm_s = (nte_real_t)tr->velocity_mm_s[k];
+    s->force_n = (force_ignored != 0) ? (nte_real_t)0 : (nte_real_t)tr->force_n[k];
+}

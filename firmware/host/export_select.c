@@ -1,11 +1,13 @@
 /*
  * --export-config's choice of parameter set: the snapshot that replays the record best from
- * depth alone.  Twin: reference_py/tools/export_select.py.
+ * depth alone, fitted to it.  Twin: reference_py/tools/export_select.py.
  */
 #include "export_select.h"
-#include "starts.h"
+#include "export_replay.h"
 
 #include <math.h>
+#include <stdbool.h>
+#include <stdlib.h>
 #include <string.h>
 
 size_t nte_export_candidate_sample(size_t j, size_t n)
@@ -40,25 +42,11 @@ void nte_export_snapshot_values(const nte_export_snapshot_t* s, const double fix
     }
 }
 
-/* The configuration a reader of the exported file builds (nte_run.c main): the exported values
- * as the nominal (nte_set_nominal, as main does); the strengths as given; predict-only; the
- * known surface.  Returns -1 when the values are refused (not expected: the run accepted
- * values of the same form). */
-static int reader_config(const nte_config_t* run_cfg, const double params[7], const double g[2],
-                         size_t n_g, double surface_mm, nte_config_t* cfg)
+static void keep_snapshot(const nte_export_snapshot_t* s, const double fixed[7], int model,
+                          nte_export_choice_t* out)
 {
-    *cfg = *run_cfg;
-    if (nte_set_nominal(cfg, params) != 0) {
-        return -1;
-    }
-    for (size_t k = 0U; k < n_g; k++) {
-        cfg->nominal[7U + k] = (nte_real_t)g[k];
-    }
-    cfg->predict_only = true;
-    if (cfg->contact.enabled) {
-        cfg->contact.surface_mm = (nte_real_t)surface_mm;
-    }
-    return 0;
+    nte_export_snapshot_values(s, fixed, model, out->params, out->sd, out->g, out->g_sd,
+                               out->g_name, &out->n_g);
 }
 
 int nte_export_choose(const nte_config_t* run_cfg, const nte_trial_t* tr,
@@ -70,48 +58,39 @@ int nte_export_choose(const nte_config_t* run_cfg, const nte_trial_t* tr,
     out->rmse_n = (double)NAN;
     out->final_rmse_n = (double)NAN;
     out->peak_n = (double)NAN;
+    out->fit_rmse_n = (double)NAN;
+    out->fit_passes = 0U;
+    keep_snapshot(&snaps[out->candidate], fixed, model, out);
     if (run_cfg->contact.enabled && !isfinite(surface_mm)) {
         return 0; /* no surface: a reader could not predict from this file either */
     }
+    double* res = malloc((tr->n > 0U ? tr->n : 1U) * sizeof(double));
+    if (res == NULL) {
+        return -1;
+    }
     double rmse[NTE_EXPORT_CANDIDATES];
-    double peak = 0.0;
+    double row[NTE_EXPORT_CANDIDATES][NTE_EXPORT_ROW_MAX];
+    size_t row_len = 7U;
+    nte_export_replay_t rep = {0U, 0.0};
     for (size_t c = 0U; c < NTE_EXPORT_CANDIDATES; c++) {
-        double params[7];
-        double sd[7];
-        double g[2];
-        double g_sd[2];
-        const char* g_name[2];
-        size_t n_g = 0U;
-        nte_export_snapshot_values(&snaps[c], fixed, model, params, sd, g, g_sd, g_name, &n_g);
-        nte_config_t cfg;
-        if ((reader_config(run_cfg, params, g, n_g, surface_mm, &cfg) != 0) ||
-            (nte_init(scratch, &cfg) != nte_err_ok)) {
+        nte_export_choice_t v;
+        keep_snapshot(&snaps[c], fixed, model, &v);
+        row_len = 7U + v.n_g;
+        for (size_t j = 0U; j < row_len; j++) {
+            row[c][j] = (j < 7U) ? v.params[j] : v.g[j - 7U];
+        }
+        if (nte_export_replay(run_cfg, tr, row[c], row_len, surface_mm, tare_n, scratch, res,
+                              &rep) != 0) {
+            free(res);
             return -1;
         }
         double sum = 0.0;
-        size_t counted = 0U;
-        for (size_t k = 0U; k < tr->n; k++) {
-            nte_sample_t s;
-            nte_output_t o;
-            s.t_us = (int64_t)floor((tr->t_s[k] * 1e6) + 0.5);
-            s.depth_mm = (nte_real_t)tr->depth_mm[k];
-            s.velocity_mm_s = (nte_real_t)tr->velocity_mm_s[k];
-            s.force_n = (nte_real_t)0; /* predict-only: the force is ignored */
-            (void)nte_step(scratch, &s, &o);
-            const double f = tr->force_n[k];
-            if (!isfinite(f)) {
-                continue;
-            }
-            const double target = f - tare_n;
-            const double e = (double)o.force_hat_n - target;
-            sum = sum + (e * e);
-            counted++;
-            if ((c == 0U) && (fabs(target) > peak)) {
-                peak = fabs(target);
-            }
+        for (size_t k = 0U; k < rep.counted; k++) {
+            sum = sum + (res[k] * res[k]);
         }
-        rmse[c] = (counted > 0U) ? sqrt(sum / (double)counted) : (double)NAN;
+        rmse[c] = (rep.counted > 0U) ? sqrt(sum / (double)rep.counted) : (double)NAN;
     }
+    free(res);
     size_t best = 0U;
     for (size_t c = 1U; c < NTE_EXPORT_CANDIDATES; c++) {
         if (rmse[c] < rmse[best]) {
@@ -121,6 +100,40 @@ int nte_export_choose(const nte_config_t* run_cfg, const nte_trial_t* tr,
     out->candidate = best;
     out->rmse_n = rmse[best];
     out->final_rmse_n = rmse[NTE_EXPORT_CANDIDATES - 1U];
-    out->peak_n = peak;
+    out->peak_n = rep.peak_n; /* the same over every replay: the record's */
+    keep_snapshot(&snaps[best], fixed, model, out);
+    if (rep.counted == 0U) {
+        return 0;
+    }
+    /* the fit moves the identified values: the seven's (Model I's beta is its fixed beta0),
+     * then every strength */
+    bool fitted[NTE_EXPORT_ROW_MAX] = {false, false, false, false, false, false, false, false,
+                                       false};
+    for (size_t j = 0U; (j < snaps[best].np) && (j < NTE_IDENTIFIED_MAX); j++) {
+        const size_t id = (size_t)snaps[best].pe[j].id;
+        if ((id < 7U) && !((model == 1) && (id == (size_t)nte_param_beta))) {
+            fitted[id] = true;
+        }
+    }
+    for (size_t j = 7U; j < row_len; j++) {
+        fitted[j] = true;
+    }
+    nte_export_fit_t fit;
+    if (nte_export_refine(run_cfg, tr, row[best], row_len, fitted, surface_mm, tare_n, scratch,
+                          &fit) != 0) {
+        return -1;
+    }
+    for (size_t j = 0U; j < row_len; j++) {
+        const double sd = fit.has_sd[j] ? fit.sd[j] : ((j < 7U) ? out->sd[j] : out->g_sd[j - 7U]);
+        if (j < 7U) {
+            out->params[j] = fit.row[j];
+            out->sd[j] = fitted[j] ? sd : out->sd[j];
+        } else {
+            out->g[j - 7U] = fit.row[j];
+            out->g_sd[j - 7U] = sd;
+        }
+    }
+    out->fit_rmse_n = fit.rmse_n;
+    out->fit_passes = fit.passes;
     return 0;
 }

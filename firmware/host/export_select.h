@@ -2,16 +2,17 @@
  * Which identified parameter set nte-run's --export-config writes: of EXPORT_CANDIDATES
  * snapshots of the estimates, evenly spaced over the record (the last sample among them), the
  * one whose replay from depth alone (--predict-only, as a reader of the file would run it) has
- * the smallest RMSE against the measured force less the tare.  Why: the bank's parameters at
- * any sample follow the last stretch of force one step ahead; the final ones are the
- * retraction's and miss the insertion when replayed.  Twin: reference_py/tools/export_select.py
- * (the same candidates, the same replays at 0 ULP, the same double sums in sample order, the
- * first smallest RMSE wins).
+ * the smallest RMSE against the measured force less the tare, fitted to the record by the same
+ * replay (export_refine.h).  Why: the bank's parameters at any sample follow the last stretch of
+ * force one step ahead; the final ones are the retraction's and miss the insertion when
+ * replayed.  Twin: reference_py/tools/export_select.py (the same candidates, the same replays
+ * at 0 ULP, the same double sums in sample order, the first smallest RMSE wins, the same fit).
  */
 #ifndef NTE_HOST_EXPORT_SELECT_H
 #define NTE_HOST_EXPORT_SELECT_H
 
 #include "csv_in.h"
+#include "export_refine.h"
 #include "nte.h"
 
 #include <stddef.h>
@@ -29,12 +30,21 @@ typedef struct nte_export_snapshot_t {
     nte_param_estimate_t pe[NTE_IDENTIFIED_MAX];
 } nte_export_snapshot_t;
 
-/** The replay's verdict. */
+/** The replay's verdict, and the values the export writes. */
 typedef struct nte_export_choice_t {
     size_t candidate;     /**< index into the snapshots */
     double rmse_n;        /**< RMSE of its replay against force - tare, N (NaN: not replayed) */
     double final_rmse_n;  /**< the same for the last snapshot (the final estimates), N */
     double peak_n;        /**< max |force - tare| over the record, N */
+    /* the values to export: the chosen snapshot's, fitted to the record (export_refine.h) */
+    double params[7];     /**< the seven force-model values, nte_param_id_t order */
+    double sd[7];         /**< their sd: the fit's for the fitted ones, 0 for the fixed ones */
+    size_t n_g;           /**< relaxation strengths identified (the branches in use) */
+    const char* g_name[2];
+    double g[2];
+    double g_sd[2];
+    double fit_rmse_n;    /**< RMSE of the fitted values' replay, N (NaN: not fitted) */
+    unsigned fit_passes;  /**< the fit's replays */
 } nte_export_choice_t;
 
 /** Sample index of snapshot j (0-based, j < NTE_EXPORT_CANDIDATES) in a record of n samples:
@@ -52,11 +62,12 @@ void nte_export_snapshot_values(const nte_export_snapshot_t* s, const double fix
 
 /**
  * Replay every snapshot from depth alone over `tr` with the run's configuration `run_cfg`
- * turned into a reader's (predict-only, the snapshot's values as the nominal, the known
- * surface `surface_mm` when the front end is on) and choose.  `scratch` is an estimator the
- * replays run in.  With the front end on and no surface found nothing is replayed: the last
- * snapshot is chosen and rmse_n is NaN.  Returns 0, or -1 when a replay's configuration is
- * refused (not expected: the run accepted the same values).
+ * turned into a reader's (export_replay.h), choose the best and fit its identified values to
+ * the record (export_refine.h); `out` holds the values to export.  `scratch` is an estimator
+ * the replays run in.  With the front end on and no surface found nothing is replayed: the
+ * last snapshot is exported as it is and rmse_n is NaN.  Returns 0, or -1 when a replay's
+ * configuration is refused or memory runs out (not expected: the run accepted values of the
+ * same form).
  */
 int nte_export_choose(const nte_config_t* run_cfg, const nte_trial_t* tr,
                       const nte_export_snapshot_t snaps[NTE_EXPORT_CANDIDATES],

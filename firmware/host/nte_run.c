@@ -497,11 +497,7 @@ static int run(const args_t* a, const out_t* out, const nte_trial_t* tr, nte_t* 
     for (size_t k = 0U; k < tr->n; k++) {
         nte_sample_t s;
         nte_output_t o;
-        s.t_us = (int64_t)floor((tr->t_s[k] * 1e6) + 0.5);
-        s.depth_mm = (nte_real_t)tr->depth_mm[k];
-        s.velocity_mm_s = (nte_real_t)tr->velocity_mm_s[k];
-        /* --predict-only: the force is ignored, the bank fed 0 N (never rejected) */
-        s.force_n = (a->predict_only != 0) ? (nte_real_t)0 : (nte_real_t)tr->force_n[k];
+        nte_trial_sample(tr, k, a->predict_only, &s);
         (void)nte_step(est, &s, &o);
         *last = o;
         counts->rejected += ((o.status & NTE_STATUS_REJECTED) != 0U) ? 1U : 0U;
@@ -548,20 +544,28 @@ static int run(const args_t* a, const out_t* out, const nte_trial_t* tr, nte_t* 
  * record best (export_select.h); temporary file, then rename */
 static int export_config(const args_t* a, const out_t* out, const nte_export_snapshot_t* snap,
                          const nte_export_choice_t* choice, const nte_config_t* cfg,
-                         const double values[7], size_t samples, const nte_output_t* last,
+                         size_t samples, const nte_output_t* last,
                          double r_n2)
 {
     nte_export_t e;
     (void)memset(&e, 0, sizeof e);
     e.source = "nte-run";
     e.model = a->model;
-    nte_export_snapshot_values(snap, values, a->model, e.params, e.sd, e.g, e.g_sd, e.g_name,
-                               &e.n_g);
+    (void)memcpy(e.params, choice->params, sizeof e.params);
+    (void)memcpy(e.sd, choice->sd, sizeof e.sd);
+    e.n_g = choice->n_g;
+    for (size_t k = 0U; k < choice->n_g; k++) {
+        e.g_name[k] = choice->g_name[k];
+        e.g[k] = choice->g[k];
+        e.g_sd[k] = choice->g_sd[k];
+    }
     e.replay_t_s = snap->t_s;
     e.replay_candidates = NTE_EXPORT_CANDIDATES;
     e.replay_rmse_n = choice->rmse_n;
     e.replay_final_rmse_n = choice->final_rmse_n;
     e.replay_peak_n = choice->peak_n;
+    e.fit_rmse_n = choice->fit_rmse_n;
+    e.fit_passes = choice->fit_passes;
     e.r_n2 = r_n2;
     e.samples = samples;
     e.direction_memory = cfg->direction_memory ? 1 : 0;
@@ -603,11 +607,14 @@ static void print_replay(const nte_export_snapshot_t* snap, const nte_export_cho
                "from depth alone\n");
         return;
     }
-    const double frac = (ch->peak_n > 0.0) ? (ch->rmse_n / ch->peak_n) : (double)INFINITY;
-    printf("exported the estimates at t = %.3f s (best of %u): replayed from depth alone, RMSE "
-           "%.4g N = %.1f %% of the peak %.4g N (the final estimates: %.4g N)\n",
-           snap->t_s, (unsigned)NTE_EXPORT_CANDIDATES, ch->rmse_n, 100.0 * frac, ch->peak_n,
-           ch->final_rmse_n);
+    /* export_select.exported_rmse: the fitted values', else the snapshot's */
+    const double rmse = isfinite(ch->fit_rmse_n) ? ch->fit_rmse_n : ch->rmse_n;
+    const double frac = (ch->peak_n > 0.0) ? (rmse / ch->peak_n) : (double)INFINITY;
+    printf("exported the estimates at t = %.3f s (best of %u) fitted to the record (%u passes): "
+           "replayed from depth alone, RMSE %.4g N = %.1f %% of the peak %.4g N (the snapshot "
+           "unfitted: %.4g N, the final estimates: %.4g N)\n",
+           snap->t_s, (unsigned)NTE_EXPORT_CANDIDATES, ch->fit_passes, rmse, 100.0 * frac,
+           ch->peak_n, ch->rmse_n, ch->final_rmse_n);
     if ((ch->peak_n > 0.0) && (frac > NTE_EXPORT_WARN_FRACTION)) {
         fprintf(stderr,
                 "warning: the exported parameters replay their own record from depth alone at "
@@ -765,11 +772,12 @@ int main(int argc, char** argv)
         static nte_t scratch; /* the replays of the candidates */
         if (nte_export_choose(&cfg, &tr, snaps, values, a.model, (double)last.surface_mm,
                               (double)last.tare_n, &scratch, &choice) != 0) {
-            fprintf(stderr, PROG ": error: --export-config: a candidate's replay was refused\n");
+            fprintf(stderr, PROG ": error: --export-config: a replay of the estimates was refused "
+                            "or memory ran out\n");
             rc = 1;
         } else {
-            rc = export_config(&a, &exp_out, &snaps[choice.candidate], &choice, &cfg, values,
-                               tr.n, &last,
+            rc = export_config(&a, &exp_out, &snaps[choice.candidate], &choice, &cfg, tr.n,
+                               &last,
                                (have_fc && fc.has_r_n2) ? fc.r_n2 : (double)cfg.r_n2);
         }
     }

@@ -110,9 +110,9 @@ from .export_select import EXPORT_CANDIDATES, ReplayChoice  # noqa: E402
 
 def export_config(run: EstimateRun, choice: "ReplayChoice") -> dict[str, object]:
     """What the estimator identified, as an estimator configuration (``--export-config``): the
-    seven force-model parameters and their standard deviations at the snapshot that replays the
-    record best from depth alone (export_select.py; the fixed ones at the preset, sd 0; Model
-    I's beta is its fixed beta0), the replay's figures, the noise variance and, for Model III,
+    seven force-model parameters and their standard deviations: the snapshot that replays the
+    record best from depth alone, fitted to it (export_select.py, export_refine.py; the fixed
+    ones at the preset, sd 0; Model I's beta is its fixed beta0), the replay's figures, the noise variance and, for Model III,
     its switches, constants and identified strengths; with the contact front end on, the
     surface and tare it ended with."""
     import math
@@ -127,7 +127,9 @@ def export_config(run: EstimateRun, choice: "ReplayChoice") -> dict[str, object]
         "replay": {"t_s": choice.t_s, "candidates": EXPORT_CANDIDATES,
                    "rmse_n": _json_real(choice.rmse_n),
                    "final_rmse_n": _json_real(choice.final_rmse_n),
-                   "peak_n": _json_real(choice.peak_n)}}
+                   "peak_n": _json_real(choice.peak_n),
+                   "fit_rmse_n": _json_real(choice.fit_rmse_n),
+                   "fit_passes": choice.fit_passes}}
     if run.model == 3:
         out["model3"] = {
             "direction_memory": cfg.direction_memory, "presliding_mm": cfg.presliding_mm,

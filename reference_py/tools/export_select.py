@@ -1,4 +1,4 @@
-"""Which identified parameter set ``--export-config`` writes: the one that replays best.
+"""Which parameter set ``--export-config`` writes: the snapshot that replays best, fitted.
 
 Why.  The bank identifies online: its parameters at any sample are the ones that follow the last
 stretch of force one step ahead, not a model of the whole record.  On a measured-like insertion
@@ -7,13 +7,14 @@ differs by direction), and replayed from depth alone they miss the insertion by 
 peak force — which is what ``--config FILE --predict-only`` (the paper's atlas) would then do on
 the next trial.  So the export keeps EXPORT_CANDIDATES snapshots of the estimates, evenly spaced
 over the record (the last sample among them), replays each from depth alone exactly as a reader
-of the exported file would (the same nominal values, Model III constants, known surface, the
-force ignored), and writes the snapshot with the smallest RMSE against the measured force less
-the tare; the replay's figures go into the file's ``replay`` block and onto stdout.
+of the exported file would (export_replay.py: the same nominal values, Model III constants,
+known surface, the force ignored), takes the snapshot with the smallest RMSE against the
+measured force less the tare, and fits its identified values to the record by the same replay
+(export_refine.py).  The replay's figures go into the file's ``replay`` block and onto stdout.
 
 The C twin is firmware/host/export_select.c: the same candidates, the same replays (C ≡
-reference at 0 ULP), the same sum of squares in sample order in double, the first smallest
-RMSE wins.  A reader ignores the ``replay`` block (estconfig.py: unknown keys are ignored).
+reference at 0 ULP), the same double sums in sample order, the first smallest RMSE wins, the
+same fit.  A reader ignores the ``replay`` block (estconfig.py: unknown keys are ignored).
 """
 from __future__ import annotations
 
@@ -22,11 +23,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..bank import FilterBank
 from ..config import EstimatorConfig
-from ..fmath import real_for
 from ..params import IDX, PARAM_NAMES, RELAX_NAMES, Preset
-from .csvio import Trial, time_us
+from .csvio import Trial
+from .export_refine import refine
+from .export_replay import replay, sum_in_order
 
 #: snapshots replayed per export (the bank is batched over them: one pass over the record)
 EXPORT_CANDIDATES = 24
@@ -45,6 +46,8 @@ class ReplayChoice:
     params_sd: list[float]   # their sd (0 for the fixed ones)
     strengths: dict[str, float]
     strengths_sd: dict[str, float]
+    fit_rmse_n: float = math.nan  # RMSE of the fitted values' replay (export_refine.py), N
+    fit_passes: int = 0           # the fit's replays
 
 
 def candidate_samples(n: int) -> list[int]:
@@ -69,47 +72,43 @@ def snapshot(names: tuple[str, ...], values: np.ndarray, sds: np.ndarray, preset
 
 
 def choose_export(run, cfg: EstimatorConfig, preset: Preset, trial: Trial) -> ReplayChoice:
-    """Replay every candidate snapshot of ``run`` from depth alone and keep the best."""
+    """Replay every candidate snapshot of ``run`` from depth alone, keep the best and fit it
+    to the record (export_refine.py)."""
     n = len(run.t_s)
     samples = candidate_samples(n)
     snaps = [snapshot(run.names, run.params[k], run.params_sd[k], preset, cfg) for k in samples]
     surface, tare = math.nan, 0.0
-    pred_cfg = replace(cfg, predict_only=True)
     if run.contact is not None:
         surface, tare = float(run.contact[0][-1]), float(run.contact[1][-1])
-        pred_cfg = replace(pred_cfg, contact=replace(cfg.contact, surface_mm=surface))
     if run.contact is not None and not math.isfinite(surface):
         # no surface found: a reader could not predict from this file either (it needs one)
         return _choice(len(samples) - 1, samples, snaps, run, math.nan, math.nan, math.nan)
     # every row in the order a reader builds its nominal values: the seven, then the strengths
-    rows = [list(p) + [st[nm] for nm in RELAX_NAMES if nm in st] for p, _, st, _ in snaps]
-    R = real_for(run.precision)
-    bank = FilterBank(R, pred_cfg, rows)
-    K = len(rows)
-    t_us = time_us(trial.t_s)
-    depth, vel = R.arr(trial.depth_mm), R.arr(trial.velocity_mm_s)
-    zero_force = R.arr(np.zeros(K))
-    sums = [0.0] * K
-    counted = 0
-    peak = 0.0
-    for k in range(n):
-        o = bank.step(np.full(K, t_us[k]), np.full(K, depth[k], dtype=R.dtype),
-                      np.full(K, vel[k], dtype=R.dtype), zero_force)
-        f = float(trial.force_n[k])
-        if not math.isfinite(f):
-            continue
-        target = f - tare
-        counted += 1
-        peak = max(peak, abs(target))
-        for c in range(K):
-            e = float(o.force_hat[c]) - target
-            sums[c] = sums[c] + e * e
-    rmse = [math.sqrt(s / counted) if counted else math.nan for s in sums]
+    rows = [_row(p, st) for p, _, st, _ in snaps]
+    rep = replay(cfg, run.precision, trial, rows, surface, tare)
+    counted = rep.residuals.shape[1]
+    rmse = [math.sqrt(sum_in_order(r * r) / counted) if counted else math.nan
+            for r in rep.residuals]
     best = 0
-    for c in range(1, K):
+    for c in range(1, len(rows)):
         if rmse[c] < rmse[best]:
             best = c
-    return _choice(best, samples, snaps, run, rmse[best], rmse[-1], peak)
+    ch = _choice(best, samples, snaps, run, rmse[best], rmse[-1], rep.peak_n)
+    if not counted:
+        return ch
+    fit = refine(cfg, run.precision, trial, rows[best], run.names, surface, tare)
+    params = fit.row[:len(PARAM_NAMES)]
+    params_sd = [fit.sd.get(j, ch.params_sd[j]) if PARAM_NAMES[j] in run.names
+                 else ch.params_sd[j] for j in range(len(PARAM_NAMES))]
+    strengths = {nm: fit.row[len(PARAM_NAMES) + k] for k, nm in enumerate(ch.strengths)}
+    strengths_sd = {nm: fit.sd.get(len(PARAM_NAMES) + k, ch.strengths_sd[nm])
+                    for k, nm in enumerate(ch.strengths)}
+    return replace(ch, params=params, params_sd=params_sd, strengths=strengths,
+                   strengths_sd=strengths_sd, fit_rmse_n=fit.rmse_n, fit_passes=fit.passes)
+
+
+def _row(params: list[float], strengths: dict[str, float]) -> list[float]:
+    return list(params) + [strengths[nm] for nm in RELAX_NAMES if nm in strengths]
 
 
 def _choice(c: int, samples: list[int], snaps: list, run, rmse: float, final_rmse: float,
@@ -119,22 +118,30 @@ def _choice(c: int, samples: list[int], snaps: list, run, rmse: float, final_rms
                         params_sd, strengths, strengths_sd)
 
 
+def exported_rmse(ch: ReplayChoice) -> float:
+    """The RMSE of what was exported: the fitted values', else the chosen snapshot's."""
+    return ch.fit_rmse_n if math.isfinite(ch.fit_rmse_n) else ch.rmse_n
+
+
 def replay_summary(ch: ReplayChoice) -> str:
     """The line the estimating tools print about the export (stdout)."""
     if not math.isfinite(ch.rmse_n):
         return ("exported the final estimates: no surface was found, so they were not "
                 "replayed from depth alone")
-    frac = ch.rmse_n / ch.peak_n if ch.peak_n > 0 else math.inf
-    return (f"exported the estimates at t = {ch.t_s:.3f} s (best of {EXPORT_CANDIDATES}): "
-            f"replayed from depth alone, RMSE {ch.rmse_n:.4g} N = {100 * frac:.1f} % of the "
-            f"peak {ch.peak_n:.4g} N (the final estimates: {ch.final_rmse_n:.4g} N)")
+    rmse = exported_rmse(ch)
+    frac = rmse / ch.peak_n if ch.peak_n > 0 else math.inf
+    return (f"exported the estimates at t = {ch.t_s:.3f} s (best of {EXPORT_CANDIDATES}) "
+            f"fitted to the record ({ch.fit_passes} passes): replayed from depth alone, RMSE "
+            f"{rmse:.4g} N = {100 * frac:.1f} % of the peak {ch.peak_n:.4g} N (the snapshot "
+            f"unfitted: {ch.rmse_n:.4g} N, the final estimates: {ch.final_rmse_n:.4g} N)")
 
 
 def replay_warning(ch: ReplayChoice) -> str | None:
     """A tool that did not fit its data says so (stderr; the file is written all the same)."""
-    if not (math.isfinite(ch.rmse_n) and ch.peak_n > 0):
+    rmse = exported_rmse(ch)
+    if not (math.isfinite(rmse) and ch.peak_n > 0):
         return None
-    frac = ch.rmse_n / ch.peak_n
+    frac = rmse / ch.peak_n
     if frac <= REPLAY_WARN_FRACTION:
         return None
     return (f"warning: the exported parameters replay their own record from depth alone at "
@@ -143,4 +150,4 @@ def replay_warning(ch: ReplayChoice) -> str | None:
 
 
 __all__ = ["EXPORT_CANDIDATES", "REPLAY_WARN_FRACTION", "ReplayChoice", "candidate_samples",
-           "choose_export", "replay_summary", "replay_warning"]
+           "choose_export", "exported_rmse", "replay_summary", "replay_warning"]

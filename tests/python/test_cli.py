@@ -1,5 +1,6 @@
 """nte-ref from the outside: simulate, estimate, plots, and every bad-input message."""
 import csv
+import math
 import os
 import stat
 import subprocess
@@ -299,9 +300,11 @@ def test_c_run_writes_by_the_safe_writer_rules(sim_csv, tmp_path):
 
 
 def test_estimate_exports_what_it_identified(sim_csv, tmp_path, capsys):
-    """--export-config: the identified parameters of the estimate file's row at the snapshot
-    that replayed best (the "replay" block's t_s; export_select.py), the fixed ones at the
-    preset, Model III's constants and strengths."""
+    """--export-config: the identified parameters start from the estimate file's row at the
+    snapshot that replayed best (the "replay" block's t_s; export_select.py) and are fitted to
+    the record (export_refine.py: a replay no worse than the snapshot's; every value within a
+    factor 7^20 of its start); the fixed ones at the preset; Model III's constants and
+    strengths."""
     import json
     from reference_py.params import PARAM_NAMES, PRESETS
     out, js = tmp_path / "e.csv", tmp_path / "cfg.json"
@@ -314,9 +317,15 @@ def test_estimate_exports_what_it_identified(sim_csv, tmp_path, capsys):
     chosen = [dict(zip(header.split(","), r.split(","))) for r in rows
               if float(r.split(",", 1)[0]) == cfg["replay"]["t_s"]]
     assert len(chosen) == 1
+    rep = cfg["replay"]
+    assert rep["fit_rmse_n"] <= rep["rmse_n"] and 1 <= rep["fit_passes"] <= 20
+    moved = 0
     for name in ("sigma0", "sigma1", "sigma2", "f1", "beta", "g_fast", "g_slow"):
         got = cfg["params"].get(name, cfg["model3"]["strengths"].get(name))
-        assert got == float(chosen[0][name]), name
+        start = float(chosen[0][name])
+        assert got > 0 and abs(math.log(got / start)) <= 20 * math.log(7.0), name
+        moved += got != start
+    assert moved == 0 if rep["fit_rmse_n"] == rep["rmse_n"] else moved > 0
     assert cfg["params"]["alpha"] == PRESETS["paper-10mms"].params.alpha
     assert cfg["params_sd"]["f2"] == 0.0
     g = cfg["model3"]["strengths"]

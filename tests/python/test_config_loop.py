@@ -282,14 +282,27 @@ def _replay_rmse(record: Path, prediction: Path, tare: float) -> tuple[float, fl
     return (total / len(f)) ** 0.5, peak
 
 
+def _with_row(exported: Path, rows: np.ndarray, k: int, model: str, out: Path) -> Path:
+    """The exported file with the identified values replaced by the estimate file's row k."""
+    c = json.loads(exported.read_text())
+    for name in ("sigma0", "sigma1", "sigma2", "f1", "beta"):
+        c["params"][name] = float(rows[name][k])
+    if model == "3":
+        for name in c["model3"]["strengths"]:
+            c["model3"]["strengths"][name] = float(rows[name][k])
+    out.write_text(json.dumps(c))
+    return out
+
+
 @pytest.mark.parametrize("model", ["2", "3"])
-def test_export_keeps_the_snapshot_that_replays_best(loop, model):
-    """--export-config writes the snapshot of the estimates whose replay from depth alone fits
-    the record best, and its "replay" block is exactly what a reader gets: predicting the same
-    record with the exported file gives its rmse_n to the bit, and the final estimates (the
-    last candidate) give its final_rmse_n; the choice is never worse than the final one; the
-    tools print the figures and warn on stderr when the replay misses by more than 15 % of the
-    peak force."""
+def test_export_keeps_the_snapshot_that_replays_best_and_fits_it(loop, model):
+    """--export-config starts from the snapshot of the estimates whose replay from depth alone
+    fits the record best and fits its identified values to the record (export_refine.py); its
+    "replay" block is exactly what a reader gets: predicting the same record with the exported
+    file gives fit_rmse_n to the bit, the chosen snapshot gives rmse_n and the final estimates
+    final_rmse_n; the fit never makes the replay worse and here halves it at least; the tools
+    print the figures and warn on stderr when the replay misses by more than 15 % of the peak
+    force."""
     d = loop["dir"]
     exported = d / f"sel{model}.json"
     r = ref(str(loop["p2"]), "--model", model, "--contact", "on", "--out",
@@ -297,48 +310,40 @@ def test_export_keeps_the_snapshot_that_replays_best(loop, model):
     assert r.returncode == 0, r.stderr
     cfg = json.loads(exported.read_text())
     rep = cfg["replay"]
-    assert rep["candidates"] == 24
-    assert 0.0 < rep["rmse_n"] <= rep["final_rmse_n"]
+    assert rep["candidates"] == 24 and 1 <= rep["fit_passes"] <= 20
+    assert 0.0 < rep["fit_rmse_n"] <= 0.5 * rep["rmse_n"] and rep["rmse_n"] <= rep["final_rmse_n"]
     pred = d / f"selp{model}.csv"
     assert ref(str(loop["p2"]), "--config", str(exported), "--predict-only", "--out",
                str(pred)).returncode == 0
     rmse, peak = _replay_rmse(loop["p2"], pred, cfg["tare_n"])
-    assert rmse == rep["rmse_n"] and peak == rep["peak_n"]
-    # the final estimates, exported by hand from the estimate file's last row
+    assert rmse == rep["fit_rmse_n"] and peak == rep["peak_n"]
+    # the chosen snapshot and the final estimates, exported by hand from the estimate file
     rows = np.genfromtxt(d / f"sel{model}.csv", delimiter=",", names=True)
-    final = json.loads(exported.read_text())
-    for name in ("sigma0", "sigma1", "sigma2", "f1", "beta"):
-        final["params"][name] = float(rows[name][-1])
-    if model == "3":
-        for name in final["model3"]["strengths"]:
-            final["model3"]["strengths"][name] = float(rows[name][-1])
-    (d / f"final{model}.json").write_text(json.dumps(final))
-    assert ref(str(loop["p2"]), "--config", str(d / f"final{model}.json"), "--predict-only",
-               "--out", str(pred)).returncode == 0
-    assert _replay_rmse(loop["p2"], pred, cfg["tare_n"])[0] == rep["final_rmse_n"]
-    # every candidate replayed (by the C twin, bit for bit the reference's): the exported one
-    # has the smallest RMSE, and it is the first to have it
     from reference_py.tools.export_select import candidate_samples
+    chosen = [k for k in candidate_samples(len(rows)) if rows["t_s"][k] == rep["t_s"]]
+    assert len(chosen) == 1
+    for k, key in ((chosen[0], "rmse_n"), (len(rows) - 1, "final_rmse_n")):
+        assert crun(str(loop["p2"]), "--config",
+                    str(_with_row(exported, rows, k, model, d / "hand.json")), "--predict-only",
+                    "--out", str(pred)).returncode == 0
+        assert _replay_rmse(loop["p2"], pred, cfg["tare_n"])[0] == rep[key], key
+    # every candidate replayed (by the C twin, bit for bit the reference's): the chosen one
+    # has the smallest RMSE, and it is the first to have it
     rmses = []
     for k in candidate_samples(len(rows)):
-        c = json.loads(exported.read_text())
-        for name in ("sigma0", "sigma1", "sigma2", "f1", "beta"):
-            c["params"][name] = float(rows[name][k])
-        if model == "3":
-            for name in c["model3"]["strengths"]:
-                c["model3"]["strengths"][name] = float(rows[name][k])
-        (d / "cand.json").write_text(json.dumps(c))
-        assert crun(str(loop["p2"]), "--config", str(d / "cand.json"), "--predict-only",
+        assert crun(str(loop["p2"]), "--config",
+                    str(_with_row(exported, rows, k, model, d / "cand.json")), "--predict-only",
                     "--out", str(pred)).returncode == 0
         rmses.append(_replay_rmse(loop["p2"], pred, cfg["tare_n"])[0])
     best = int(np.argmin(rmses))
     assert rmses[best] == rep["rmse_n"] and rows["t_s"][candidate_samples(len(rows))[best]] == \
         rep["t_s"]
     assert rep["rmse_n"] < rep["final_rmse_n"]      # on this record the choice matters
-    # the figures on stdout; the warning when the fit is poor
-    assert "best of 24" in r.stdout and "% of the peak" in r.stdout
+    # the figures on stdout; the warning when the fitted replay is poor
+    assert "best of 24" in r.stdout and "fitted to the record" in r.stdout
+    assert f"= {100 * rep['fit_rmse_n'] / rep['peak_n']:.1f} % of the peak" in r.stdout
     assert ("warning: the exported parameters replay their own record" in r.stderr) == \
-        (rep["rmse_n"] > 0.15 * rep["peak_n"])
+        (rep["fit_rmse_n"] > 0.15 * rep["peak_n"])
 
 
 def test_a_coefficient_fitted_at_zero_is_written_readable(tmp_path):

@@ -1,0 +1,38 @@
+/*
+ * The replay a reader of an exported configuration gets: the model alone, from depth alone.
+ * --export-config judges parameter sets by what `--config FILE --predict-only` would do with
+ * them on the record they came from: the run's configuration turned into a reader's (the set
+ * as the nominal values, predict-only, the surface the front end ended with), the record
+ * stepped with the force ignored, the prediction compared with the measured force less the
+ * tare.  export_select.c replays the run's snapshots this way, export_refine.c perturbed sets.
+ * Twin: reference_py/tools/export_replay.py (C ≡ reference at 0 ULP).
+ */
+#ifndef NTE_HOST_EXPORT_REPLAY_H
+#define NTE_HOST_EXPORT_REPLAY_H
+
+#include "csv_in.h"
+#include "nte.h"
+
+#include <stddef.h>
+
+/** Entries of a replayed row: the seven force-model values, then up to two strengths. */
+#define NTE_EXPORT_ROW_MAX 9U
+
+/** One replay's verdict. */
+typedef struct nte_export_replay_t {
+    size_t counted; /**< samples with a finite force (the others are not compared) */
+    double peak_n;  /**< max |force - tare| over them, N */
+} nte_export_replay_t;
+
+/**
+ * Replay `row` (row_len entries: the seven values in nte_param_id_t order, then the relaxation
+ * strengths in use) over `tr` with the run's configuration `run_cfg` turned into a reader's.
+ * Writes prediction - (force - tare) of every counted sample, in sample order, into `res`
+ * (capacity tr->n; may be NULL when only the verdict is wanted) and returns 0, or -1 when the
+ * row is refused as a configuration.  `scratch` is the estimator the replay runs in.
+ */
+int nte_export_replay(const nte_config_t* run_cfg, const nte_trial_t* tr, const double* row,
+                      size_t row_len, double surface_mm, double tare_n, nte_t* scratch,
+                      double* res, nte_export_replay_t* out);
+
+#endif /* NTE_HOST_EXPORT_REPLAY_H */
