@@ -113,10 +113,10 @@ def sensor_failures(frames: list[tuple[float, can.Message]], db: NteDatabase,
                     commands: Sequence[tuple[float, str]] = (),
                     faults: Sequence[tuple[float, float]] = (),
                     lost: Sequence[tuple[float, float]] = ()) -> list[tuple[float, can.Message]]:
-    """`frames` with the force sensor's failures of replay's options (host_bench.faults):
+    """`frames` with the force sensor's failures of replay's options (host_bench.sensor_failures):
     SensorFault on the Force frames in the `faults` spans, the Force frames of the `lost` spans
     left out, ForceSource Commands at the `commands` times (s, scenario time)."""
-    from .faults import force_source_commands, sensor_fault, sensor_lost
+    from .sensor_failures import force_source_commands, sensor_fault, sensor_lost
     if faults:
         frames = sensor_fault(frames, db, list(faults))
     if lost:
