@@ -53,14 +53,22 @@ def results(tmp_path_factory: pytest.TempPathFactory, vcan_env: dict) -> dict:
     node = _built("nte-node")
     shim = _built("libnte_enobufs_shim.so")
     node_vcan_driver.prepare(out)                       # on the host
-    env = dict(vcan_env, NTE_ENOBUFS_SHIM=str(shim), WITH_VCAN_TIMEOUT="900")
+    # every case in one command inside the kernel; under QEMU without KVM on a loaded 2-core
+    # host they take several times their real time, hence the generous limit (a limit, not a
+    # measure: nothing here judges speed)
+    env = dict(vcan_env, NTE_ENOBUFS_SHIM=str(shim), WITH_VCAN_TIMEOUT="2400")
     r = subprocess.run([str(ROOT / "host_bench/with-vcan"), "bash",
                         "tests/python/node_vcan_bus.sh", str(node), str(out), *CASES],
                        cwd=ROOT, env=env, capture_output=True, text=True,
                        timeout=3600)                    # includes waiting for the shared kernel
     res = {}
     for c in CASES:                                     # on the host again
-        res[c] = node_vcan_driver.analyse(out, c)
+        try:
+            res[c] = node_vcan_driver.analyse(out, c)
+        except (AssertionError, OSError, ValueError, IndexError) as e:
+            # a capture cut short (the command stopped early) reads as a broken record: say
+            # why, with the command's own status and output, in the test that needs it
+            res[c] = {"error": f"{type(e).__name__}: {e}"}
         if "error" in res[c] and r.returncode not in (0, 1):
             res[c]["error"] += f"\nwith-vcan exit {r.returncode}: {r.stdout}{r.stderr}"
     return res
