@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Iterable
+from typing import Iterable, Iterator
 
 import numpy as np
 
@@ -549,22 +549,29 @@ class NodeMirror:
         return self
 
 
+def _outputs_raw(db: NteDatabase, messages: Iterable, names: tuple[str, ...],
+                 bad: list[int]) -> Iterator[tuple[str, dict]]:
+    """(name, raw signal values) of the node's frames of the given messages, in order; a frame
+    that fails its E2E check is counted in bad[0] and skipped."""
+    rx = db.receiver()
+    for m in messages:
+        name, sig, _ = rx.decode(m.arbitration_id, bytes(m.data))
+        if name not in names:
+            continue
+        if sig is None:
+            bad[0] += 1
+            continue
+        yield name, db.db.get_message_by_name(name).decode(bytes(m.data), scaling=False,
+                                                           decode_choices=False)
+
+
 def node_outputs(db: NteDatabase, messages: Iterable) -> tuple[list[EstimateOut], list[ParamOut], int]:
     """The node's Estimate and Params frames (in order) as raw values; and the count of output
     frames that failed their E2E check."""
-    rx = db.receiver()
     est: list[EstimateOut] = []
     par: list[ParamOut] = []
-    bad = 0
-    for m in messages:
-        name, sig, status = rx.decode(m.arbitration_id, bytes(m.data))
-        if name not in ("Estimate", "Params"):
-            continue
-        if sig is None:
-            bad += 1
-            continue
-        raw = db.db.get_message_by_name(name).decode(bytes(m.data), scaling=False,
-                                                     decode_choices=False)
+    bad = [0]
+    for name, raw in _outputs_raw(db, messages, ("Estimate", "Params"), bad):
         if name == "Estimate":
             est.append(EstimateOut(int(raw["ForceEst"]), int(raw["Innovation"]), int(raw["Z"]),
                                    int(raw["InTissue"]), int(raw["Adapting"]),
@@ -575,27 +582,16 @@ def node_outputs(db: NteDatabase, messages: Iterable) -> tuple[list[EstimateOut]
                      "GSlow")[j]
             sname = vname + "StdLog10"
             par.append(ParamOut(j, F32(raw[vname]), int(raw[sname])))
-    return est, par, bad
+    return est, par, bad[0]
 
 
 def contact_outputs(db: NteDatabase, messages: Iterable) -> tuple[list[ContactOut], int]:
     """The node's Contact frames (in order) as raw values; and how many failed E2E."""
-    rx = db.receiver()
-    out: list[ContactOut] = []
-    bad = 0
-    for m in messages:
-        name, sig, _ = rx.decode(m.arbitration_id, bytes(m.data))
-        if name != "Contact":
-            continue
-        if sig is None:
-            bad += 1
-            continue
-        raw = db.db.get_message_by_name(name).decode(bytes(m.data), scaling=False,
-                                                     decode_choices=False)
-        out.append(ContactOut(int(raw["ContactState"]), int(raw["SurfaceValid"]),
-                              int(raw["ActiveModel"]), int(raw["Surface"]), int(raw["Tare"]),
-                              int(raw["Layer"])))
-    return out, bad
+    bad = [0]
+    out = [ContactOut(int(raw["ContactState"]), int(raw["SurfaceValid"]), int(raw["ActiveModel"]),
+                      int(raw["Surface"]), int(raw["Tare"]), int(raw["Layer"]))
+           for _, raw in _outputs_raw(db, messages, ("Contact",), bad)]
+    return out, bad[0]
 
 
 def compare(mirror: NodeMirror, est: list[EstimateOut], par: list[ParamOut],
