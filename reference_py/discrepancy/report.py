@@ -28,27 +28,153 @@ def _clean(x: Any) -> Any:
     return x
 
 
-def _effect_params(res: Result, k: int) -> dict[str, Any]:
-    step = res.steps[k]
-    f = step.fit
-    out: dict[str, Any] = {}
+#: the linear coefficients of each effect that the report lists (per trial ones end in "[i]")
+_EFFECT_COEFS = {"velocity_friction": ("b_visc",), "direction_asymmetry": ("dC_out", "dsigma2_out"),
+                 "layer_puncture": ("layer_drop",), "sensor_drift": ("drift",),
+                 "dwell_relaxation": ("relax_",), "reversal_presliding": ("presliding_",)}
+_COEF_UNITS = {"b_visc": "N s/mm^2", "dC_out": "N/mm", "dsigma2_out": "N/mm", "layer_drop": "N",
+               "drift": "N/s"}
+
+
+def _effect_values(res: Result, name: str) -> list[dict[str, Any]]:
+    """The parameters of one named effect in the final model (the one estimator_config.json
+    exports): name, unit, value, standard error (nonlinear ones), whether the config carries it.
+    The report's effect parameters and the config's ``effects`` block are both read from here."""
+    f = res.fits[-1]
     se = f.nl_se or {}
-    for par in EFFECT_NL[step.effect]:
-        out[f"{par.name} [{par.unit}]"] = f.nl[par.name]
-        if par.name in se:
-            out[f"{par.name} standard error [{par.unit}]"] = se[par.name]
-    lab = {"velocity_friction": ["b_visc"], "direction_asymmetry": ["dC_out", "dsigma2_out"],
-           "layer_puncture": ["layer_drop"], "sensor_drift": ["drift"],
-           "dwell_relaxation": [c for c in f.coef if c.startswith("relax_")],
-           "reversal_presliding": [c for c in f.coef if c.startswith("presliding_")]}
-    units = {"b_visc": "N s/mm^2", "dC_out": "N/mm", "dsigma2_out": "N/mm", "layer_drop": "N",
-             "drift": "N/s"}
-    for c in lab.get(step.effect, []):
-        out[f"{c} [{units.get(c, 'N')}]"] = f.coef[c]
-    if step.effect == "direction_asymmetry":
-        out["retraction/insertion sigma2 ratio"] = (f.coef["sigma2"] + f.coef["dsigma2_out"]) / \
-            f.coef["sigma2"] if f.coef["sigma2"] else None
+    rows: list[dict[str, Any]] = []
+    for par in EFFECT_NL[name]:
+        rows.append({"name": par.name, "unit": par.unit, "value": f.nl[par.name],
+                     "se": se.get(par.name), "export": not par.per_trial})
+    for lab, c in f.coef.items():
+        key = lab.split("[")[0]
+        if any(key == w or (w.endswith("_") and key.startswith(w))
+               for w in _EFFECT_COEFS.get(name, ())):
+            rows.append({"name": lab, "unit": _COEF_UNITS.get(key, "N"), "value": c, "se": None,
+                         "export": key in _COEF_UNITS and not lab.endswith("]")})
+    if name == "direction_asymmetry":
+        rows.append({"name": "retraction/insertion sigma2 ratio", "unit": "",
+                     "value": (f.coef["sigma2"] + f.coef["dsigma2_out"]) / f.coef["sigma2"]
+                     if f.coef["sigma2"] else None, "se": None, "export": False})
+    if name == "dwell_relaxation":
+        rel = [dw["relative_decay"] for t in res.evidence["per_trial"]  # type: ignore[union-attr]
+               for dw in t["dwells"]]
+        rows.append({"name": "relative_decay_median", "unit": "1",
+                     "value": float(np.median(rel)) if rel else None, "se": None, "export": True})
+    return rows
+
+
+def _params_dict(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for r in rows:
+        u = f" [{r['unit']}]" if r["unit"] else ""
+        out[f"{r['name']}{u}"] = r["value"]
+        if r["se"] is not None:
+            out[f"{r['name']} standard error{u}"] = r["se"]
     return out
+
+
+#: a fitted value within this fraction of its search range (log range for log-searched values)
+#: from a bound counts as at the bound (the fit stops near, rarely on, a bound)
+AT_BOUND_FRAC = 0.01
+#: a linear coefficient within this of its lower bound is at it (the bounded solve puts it there)
+AT_BOUND_LIN = 1e-9
+
+
+def check_parameter(name: str, value: float, lo: float, hi: float, se: float | None = None,
+                    log: bool = True, fit: str = "final", trial: str | None = None
+                    ) -> list[dict[str, Any]]:
+    """Flags of one fitted value: ``at_bound`` when it sits at (within AT_BOUND_FRAC of the
+    range of) a bound of its fit, ``se_above_value`` when its standard error exceeds it (only
+    for positive, log-searched values: a signed correction near 0 has no scale to compare)."""
+    out: list[dict[str, Any]] = []
+    base = {"parameter": name, "trial": trial, "value": float(value), "fit": fit}
+    if not math.isfinite(value):
+        return out
+    for side, b in (("lower", lo), ("upper", hi)):
+        if not math.isfinite(b):
+            continue
+        if math.isfinite(lo) and math.isfinite(hi) and hi > lo:
+            if log and lo > 0 and value > 0:
+                d = abs(math.log(value) - math.log(b)) / (math.log(hi) - math.log(lo))
+            else:
+                d = abs(value - b) / (hi - lo)
+            hit = d <= AT_BOUND_FRAC
+        else:
+            hit = (value <= b + AT_BOUND_LIN) if side == "lower" else (value >= b - AT_BOUND_LIN)
+        if hit:
+            out.append({**base, "kind": "at_bound", "bound": float(b), "side": side})
+    if log and se is not None and math.isfinite(se) and se > abs(value):
+        out.append({**base, "kind": "se_above_value", "se": float(se)})
+    return out
+
+
+def parameter_flags(res: Result) -> list[dict[str, Any]]:
+    """Every reported value at a bound of its fit or with a standard error above it: the base
+    model's (base fit: shape, surfaces, sigma0, sigma1, sigma2, layer coefficients) and the named
+    effects' (final fit), under the names and in the units the report shows them."""
+    from .effects import BASE_NL, BETA0_DEFAULT
+    out: list[dict[str, Any]] = []
+    names = [p.name for p in res.preps]
+
+    def nl_flags(f: Any, specs: Any, fit_name: str) -> None:
+        se = f.nl_se or {}
+        for par in specs:
+            vals = np.atleast_1d(np.asarray(f.nl[par.name], dtype=float))
+            ses = np.atleast_1d(np.asarray(se[par.name], dtype=float)) if par.name in se \
+                else np.full(len(vals), np.nan)
+            for i, v in enumerate(vals):
+                tr = names[i] if par.per_trial and i < len(names) else None
+                s_i = float(ses[i]) if i < len(ses) and np.isfinite(ses[i]) else None
+                out.extend(check_parameter(par.name, float(v), par.lo, par.hi, s_i, par.log,
+                                           fit_name, tr))
+
+    def lin_flags(coef: dict[str, float], keep: Any, fit_name: str) -> None:
+        for lab, c in coef.items():
+            if not keep(lab):
+                continue
+            lo, hi = lin_bound(lab)
+            name, scale = lab.split("[")[0], 1.0
+            if name in ("A", "C"):      # shown as sigma0 = A / beta, sigma1 = C / beta
+                name, scale = {"A": "sigma0", "C": "sigma1"}[name], 1.0 / BETA0_DEFAULT
+            tr = None
+            if lab.endswith("]"):
+                i = int(lab[lab.index("[") + 1:-1])
+                tr = names[i] if i < len(names) else str(i)
+            for fl in check_parameter(name, c, lo, hi, None, False, fit_name, tr):
+                fl["value"] = c * scale
+                if "bound" in fl:
+                    fl["bound"] = fl["bound"] * scale
+                out.append(fl)
+
+    base = res.fits[0]
+    nl_flags(base, BASE_NL, "base")
+    lin_flags(base.coef, lambda lab: lab.split("[")[0] in ("A", "C", "sigma2")
+              or lab.startswith("layer") and lab.split("[")[0] != "layer_drop", "base")
+    final = res.fits[-1]
+    for step in res.steps:
+        nl_flags(final, EFFECT_NL[step.effect], "final")
+        keys = _EFFECT_COEFS.get(step.effect, ())
+        lin_flags(final.coef, lambda lab, keys=keys: any(
+            lab.split("[")[0] == w or (w.endswith("_") and lab.startswith(w)) for w in keys),
+            "final")
+    return out
+
+
+def gap_chain(res: Result) -> list[dict[str, Any]]:
+    """The models of the gap table, in the order the effects were added: the base (one layer
+    when ruptures were detected), the multi-layer base (+layer_puncture), then one model per
+    added effect; each with its errors per phase.  Effect j's gap is chain[j] -> chain[j+1]."""
+    chain = []
+    if any(res.layers) and res.errors_one_layer is not None:
+        chain.append({"model": "base", "errors": res.errors_one_layer})
+        chain.append({"model": "+layer_puncture", "errors": res.errors[0]})
+    else:
+        chain.append({"model": "base (with its layers)" if any(res.layers) else "base",
+                      "errors": res.errors[0]})
+    for step, err in zip(res.steps, res.errors[1:]):
+        chain.append({"model": f"+{step.effect}", "errors": err})
+    return chain
 
 
 def bounds_table() -> dict[str, Any]:
@@ -121,7 +247,11 @@ def verdict(res: Result) -> dict[str, Any]:
 
 
 def build(res: Result, inputs: list[str]) -> dict[str, Any]:
-    """The whole report as a JSON-ready dict."""
+    """The whole report as a JSON-ready dict.  Its ``export`` is estimator_config.json itself
+    (written from it), and report.md is rendered from this dict alone: one source for all
+    three files."""
+    chain = gap_chain(res)
+    off = len(chain) - 1 - len(res.steps)     # 1 when layer_puncture has its own column
     effects = []
     if any(res.layers):
         effects.append({
@@ -131,40 +261,85 @@ def build(res: Result, inputs: list[str]) -> dict[str, Any]:
             "score": {"local": "force drops seen in the first insertion; the multi-layer base "
                       "model switches to each layer's own parameters there"},
             "acts_on_phases": list(EFFECT_PHASES["layer_puncture"]),
-            "errors_before": res.errors[0], "errors_after": res.errors[0]})
+            "errors_before": chain[0]["errors"] if off else None,
+            "errors_after": chain[off]["errors"]})
+    values = {step.effect: _effect_values(res, step.effect) for step in res.steps}
     for k, step in enumerate(res.steps):
         effects.append({
             "name": step.effect, "meaning": EFFECT_MEANING[step.effect],
-            "parameters": _effect_params(res, k),
+            "parameters": _params_dict(values[step.effect]),
             "magnitude": _magnitude(res, k), "share_of_explained_gap": _share(res, k),
             "score": {"delta_bic_local": step.delta_bic, "heldout_gain": step.heldout_gain,
                       "own_phase_gain": step.own_phase_gain, "local_evidence": step.local},
             "acts_on_phases": list(EFFECT_PHASES[step.effect]),
-            "errors_before": res.errors[k], "errors_after": res.errors[k + 1],
+            "errors_before": chain[k + off]["errors"], "errors_after": chain[k + off + 1]["errors"],
             "candidates": step.candidates})
-    effects_named = res.named
+    export = _export(res, values)
     base = base_paramset(res.fits[0])
+    base_se = res.fits[0].nl_se or {}
+    surf = np.atleast_1d(res.fits[0].nl["surface"])
     trials = [{"name": p.name, "samples": int(len(p.t_s)), "surface_offset_mm": p.surface_mm,
-               "tare_n": p.tare_n, "noise_n": p.noise_n, "puncture_depth_mm": p.puncture_mm,
-               "speed_mm_s": p.speed_mm_s,
+               "surface_correction_mm": float(surf[i]),
+               "surface_fitted_mm": export["surface_mm"][i],
+               "tare_n": export["tare_n"][i], "noise_n": p.noise_n,
+               "puncture_depth_mm": p.puncture_mm, "speed_mm_s": p.speed_mm_s,
                "phase_samples": {ph: int(np.count_nonzero(p.phase == j))
-                                 for j, ph in enumerate(PHASES)}} for p in res.preps]
+                                 for j, ph in enumerate(PHASES)}}
+              for i, p in enumerate(res.preps)]
     return _clean({
-        "inputs": inputs, "named": effects_named, "effects": effects,
+        "inputs": inputs, "named": res.named, "effects": effects,
         "verdict": verdict(res), "bounds": bounds_table(),
-        "bound_violations": bound_violations(res), "local_evidence": res.evidence,
-        "validation": res.validation,
+        "bound_violations": bound_violations(res), "flags": parameter_flags(res),
+        "local_evidence": res.evidence, "validation": res.validation,
         "base_model": {"model": "II (alpha, f2 from the joint Model I fit; see DISCREPANCY.md), "
                                 "plus one parameter set per detected layer",
-                       "params": base.__dict__,
+                       "params": export["params"], "fitted_params": base.__dict__,
+                       "floored": export["floored"],
+                       "shape": {k: {"value": float(res.fits[0].nl[k]),
+                                     "se": float(base_se[k]) if k in base_se else None}
+                                 for k in ("p", "g0", "alpha")},
                        "layer_coefficients": {k: v for k, v in res.fits[0].coef.items()
                                               if k.startswith("layer")},
                        "zero_in_air": True},
         "trials": trials, "skipped": [{"name": n, "reason": r} for n, r in res.skipped],
         "shared_fit": len(res.preps) > 1, "heldout_scheme": res.heldout_scheme,
-        "errors": res.errors, "final_round": res.last_round,
+        "gap_models": [c["model"] for c in chain], "errors": [c["errors"] for c in chain],
+        "final_round": res.last_round,
         "residual_stats_before": res.stats_before, "residual_stats_after": res.stats_after,
-        "speed_direction": res.speed_dir, "notes": res.notes, "runtime_s": res.runtime_s})
+        "speed_direction": res.speed_dir, "notes": res.notes, "runtime_s": res.runtime_s,
+        "export": export})
+
+
+def _flag_lines(flags: list[dict[str, Any]]) -> list[str]:
+    """One line per flagged parameter and kind; the trials of a per-trial value on one line."""
+    groups: dict[tuple[Any, ...], list[dict[str, Any]]] = {}
+    for f in flags:
+        key = (f["parameter"], f["kind"], f.get("side"), f["fit"], f.get("trial") is None)
+        groups.setdefault(key, []).append(f)
+    out = []
+    for fs in groups.values():
+        if len(fs) == 1 or fs[0].get("trial") is None:
+            out += [_flag_text(f) for f in fs]
+            continue
+        f = fs[0]
+        vals = ", ".join(f"{g['trial']}: {_fmt(g['value'])}" for g in fs)
+        if f["kind"] == "at_bound":
+            out.append(f"{f['parameter']} ({vals}) at its {f['side']} bound {_fmt(f['bound'])} "
+                       f"({f['fit']} fit)")
+        else:
+            ses = ", ".join(f"{g['trial']}: {_fmt(g['se'])}" for g in fs)
+            out.append(f"{f['parameter']} ({vals}) with standard errors ({ses}) above the values "
+                       f"({f['fit']} fit)")
+    return out
+
+
+def _flag_text(f: dict[str, Any]) -> str:
+    who = f"{f['parameter']}" + (f"[{f['trial']}]" if f.get("trial") else "")
+    if f["kind"] == "at_bound":
+        return (f"{who} = {_fmt(f['value'])} at its {f['side']} bound {_fmt(f['bound'])} "
+                f"({f['fit']} fit)")
+    return (f"{who} = {_fmt(f['value'])} with standard error {_fmt(f['se'])} above it "
+            f"({f['fit']} fit)")
 
 
 def _fmt(x: Any) -> str:
@@ -188,17 +363,31 @@ def render_md(rep: dict[str, Any], figures: list[str]) -> str:
               f"final {_fmt(val['rmse_final_n'])} N, shrink {_fmt(val['shrink'])}", ""]
     if rep["bound_violations"]:
         L += ["Parameters outside their bounds: " + "; ".join(rep["bound_violations"]), ""]
+    if rep["flags"]:
+        L += [f"**Check these values ({len(rep['flags'])} flag(s)): at a bound of their fit, or "
+              "with a standard error above the value**", ""]
+        L += [f"- FLAG {t}" for t in _flag_lines(rep["flags"])] + [""]
+    else:
+        L += ["No fitted value is at a bound or has a standard error above it.", ""]
     L += [f"- {n}" for n in rep["notes"]]
     if rep["skipped"]:
         L += [""] + [f"- skipped {s['name']}: {s['reason']}" for s in rep["skipped"]]
-    L += ["", "## Trials", "", "| trial | samples | surface offset mm | tare N | noise N | "
-          "puncture mm | speed mm/s |", "|---|---|---|---|---|---|---|"]
+    L += ["", "## Trials", "", "| trial | samples | surface detected mm | surface correction mm "
+          "| surface fitted mm | tare N | noise N | puncture mm | speed mm/s |",
+          "|---|---|---|---|---|---|---|---|---|"]
     for t in rep["trials"]:
         L.append(f"| {t['name']} | {t['samples']} | {_fmt(t['surface_offset_mm'])} | "
+                 f"{_fmt(t['surface_correction_mm'])} | {_fmt(t['surface_fitted_mm'])} | "
                  f"{_fmt(t['tare_n'])} | {_fmt(t['noise_n'])} | {_fmt(t['puncture_depth_mm'])} "
                  f"| {_fmt(t['speed_mm_s'])} |")
-    L += ["", "## 1. Base model", ""]
-    L += [f"- {k} = {_fmt(v)}" for k, v in rep["base_model"]["params"].items()]
+    bm = rep["base_model"]
+    L += ["", "## 1. Base model", "", "As written to estimator_config.json:", ""]
+    for k, v in bm["params"].items():
+        fl = bm["floored"].get(k)
+        L.append(f"- {k} = {_fmt(v)}" + (f" (fitted {_fmt(fl['fitted'])}, floored)" if fl else ""))
+    L += ["", "Shape of the fit (normalised):", ""]
+    L += [f"- {k} = {_fmt(v['value'])}" + (f" ± {_fmt(v['se'])}" if v["se"] is not None else "")
+          for k, v in bm["shape"].items()]
     L += ["", "## 2. Residual of the base model per phase", "",
           "| phase | n | bias N | RMS N | trend N/s | decay N | period Hz | power share |",
           "|---|---|---|---|---|---|---|---|"]
@@ -215,7 +404,7 @@ def render_md(rep: dict[str, Any], figures: list[str]) -> str:
             L += [f"- magnitude {_fmt(e['magnitude']['rms_n'])} ± "
                   f"{_fmt(e['magnitude']['standard_error_n'])} N RMS, share of the explained gap "
                   f"{_fmt(e['share_of_explained_gap'])}"]
-        L += ["", "Parameters:"]
+        L += ["", "Parameters" + (" (final model, as exported):" if "magnitude" in e else ":")]
         L += [f"- {p} = {_fmt(v)}" for p, v in e["parameters"].items()]
         L += ["", "| candidate | delta BIC | held-out gain |", "|---|---|---|"]
         for c in e.get("candidates", []):
@@ -224,7 +413,7 @@ def render_md(rep: dict[str, Any], figures: list[str]) -> str:
     if not rep["effects"]:
         L += ["No candidate is significant: `none` (the base model explains the data).", ""]
     L += ["## 5. Gap before and after each added effect (RMSE / MAE, N)", ""]
-    models = ["base"] + [f"+{n}" for n in rep["named"] if n != "none"]
+    models = rep["gap_models"]
     L += ["| phase | " + " | ".join(models) + " |", "|---" * (len(models) + 1) + "|"]
     for ph in list(PHASES) + ["overall"]:
         cells = []
@@ -264,31 +453,15 @@ def readable_params(params: dict[str, float], noise_n: float, depth_max_mm: floa
     return out, floored
 
 
-def estimator_config(res: Result) -> dict[str, Any]:
-    """The fitted base model as an estimator configuration (schema in DISCREPANCY.md §7)."""
+def _export(res: Result, values: dict[str, list[dict[str, Any]]]) -> dict[str, Any]:
+    """The estimator configuration (schema in DISCREPANCY.md §7): the base fit's parameters,
+    surfaces and layers, and the named effects' shared parameters from ``values`` (the rows
+    the report's effect parameters come from)."""
     base = res.fits[0]
-    final = res.fits[-1]
-    eff: dict[str, Any] = {}
-    for step in res.steps:
-        e = step.effect
-        d: dict[str, Any] = {par.name: final.nl[par.name] for par in EFFECT_NL[e]
-                             if not par.per_trial}
-        for lab, c in final.coef.items():
-            key = lab.split("[")[0]
-            if lab.endswith("]"):
-                continue
-            if (e == "velocity_friction" and key == "b_visc") or \
-               (e == "direction_asymmetry" and key in ("dC_out", "dsigma2_out")) or \
-               (e == "layer_puncture" and key == "layer_drop") or \
-               (e == "sensor_drift" and key == "drift"):
-                d[key] = c
-        if e == "dwell_relaxation":
-            rel = [dw["relative_decay"] for t in res.evidence["per_trial"]
-                   for dw in t["dwells"]]
-            d["relative_decay_median"] = float(np.median(rel)) if rel else None
-        eff[e] = d
+    eff = {e: {r["name"]: r["value"] for r in rows if r["export"]}
+           for e, rows in values.items()}
     layers = []
-    for i, (p, t) in enumerate(zip(res.preps, res.evidence["per_trial"])):
+    for i, (p, t) in enumerate(zip(res.preps, res.evidence["per_trial"])):  # type: ignore
         coefs = {k.split("[")[0]: v for k, v in base.coef.items()
                  if k.startswith("layer") and k.endswith(f"[{i}]")}
         layers.append({"trial": p.name, "ruptures_mm": [r["depth_mm"] for r in t["ruptures"]],
@@ -300,12 +473,17 @@ def estimator_config(res: Result) -> dict[str, Any]:
     return _clean({
         "schema": CONFIG_SCHEMA, "source": "nte-discrepancy", "model": 2,
         "params": params, "floored": floored, "r_n2": noise ** 2, "noise_n": noise,
-        "surface_mm": [p.surface_mm + float(base.nl["surface"][i])
+        "surface_mm": [p.surface_mm + float(np.atleast_1d(base.nl["surface"])[i])
                        for i, p in enumerate(res.preps)],
         "tare_n": [p.tare_n for p in res.preps],
         "sign": {"force": [p.force_sign for p in res.preps],
                  "depth": [p.depth_sign for p in res.preps]},
         "layers": layers, "effects": eff})
+
+
+def estimator_config(res: Result) -> dict[str, Any]:
+    """The fitted base model as an estimator configuration: the report's ``export``."""
+    return dict(build(res, [])["export"])
 
 
 def write(res: Result, inputs: list[str], out: Path, with_figures: bool = True) -> dict[str, Any]:
@@ -324,6 +502,6 @@ def write(res: Result, inputs: list[str], out: Path, with_figures: bool = True) 
         outs.write_text(outs.add(out / "report.json", "--out"), json.dumps(rep, indent=1))
         outs.write_text(outs.add(out / "report.md", "--out"), render_md(rep, figs))
         outs.write_text(outs.add(out / "estimator_config.json", "--out"),
-                        json.dumps(estimator_config(res), indent=1))
+                        json.dumps(rep["export"], indent=1))
         outs.commit()
     return rep

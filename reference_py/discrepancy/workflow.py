@@ -68,6 +68,9 @@ class Result:
     layers: list[int] = field(default_factory=list)      # layers (ruptures) per trial
     unexplained: list[dict[str, float | str]] = field(default_factory=list)
     validation: dict[str, object] = field(default_factory=dict)
+    #: errors of the base model fitted with one layer (the ruptures ignored), when ruptures were
+    #: detected: the gap before ``layer_puncture`` (the multi-layer base, errors[0], is after it)
+    errors_one_layer: dict[str, dict[str, float]] | None = None
 
     @property
     def named(self) -> list[str]:
@@ -440,10 +443,11 @@ def run(trials: list[Trial], max_effects: int = len(VOCABULARY), force_sign: flo
     # local evidence first: it does not depend on any fit
     ev = evmod.collect(preps)
     rupt = [[r["depth_mm"] for r in t["ruptures"]] for t in ev["per_trial"]]  # type: ignore
-    grids, ys, phs = [], [], []
+    grids, ys, phs, fit_rows = [], [], [], []
     for p, rp in zip(preps, rupt):
         stride = int(np.ceil(len(p.t_s) / FIT_ROWS))
         rows = np.arange(0, len(p.t_s), stride)
+        fit_rows.append(rows)
         grids.append(_grid(p, rows, rp))
         ys.append(p.force_n[rows])
         phs.append(p.phase[rows])
@@ -550,10 +554,16 @@ def run(trials: list[Trial], max_effects: int = len(VOCABULARY), force_sign: flo
         val = _validate(grids, y, bnd, fits[-1], base_fit)
     except (np.linalg.LinAlgError, ValueError) as exc:
         val = {"scheme": f"failed: {exc}"}
+    one_layer = None
+    if any(rupt):
+        # the gap before layer_puncture: the same base fitted as one layer
+        g1 = [_grid(p, rows) for p, rows in zip(preps, fit_rows)]
+        f1 = _fit_base(g1, y, StateCache(FIT_SUBSTEPS))
+        one_layer = _errors(preps, _predict(preps, f1, [[] for _ in preps]))
     return Result(preps, skipped, scheme, fits, steps, last_round, preds, errors,
                   phase_stats(preps, res_before), phase_stats(preps, res_after),
                   speed_direction(preps, res_before), time.perf_counter() - t_start, notes,
-                  ev, [len(r) for r in rupt], unexpl, val)
+                  ev, [len(r) for r in rupt], unexpl, val, one_layer)
 
 
 def base_paramset(f: Fit):  # type: ignore[no-untyped-def]
