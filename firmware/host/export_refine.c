@@ -231,9 +231,9 @@ int nte_export_refine(const nte_config_t* run_cfg, const nte_trial_t* tr, const 
     }
     double row[NTE_EXPORT_ROW_MAX];
     (void)memcpy(row, start, row_len * sizeof row[0]);
-    static normal_t cur; /* static: three of them would crowd the stack */
-    static normal_t light_ne;
-    static normal_t heavy_ne;
+    normal_t cur;      /* the current values' SSE, A and b */
+    normal_t light_ne; /* the two candidate steps' */
+    normal_t heavy_ne;
     size_t m = 0U;
     size_t m2 = 0U;
     int rc = point_pass(run_cfg, tr, row, row_len, idx, P, surface_mm, tare_n, scratch, res,
