@@ -443,7 +443,9 @@ typedef struct nte_config_t {
     int32_t model;              /**< [argument] 1 (Model I), 2 (Model II) or 3 (Model III) */
     nte_schedule_t schedule;    /**< [argument] nte_schedule_all or _rotate */
     int32_t substeps;           /**< [1] RK3 sub-steps per sample, 1..16 (cost linear) */
-    int32_t gate_reopen_after;  /**< [10] after this many gated updates accept one, 1..1000 */
+    int32_t gate_reopen_after;  /**< [10; Model III 1] after this many gated updates in a row
+                                     accept one, 1..1000 (Model III: a lasting change such as
+                                     a tear passes after one refused sample) */
     bool sign_inflation;        /**< [true] inflate R where the smooth sign may be wrong */
     bool predict_only;          /**< [false] start in predict-only mode: the model alone
                                      (sensorless prediction, the paper's atlas) from the

@@ -10,7 +10,9 @@ static void set_common(nte_config_t* cfg, const int32_t model, const nte_schedul
     cfg->model = model;
     cfg->schedule = schedule;
     cfg->substeps = 1;
-    cfg->gate_reopen_after = 10;
+    /* Model III reopens its gate after one refused update: what it still refuses in tissue is
+     * a tear or a turn-over that lasts (reference_py/config.py GATE_REOPEN_AFTER) */
+    cfg->gate_reopen_after = (model == 3) ? 1 : 10;
     cfg->sign_inflation = true;
     cfg->predict_only = false;
     cfg->eps_mm_s = NTE_K_DEF_EPS_MM_S;

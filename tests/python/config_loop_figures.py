@@ -15,6 +15,12 @@
    records of discrepancy_measured_like.py (another force law and sampling; seeds 11-21), each
    identified as generated and predicted on the same record's truth under a fresh noise draw
    (the same condition, another trial), RMSE to the truth less its tare over the peak.
+4. The one-step innovation RMS over the sensor noise per phase (insertion, dwell, retraction),
+   files as recorded, Model II's default beside Model III's (contact front end on), median and
+   90th percentile over records: the phantom presets and `lab` on seeds 301-310, and the
+   measured-like generator on seeds 31-50.  Model III's gate (config.GATE_REOPEN_AFTER) was
+   chosen on skin-on-muscle seeds 101-102 and compared on seeds 201-210 and measured-like
+   seeds 11-30; these seeds were not looked at.
 
 The estimator runs are nte-run-double's (bit for bit the reference's: test_config_loop.py), for
 speed.  Tuning seeds 1-5, held-out seeds 101-110.
@@ -76,12 +82,14 @@ def atlas(d: Path, preset: str, seeds: tuple[int, ...], model: int) -> list[tupl
     return out
 
 
+def write_record(path: Path, t: np.ndarray, x: np.ndarray, f: np.ndarray) -> None:
+    path.write_text("t_s,depth_mm,force_n\n" + "".join(
+        "%.17g,%.17g,%.17g\n" % r for r in zip(t, x, f)))
+
+
 def measured_like_atlas(d: Path, seeds: range) -> None:
     from discrepancy_measured_like import make_trial
-
-    def write(path: Path, t: np.ndarray, x: np.ndarray, f: np.ndarray) -> None:
-        path.write_text("t_s,depth_mm,force_n\n" + "".join(
-            "%.17g,%.17g,%.17g\n" % r for r in zip(t, x, f)))
+    write = write_record
 
     print(f"3. atlas on the measured-like generator (held out), seeds {seeds[0]}-{seeds[-1]}: "
           "RMSE / peak of the prediction of the same condition's other trial")
@@ -107,6 +115,79 @@ def measured_like_atlas(d: Path, seeds: range) -> None:
     for model in (2, 3):
         print(f"   Model {'I' * model}: median {np.median(rel[model]):.1f} %, "
               f"range {np.min(rel[model]):.1f}-{np.max(rel[model]):.1f} %")
+
+
+PHASE_NAMES = ("insertion", "dwell", "retraction")
+FIGURE_SEEDS = tuple(range(301, 311))
+FIGURE_MEASURED_LIKE = range(31, 51)
+MODEL_ARGS = {2: ("--model", "2"), 3: ("--model", "3", "--contact", "on")}
+
+
+def phase_rms(innovation: np.ndarray, phase: np.ndarray, noise: float) -> list[float]:
+    """Innovation RMS over the noise in phases 1, 2, 3 (insertion, dwell, retraction)."""
+    return [float(np.sqrt(np.mean(innovation[phase == k] ** 2))) / noise for k in (1, 2, 3)]
+
+
+def phantom_phases(truth: dict, t: np.ndarray) -> np.ndarray:
+    """1 insertion, 2 dwell, 3 retraction from the phantom's cycle marks (0 at rest)."""
+    phase = np.zeros(len(t), dtype=int)
+    for c in truth["cycles"]:
+        phase[(t >= c["start_s"]) & (t < c["insertion_end_s"])] = 1
+        phase[(t >= c["insertion_end_s"]) & (t < c["retraction_start_s"])] = 2
+        phase[(t >= c["retraction_start_s"]) & (t < c["retraction_end_s"])] = 3
+    return phase
+
+
+def motion_phases(t: np.ndarray, depth: np.ndarray, in_tissue: np.ndarray) -> np.ndarray:
+    """The same from the motion (5 % of the top speed; the dwell is the still deep part);
+    insertion and dwell only where the needle is in the tissue."""
+    v = np.gradient(depth, t)
+    top = float(np.max(np.abs(v)))
+    deep = depth > float(np.min(depth)) + 0.5 * float(np.ptp(depth))
+    phase = np.where(v > 0.05 * top, 1, np.where(v < -0.05 * top, 3, np.where(deep, 2, 0)))
+    return np.where(in_tissue | (phase == 3), phase, 0)
+
+
+def print_phase_rows(label: str, rows: dict[int, list[list[float]]]) -> None:
+    for model in (2, 3):
+        a = np.asarray(rows[model])
+        cells = ", ".join(f"{n} {np.median(a[:, k]):.1f} ({np.percentile(a[:, k], 90):.1f})"
+                          for k, n in enumerate(PHASE_NAMES))
+        print(f"   {label:15s} Model {'I' * model:3s}: {cells}")
+
+
+def innovation_by_phase(d: Path, presets: list[str]) -> None:
+    from discrepancy_measured_like import make_trial
+    print(f"4. one-step innovation RMS / noise per phase, median (90th percentile), files as "
+          f"recorded; phantom seeds {FIGURE_SEEDS[0]}-{FIGURE_SEEDS[-1]}, measured-like seeds "
+          f"{FIGURE_MEASURED_LIKE[0]}-{FIGURE_MEASURED_LIKE[-1]}")
+    pooled: dict[int, list[list[float]]] = {2: [], 3: []}
+    for preset in [*presets, "lab"]:
+        rows: dict[int, list[list[float]]] = {2: [], 3: []}
+        for s in FIGURE_SEEDS:
+            f = phantom(d, preset, s)
+            truth = json.loads(f.with_suffix(".truth.json").read_text())
+            noise = float(truth["spec"]["sensor"]["noise_n"])
+            for model in (2, 3):
+                run(str(f), *MODEL_ARGS[model], "--out", str(d / "ph.csv"))
+                e = np.genfromtxt(d / "ph.csv", delimiter=",", names=True)
+                rows[model].append(phase_rms(e["innovation_n"],
+                                             phantom_phases(truth, e["t_s"]), noise))
+        print_phase_rows(preset, rows)
+        for model in (2, 3):
+            pooled[model] += rows[model]
+    print_phase_rows("all phantom", pooled)
+    rows = {2: [], 3: []}
+    for seed in FIGURE_MEASURED_LIKE:
+        tr, force_true, sigma, _ = make_trial(seed)
+        f = d / f"mlp{seed}.csv"
+        write_record(f, tr.t_s, tr.depth_mm, tr.force_n)
+        phase = motion_phases(tr.t_s, tr.depth_mm, force_true - force_true[0] > 2.0 * sigma)
+        for model in (2, 3):
+            run(str(f), *MODEL_ARGS[model], "--out", str(d / "ph.csv"))
+            e = np.genfromtxt(d / "ph.csv", delimiter=",", names=True)
+            rows[model].append(phase_rms(e["innovation_n"], phase, sigma))
+    print_phase_rows("measured-like", rows)
 
 
 def main(presets: list[str]) -> None:
@@ -151,6 +232,7 @@ def main(presets: list[str]) -> None:
                       f"{'I' * model}: {np.median(medians[model]):.0f} % (worst tissue "
                       f"{np.max(medians[model]):.0f} %)")
         measured_like_atlas(d, range(11, 22))
+        innovation_by_phase(d, presets)
 
 
 if __name__ == "__main__":
