@@ -212,23 +212,27 @@ def full_rate(out: Path) -> dict:
 
 
 def bad_traffic(out: Path) -> dict:
-    cap = capture(out / "bad_cap.log")
-    res = _result(out, cap, "bad")
+    """Every kind of bad frame, a depth gap and commands, the node without its kernel filters:
+    the mirror fed what the node received (its own log, every frame on the bus but its own)
+    must give what it sent (its own log) and count the same events."""
+    recv = capture(out / "bad.recv.log")
+    sent = capture(out / "bad.sent.log")
+    res = _result(out, sent, "bad", inputs=recv)
     res["expect"] = json.loads((out / "bad_expect.json").read_text())
     # reference for "a valid reset resets": a fresh mirror fed only what follows the reset
-    cmd = [i for i, m in enumerate(cap) if m.arbitration_id == DB.frame_id("Command")]
+    cmd = [i for i, m in enumerate(recv) if m.arbitration_id == DB.frame_id("Command")]
     if not cmd:
-        raise AssertionError(f"no Command frame in the capture ({len(cap)} frames)")
+        raise AssertionError(f"no Command frame among the {len(recv)} the node received")
     fresh = NodeMirror()
-    after = cap[cmd[-1] + 1:]
+    after = recv[cmd[-1] + 1:]
     # the fresh mirror needs E2E sync and clock history as the node had: feed the depth
     # history before the reset silently, then compare the estimates after the reset
-    fresh.feed_all(m for m in cap[:cmd[-1]] if m.arbitration_id == DB.frame_id("Depth"))
+    fresh.feed_all(m for m in recv[:cmd[-1]] if m.arbitration_id == DB.frame_id("Depth"))
     fresh.estimates.clear()
     fresh.params.clear()
     fresh.feed_all(m for m in after if m.arbitration_id == DB.frame_id("Depth") or
                    m.arbitration_id == DB.frame_id("Force"))
-    est, _, _ = node_outputs(DB, cap)
+    est, _, _ = node_outputs(DB, sent)
     # the node's last estimates are those of the forces after the reset
     res["after_reset_node"] = [e.key() for e in est[len(est) - len(fresh.estimates):]]
     res["after_reset_fresh"] = [e.key() for e in fresh.estimates]

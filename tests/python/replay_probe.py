@@ -1,8 +1,10 @@
 """Run inside host_bench/with-vcan by test_bench_replay.py.
 
-    python tests/python/replay_probe.py SCENARIO.csv OUTDIR SPEED
+    python tests/python/replay_probe.py SCENARIO.csv OUTDIR SPEED FRAMES
 
-Starts candump -L vcan0 (capturing to OUTDIR/candump.log), runs the replay engine
+Starts candump -L vcan0 (capturing to OUTDIR/candump.log; it exits by itself after FRAMES
+frames, the replay's and the heartbeats: under TCG it lags the bus by seconds, and stopping it
+when the replay ends left frames still queued in its socket unwritten), runs the replay engine
 (nte-bench send, as python -m host_bench.cli send) on the scenario with --record-csv/--record-log into OUTDIR, and
 meanwhile plays a stand-in for the node: five Heartbeat frames (E2E protected, from
 host_bench.dbc) sent 0.2 s apart, which the replay must record. Both child processes are
@@ -21,9 +23,10 @@ from host_bench.dbc import NteDatabase
 
 
 def main() -> int:
-    scenario, outdir, speed = sys.argv[1], Path(sys.argv[2]), sys.argv[3]
+    scenario, outdir, speed, frames = sys.argv[1], Path(sys.argv[2]), sys.argv[3], sys.argv[4]
     dump_file = open(outdir / "candump.log", "w")
-    dump = subprocess.Popen(["candump", "-L", "vcan0"], stdout=dump_file)
+    dump = subprocess.Popen(["candump", "-L", "-n", frames, "-r", "16000000", "vcan0"],
+                            stdout=dump_file)
     replay = None
     try:
         time.sleep(0.3)
@@ -46,7 +49,11 @@ def main() -> int:
                     "E2eErrors": 0, "RangeErrors": 0, "StepTime": 0.000734}))
                 time.sleep(0.2)
         rc = replay.wait(timeout=120)
-        time.sleep(0.2)
+        try:
+            dump.wait(timeout=300)   # until it has written all FRAMES
+        except subprocess.TimeoutExpired:
+            print(f"candump did not see all {frames} frames within 300 s", file=sys.stderr)
+            return 4
         return rc
     finally:
         if replay is not None and replay.poll() is None:

@@ -148,8 +148,9 @@ def test_replay_on_vcan(tmp_path: Path, vcan_env: dict) -> None:
     rows = write_scenario(scen)
     py = str(ROOT / ".venv" / "bin" / "python") if (ROOT / ".venv/bin/python").exists() else "python3"
     env = dict(vcan_env, TMPDIR=str(tmp_path), WITH_VCAN_TIMEOUT="600")
+    frames = N + sum(1 for row in rows if row[3] is not None) + 5   # depth, force, heartbeats
     r = subprocess.run([str(ROOT / "host_bench" / "with-vcan"), py, "tests/python/replay_probe.py",
-                        str(scen), str(tmp_path), "0.5"], cwd=ROOT, env=env,
+                        str(scen), str(tmp_path), "0.5", str(frames)], cwd=ROOT, env=env,
                        capture_output=True, text=True, timeout=3600)  # may wait for the kernel
     assert r.returncode == 0, r.stdout + r.stderr + (tmp_path / "replay.out").read_text()
     print("\n" + (tmp_path / "replay.out").read_text().strip())
