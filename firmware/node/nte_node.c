@@ -251,6 +251,26 @@ static void nte_node_publish_params(nte_node_t* self)
     }
 }
 
+/* Whole 0.1 s steps in `us` microseconds, modulo 2^19 (the Heartbeat's Uptime wrap), without
+ * a 64-bit division: on the Cortex-M4 that links the C library's 64-bit divide, 700 B of the
+ * board's 32 KiB.  With us = h 2^32 + l and 2^32 = M 100000 + R (M = 42949, R = 67296),
+ * floor(us / 100000) = h M + floor((h R + l) / 100000), and h R + l < us while h > 0, so the
+ * loop ends (R < 2^17: within three rounds) with a high word of 0 and one 32-bit division.
+ * The sum wraps modulo 2^32, a multiple of 2^19, so the result is exact. */
+static uint32_t nte_node_tenths_wrapped(uint64_t us)
+{
+    const uint32_t m = 42949u;
+    const uint32_t r = 67296u;
+    uint32_t q = 0u;
+    while ((us >> 32u) != 0u) {
+        const uint32_t h = (uint32_t)(us >> 32u);
+        q += h * m;
+        us = ((uint64_t)h * r) + (uint32_t)us;
+    }
+    q += (uint32_t)us / 100000u;
+    return q % 524288u;
+}
+
 static void nte_node_heartbeat(nte_node_t* self, uint64_t now)
 {
     nte_frames_heartbeat_t hb;
@@ -261,7 +281,7 @@ static void nte_node_heartbeat(nte_node_t* self, uint64_t now)
     hb.active_model = (uint8_t)(self->model - 1);
     hb.active_estimator = (self->estimator == nte_estimator_robust) ? 1u : 0u;
     /* 0.1 s steps, reduced modulo the frame's wrap (2^19 steps) before the float */
-    hb.uptime_s = (float)(uint32_t)((up_us / 100000u) % 524288u) * 0.1f;
+    hb.uptime_s = (float)nte_node_tenths_wrapped(up_us) * 0.1f;
     hb.e2e_errors = ev[nte_node_ev_wrong_dlc] + ev[nte_node_ev_bad_crc] +
                     ev[nte_node_ev_counter_invalid] + ev[nte_node_ev_counter_repeated];
     hb.range_errors = ev[nte_node_ev_out_of_range] + ev[nte_node_ev_time_backwards] +

@@ -994,6 +994,37 @@ static void test_params_and_heartbeat(void** state)
     assert_int_equal(count_id(&g_port_a, NTE_FRAMES_OFFSET_PARAMS), 21u);
 }
 
+/* Heartbeat Uptime after long runs: 0.1 s steps modulo 2^19, as a 64-bit division gives them
+ * (the node computes them without one), also past 2^32 us and far beyond. */
+static void test_heartbeat_uptime_after_long_runs(void** state)
+{
+    static const uint64_t ups[] = {100000u, 199999u, 200000u, 4294967295u, 4294967296u,
+                                   52428799999u, 52428800000u, 5u * 4294967296u + 123456789u,
+                                   0x0123456789ABCDEFu, 0xFFFFFFFF00000000u};
+    nte_node_config_t cfg;
+    nte_e2e_rx_t rxh;
+    (void)state;
+    nte_node_config_default(&cfg, 2);
+    for (size_t i = 0u; i < sizeof ups / sizeof ups[0]; i++) {
+        start(&g_node_a, &g_port_a, &cfg); /* a fresh node: its first heartbeat at ups[i] */
+        g_port_a.now += ups[i];
+        g_port_a.tx_n = 0u;
+        (void)nte_node_poll(&g_node_a);
+        size_t last = g_port_a.tx_n;
+        for (size_t k = 0u; k < g_port_a.tx_n; k++) {
+            last = (g_port_a.tx[k].id == BASE + NTE_FRAMES_OFFSET_HEARTBEAT) ? k : last;
+        }
+        assert_true(last < g_port_a.tx_n);
+        nte_frames_heartbeat_t h;
+        (void)nte_frames_rx_init(&rxh, nte_frames_kind_heartbeat);
+        assert_int_equal(nte_frames_decode_heartbeat(&rxh, g_port_a.tx[last].data, 8u, &h, NULL,
+                                                     NULL),
+                         nte_frames_ok);
+        const double expect = (double)((ups[i] / 100000u) % 524288u) * 0.1;
+        assert_true(fabs((double)h.uptime_s - expect) < 0.05);
+    }
+}
+
 /* ---------------------------------------------------------------------------------------- */
 /* Model III: selected by Command, Params 0..8 with g_fast and g_slow, the Contact frame.      */
 
@@ -1276,6 +1307,7 @@ int main(void)
         cmocka_unit_test(test_send_failure),
         cmocka_unit_test(test_commands),
         cmocka_unit_test(test_params_and_heartbeat),
+        cmocka_unit_test(test_heartbeat_uptime_after_long_runs),
         cmocka_unit_test(test_model3_params_contact),
         cmocka_unit_test(test_predict_only),
     };
