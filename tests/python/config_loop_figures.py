@@ -35,6 +35,9 @@ from pathlib import Path
 
 import numpy as np
 
+from reference_py.tools.plotting import (PHASES, phase_of, read_input, read_truth,
+                                         spans_from_motion)
+
 ROOT = Path(__file__).resolve().parents[2]
 C = ROOT / "build" / "host" / "bin" / "nte-run-double"
 VENV = Path(sys.executable).parent
@@ -89,7 +92,6 @@ def write_record(path: Path, t: np.ndarray, x: np.ndarray, f: np.ndarray) -> Non
 
 def measured_like_atlas(d: Path, seeds: range) -> None:
     from discrepancy_measured_like import make_trial
-    write = write_record
 
     print(f"3. atlas on the measured-like generator (held out), seeds {seeds[0]}-{seeds[-1]}: "
           "RMSE / peak of the prediction of the same condition's other trial")
@@ -97,9 +99,9 @@ def measured_like_atlas(d: Path, seeds: range) -> None:
     for seed in seeds:
         tr, truth, sigma, _ = make_trial(seed)
         a, b = d / f"ml{seed}a.csv", d / f"ml{seed}b.csv"
-        write(a, tr.t_s, tr.depth_mm, tr.force_n)
+        write_record(a, tr.t_s, tr.depth_mm, tr.force_n)
         rng = np.random.default_rng(1000 + seed)
-        write(b, tr.t_s, tr.depth_mm, truth + rng.normal(0.0, sigma, len(truth)))
+        write_record(b, tr.t_s, tr.depth_mm, truth + rng.normal(0.0, sigma, len(truth)))
         target = truth - truth[0]           # the record starts in the air: truth[0] is the tare
         line = f"   seed {seed}:"
         for model in (2, 3):
@@ -117,46 +119,36 @@ def measured_like_atlas(d: Path, seeds: range) -> None:
               f"range {np.min(rel[model]):.1f}-{np.max(rel[model]):.1f} %")
 
 
-PHASE_NAMES = ("insertion", "dwell", "retraction")
 FIGURE_SEEDS = tuple(range(301, 311))
 FIGURE_MEASURED_LIKE = range(31, 51)
 MODEL_ARGS = {2: ("--model", "2"), 3: ("--model", "3", "--contact", "on")}
 
 
-def phase_rms(innovation: np.ndarray, phase: np.ndarray, noise: float) -> list[float]:
-    """Innovation RMS over the noise in phases 1, 2, 3 (insertion, dwell, retraction)."""
-    return [float(np.sqrt(np.mean(innovation[phase == k] ** 2))) / noise for k in (1, 2, 3)]
-
-
-def phantom_phases(truth: dict, t: np.ndarray) -> np.ndarray:
-    """1 insertion, 2 dwell, 3 retraction from the phantom's cycle marks (0 at rest)."""
-    phase = np.zeros(len(t), dtype=int)
-    for c in truth["cycles"]:
-        phase[(t >= c["start_s"]) & (t < c["insertion_end_s"])] = 1
-        phase[(t >= c["insertion_end_s"]) & (t < c["retraction_start_s"])] = 2
-        phase[(t >= c["retraction_start_s"]) & (t < c["retraction_end_s"])] = 3
-    return phase
-
-
-def motion_phases(t: np.ndarray, depth: np.ndarray, in_tissue: np.ndarray) -> np.ndarray:
-    """The same from the motion (5 % of the top speed; the dwell is the still deep part);
-    insertion and dwell only where the needle is in the tissue."""
-    v = np.gradient(depth, t)
-    top = float(np.max(np.abs(v)))
-    deep = depth > float(np.min(depth)) + 0.5 * float(np.ptp(depth))
-    phase = np.where(v > 0.05 * top, 1, np.where(v < -0.05 * top, 3, np.where(deep, 2, 0)))
-    return np.where(in_tissue | (phase == 3), phase, 0)
+def phase_rms_by_model(d: Path, record: Path, phase: np.ndarray, noise: float
+                       ) -> dict[int, list[float]]:
+    """Each model's one-step innovation RMS over the noise in every phase of PHASES (``phase``:
+    each sample's phase name, plotting.phase_of)."""
+    out = {}
+    for model in (2, 3):
+        run(str(record), *MODEL_ARGS[model], "--out", str(d / "ph.csv"))
+        innovation = column(d / "ph.csv", "innovation_n")
+        out[model] = [float(np.sqrt(np.mean(innovation[phase == name] ** 2))) / noise
+                      for name in PHASES]
+    return out
 
 
 def print_phase_rows(label: str, rows: dict[int, list[list[float]]]) -> None:
     for model in (2, 3):
         a = np.asarray(rows[model])
         cells = ", ".join(f"{n} {np.median(a[:, k]):.1f} ({np.percentile(a[:, k], 90):.1f})"
-                          for k, n in enumerate(PHASE_NAMES))
+                          for k, n in enumerate(PHASES))
         print(f"   {label:15s} Model {'I' * model:3s}: {cells}")
 
 
 def innovation_by_phase(d: Path, presets: list[str]) -> None:
+    """Part 4.  The phases as `nte-ref plot` draws them: the phantom's from its truth file's
+    cycles, the measured-like records' from their motion (insertion and dwell only where the
+    true force is above twice the noise: the air gap is no phase)."""
     from discrepancy_measured_like import make_trial
     print(f"4. one-step innovation RMS / noise per phase, median (90th percentile), files as "
           f"recorded; phantom seeds {FIGURE_SEEDS[0]}-{FIGURE_SEEDS[-1]}, measured-like seeds "
@@ -166,27 +158,23 @@ def innovation_by_phase(d: Path, presets: list[str]) -> None:
         rows: dict[int, list[list[float]]] = {2: [], 3: []}
         for s in FIGURE_SEEDS:
             f = phantom(d, preset, s)
-            truth = json.loads(f.with_suffix(".truth.json").read_text())
-            noise = float(truth["spec"]["sensor"]["noise_n"])
-            for model in (2, 3):
-                run(str(f), *MODEL_ARGS[model], "--out", str(d / "ph.csv"))
-                e = np.genfromtxt(d / "ph.csv", delimiter=",", names=True)
-                rows[model].append(phase_rms(e["innovation_n"],
-                                             phantom_phases(truth, e["t_s"]), noise))
+            truth = read_truth(str(f.with_suffix(".truth.json")))
+            phase = phase_of(column(f, "t_s"), truth.spans)
+            for model, row in phase_rms_by_model(d, f, phase, float(truth.noise_n)).items():
+                rows[model].append(row)
+                pooled[model].append(row)
         print_phase_rows(preset, rows)
-        for model in (2, 3):
-            pooled[model] += rows[model]
     print_phase_rows("all phantom", pooled)
     rows = {2: [], 3: []}
     for seed in FIGURE_MEASURED_LIKE:
         tr, force_true, sigma, _ = make_trial(seed)
         f = d / f"mlp{seed}.csv"
         write_record(f, tr.t_s, tr.depth_mm, tr.force_n)
-        phase = motion_phases(tr.t_s, tr.depth_mm, force_true - force_true[0] > 2.0 * sigma)
-        for model in (2, 3):
-            run(str(f), *MODEL_ARGS[model], "--out", str(d / "ph.csv"))
-            e = np.genfromtxt(d / "ph.csv", delimiter=",", names=True)
-            rows[model].append(phase_rms(e["innovation_n"], phase, sigma))
+        phase = phase_of(tr.t_s, spans_from_motion(read_input(str(f))))
+        in_air = force_true - force_true[0] <= 2.0 * sigma
+        phase[in_air & (phase != "retraction")] = ""
+        for model, row in phase_rms_by_model(d, f, phase, sigma).items():
+            rows[model].append(row)
     print_phase_rows("measured-like", rows)
 
 
