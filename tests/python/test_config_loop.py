@@ -491,8 +491,7 @@ def test_atlas_on_held_out_records_within_15_percent(tmp_path):
     a, b = tmp_path / "a.csv", tmp_path / "b.csv"
     rng = np.random.default_rng(1022)
     for path, force in ((a, tr.force_n), (b, truth + rng.normal(0.0, sigma, len(truth)))):
-        path.write_text("t_s,depth_mm,force_n\n" + "".join(
-            "%.17g,%.17g,%.17g\n" % r for r in zip(tr.t_s, tr.depth_mm, force)))
+        figures.write_record(path, tr.t_s, tr.depth_mm, force)
     assert crun(str(a), "--model", "3", "--contact", "on", "--out", str(tmp_path / "id.csv"),
                 "--export-config", str(tmp_path / "x.json")).returncode == 0
     assert crun(str(b), "--config", str(tmp_path / "x.json"), "--predict-only", "--out",
