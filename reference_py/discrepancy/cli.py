@@ -4,6 +4,7 @@ physical effect, add it and show the gap shrink.
 usage: nte-discrepancy FILE [FILE ...] --out DIR [--no-figures] [--each] [--jobs N]
                        [--force-unit U] [--time-unit U] [--depth-unit U]
                        [--force-sign +1|-1] [--depth-sign +1|-1] [--no-units-check]
+                       [--columns t=NAME,depth=NAME,force=NAME[,velocity=NAME]]
 
 FILE    measured trials: CSV with t_s, depth_mm, force_n (optional velocity_mm_s; a spreadsheet
         export with a byte-order mark and quoted cells is fine), or a candump log (.log) of the
@@ -18,6 +19,8 @@ FILE    measured trials: CSV with t_s, depth_mm, force_n (optional velocity_mm_s
         units or signs naming the likely option).  A record that still reads negative on
         insertion (a candump log, or --no-units-check) is detected per trial, flipped, and the
         report says so.
+--columns  a logger's own column names (e.g. t=time_us,depth=pz,force=fz with --time-unit us):
+        the CSV is read as it is (the velocity computed from the depth unless velocity= names it).
 
 Exit status: 0 success, 2 bad input or options (one line on stderr naming file, line and column
 or the option).

@@ -106,23 +106,34 @@ def add_unit_arguments(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("units and signs of the input CSV (converted by the reader; "
                              "implausible values are refused naming the likely option)")
     g.add_argument("--force-unit", choices=tuple(FORCE_UNITS), default="N",
-                   help="unit of the force_n column")
+                   help="unit of the force_n column (or the one --columns names force)")
     g.add_argument("--time-unit", choices=tuple(TIME_UNITS), default="s",
-                   help="unit of the t_s column")
+                   help="unit of the t_s column (or the one --columns names t; us: "
+                        "microseconds)")
     g.add_argument("--depth-unit", choices=tuple(DEPTH_UNITS), default="mm",
-                   help="unit of the depth_mm (and velocity_mm_s, per time unit) column")
+                   help="unit of the depth_mm (and velocity_mm_s, per time unit) column (or "
+                        "the ones --columns names)")
     g.add_argument("--force-sign", type=_sign, default=1, metavar="+1|-1",
                    help="-1: the sensor reads the insertion force as negative")
     g.add_argument("--depth-sign", type=_sign, default=1, metavar="+1|-1",
                    help="-1: the depth column grows out of the tissue")
     g.add_argument("--no-units-check", action="store_true",
                    help="do not refuse implausible units or signs (default: check)")
+    g.add_argument("--columns", metavar="MAP",
+                   help="the file's own column names, as t=NAME,depth=NAME,force=NAME"
+                        "[,velocity=NAME]: a logger's CSV read as it is (e.g. "
+                        "t=time_us,depth=pz,force=fz with --time-unit us); the velocity is "
+                        "computed from the depth unless the map names it (default: t_s, "
+                        "depth_mm, force_n and velocity_mm_s if present)")
 
 
 def units_from(a: argparse.Namespace) -> "Units":
-    from .csvio import Units
+    """The reader's Units from the flags of add_unit_arguments; a malformed --columns is a
+    CsvError (``--columns MAP: reason``)."""
+    from .csvio import ColumnMap, Units
+    columns = ColumnMap() if a.columns is None else ColumnMap.parse(a.columns)
     return Units(a.force_unit, a.time_unit, a.depth_unit, a.force_sign, a.depth_sign,
-                 not a.no_units_check)
+                 not a.no_units_check, columns)
 
 
 _Parser = OneLineParser

@@ -17,6 +17,15 @@ Reading (:func:`read_table`, :func:`read_trial`)
 
         FILE:LINE: column 'NAME': reason        (or FILE:LINE: reason, or FILE: reason)
 
+    (a refused option: ``--OPTION VALUE: reason``).
+
+Column map (:class:`ColumnMap`, ``--columns t=NAME,depth=NAME,force=NAME[,velocity=NAME]``)
+    A logger's file is read as it is: the map names the file's columns that hold the time,
+    the depth and the force (and the velocity; without ``velocity=`` it is computed from the
+    depth, whatever other columns the file has).  Every rule above then applies to the mapped
+    columns, and every message names them as the file does.  With ``--time-unit us`` (and the
+    other unit options) a time in microseconds, a depth in metres... are converted.
+
 Outputs are written by :mod:`reference_py.tools.safe_write` (``write_atomic`` is re-exported
 here).  Floats are printed with '%.17g' (float64) or '%.9g' (float32): enough digits to
 round-trip, and the same text the C host program prints.
@@ -38,6 +47,10 @@ from .safe_write import write_atomic  # noqa: F401  (re-exported)
 
 REQUIRED = ("t_s", "depth_mm", "force_n")
 OPTIONAL = ("velocity_mm_s",)
+#: the keys of --columns and the standard column each one stands for
+COLUMN_KEYS = {"t": "t_s", "depth": "depth_mm", "force": "force_n", "velocity": "velocity_mm_s"}
+#: the keys --columns must give (velocity is optional)
+COLUMN_KEYS_REQUIRED = ("t", "depth", "force")
 
 _NUMBER = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?")
 _NOT_FINITE = re.compile(r"[+-]?(nan|inf|infinity)", re.IGNORECASE)
@@ -169,7 +182,7 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
 
 #: Units the reader converts from (factor to the tools' unit: N, s, mm).
 FORCE_UNITS = {"N": 1.0, "mN": 1.0e-3}
-TIME_UNITS = {"s": 1.0, "ms": 1.0e-3}
+TIME_UNITS = {"s": 1.0, "ms": 1.0e-3, "us": 1.0e-6}
 DEPTH_UNITS = {"mm": 1.0, "m": 1.0e3}
 
 
@@ -179,15 +192,68 @@ class UnitsError(CsvError):
 
 
 @dataclass(frozen=True)
+class ColumnMap:
+    """Which of the file's columns hold the time, depth, force and velocity (the module's
+    docstring, "Column map").  The default is the standard names, the velocity read when the
+    file has it; a parsed map (``text`` not empty) reads the velocity only when it names it."""
+    t: str = "t_s"
+    depth: str = "depth_mm"
+    force: str = "force_n"
+    velocity: str | None = "velocity_mm_s"
+    text: str = ""              # the --columns value it was parsed from ("": the standard names)
+
+    @classmethod
+    def parse(cls, text: str) -> "ColumnMap":
+        """``t=NAME,depth=NAME,force=NAME[,velocity=NAME]``, or CsvError naming what is wrong:
+        an item that is not KEY=NAME, an unknown or repeated key, a key missing, one column
+        given two meanings."""
+        def refuse(why: str) -> CsvError:
+            return CsvError(f"--columns {text}: {why}")
+
+        keys = ", ".join(COLUMN_KEYS)
+        given: dict[str, str] = {}
+        for item in text.split(","):
+            key, eq, name = (part.strip() for part in item.partition("="))
+            if not eq or not key:
+                raise refuse(f"{item.strip()!r} is not KEY=NAME (expected "
+                             f"t=NAME,depth=NAME,force=NAME[,velocity=NAME])")
+            if key not in COLUMN_KEYS:
+                raise refuse(f"unknown key {key!r} (keys: {keys})")
+            if key in given:
+                raise refuse(f"key {key!r} given twice")
+            if not name:
+                raise refuse(f"key {key!r} names no column")
+            twin = next((k for k, v in given.items() if v == name), None)
+            if twin is not None:
+                raise refuse(f"column {name!r} given for both {twin!r} and {key!r}")
+            given[key] = name
+        missing = [k for k in COLUMN_KEYS_REQUIRED if k not in given]
+        if missing:
+            raise refuse(f"key {missing[0]!r} missing ({', '.join(COLUMN_KEYS_REQUIRED)} are "
+                         f"required, velocity is optional)")
+        return cls(given["t"], given["depth"], given["force"], given.get("velocity"), text)
+
+    def name(self, standard: str) -> str:
+        """The file's name of the column that stands for the standard column ``standard``
+        (a column that is not an insertion's keeps its name)."""
+        for key, std in COLUMN_KEYS.items():
+            if std == standard:
+                return getattr(self, key) or standard
+        return standard
+
+
+@dataclass(frozen=True)
 class Units:
     """How a file's columns are converted to N, s, mm (and the sign conventions: depth grows
-    into the tissue, force is positive while inserting), and whether to check plausibility."""
+    into the tissue, force is positive while inserting), whether to check plausibility, and
+    which columns hold what (``columns``)."""
     force: str = "N"
     time: str = "s"
     depth: str = "mm"
     force_sign: int = 1
     depth_sign: int = 1
     check: bool = True
+    columns: ColumnMap = ColumnMap()
 
 
 @dataclass(frozen=True)
@@ -219,33 +285,45 @@ def _pct(x: float) -> str:
     return f"{100.0 * x:.0f} %"
 
 
+def _time_hint(dt: float, unit: str, dt_max: float) -> str:
+    """Why a median time step of ``dt`` s (read as ``unit``) is too long: the smaller unit
+    (of TIME_UNITS, after ``unit``) that makes it fit the gap limit, or too coarse."""
+    units = list(TIME_UNITS)
+    for smaller in units[units.index(unit) + 1:]:
+        if dt * TIME_UNITS[smaller] / TIME_UNITS[unit] <= dt_max:
+            what = {"ms": "milliseconds", "us": "microseconds"}[smaller]
+            return f"probably {what}: convert with --time-unit {smaller}"
+    return "too coarse for the estimator"
+
+
 def check_units(tr: "Trial", units: Units = Units(), limits: Limits = Limits()) -> None:
     """Refuse (UnitsError) a trial whose values, in N, s and mm, are implausible: time steps of
-    seconds (ms read as s), a depth stroke under a millimetre (m read as mm), depth mostly
+    seconds (ms or us read as s), a depth stroke under a millimetre (m read as mm), depth mostly
     negative or force mostly negative while inserting (the opposite sign), force mostly beyond
     the configured range (mN read as N), a force beyond a thousand times the range, or most
     samples outside the estimator's accepted ranges.  The message names the column, the probable
     unit or convention and the option that converts it."""
     n = len(tr.t_s)
     name = tr.path
+    # the file's names of the time, depth and force columns (--columns)
+    ct, cd, cf = (units.columns.name(c) for c in REQUIRED)
     fmax = limits.force_max_n
     if n >= 2:
         dt = float(np.median(np.diff(tr.t_s)))
         if dt > limits.dt_max_s:
-            hint = ("probably milliseconds: convert with --time-unit ms" if units.time == "s"
-                    else "too coarse for the estimator")
-            raise UnitsError(f"{name}: column 't_s': median time step {dt:.4g} s (longer than "
-                             f"the {limits.dt_max_s:g} s gap limit): {hint}")
+            raise UnitsError(f"{name}: column '{ct}': median time step {dt:.4g} s "
+                             f"(longer than the {limits.dt_max_s:g} s gap limit): "
+                             f"{_time_hint(dt, units.time, limits.dt_max_s)}")
     d = tr.depth_mm
     stroke = float(np.max(d) - np.min(d))
     if 0.0 < stroke < MIN_STROKE_MM:          # (a depth that never moves is no unit question)
         hint = ("probably metres: convert with --depth-unit m" if units.depth == "mm"
                 else "no insertion")
-        raise UnitsError(f"{name}: column 'depth_mm': the depth spans only {stroke:.4g} mm "
+        raise UnitsError(f"{name}: column '{cd}': the depth spans only {stroke:.4g} mm "
                          f"(less than {MIN_STROKE_MM:g} mm): {hint}")
     neg = float(np.mean(d < 0.0))
     if neg > 0.5:
-        raise UnitsError(f"{name}: column 'depth_mm': {_pct(neg)} of the depths are negative "
+        raise UnitsError(f"{name}: column '{cd}': {_pct(neg)} of the depths are negative "
                          f"(down to {float(np.min(d)):.4g} mm): probably measured the other "
                          f"way: convert with --depth-sign -1")
     f = tr.force_n
@@ -259,18 +337,18 @@ def check_units(tr: "Trial", units: Units = Units(), limits: Limits = Limits()) 
                 hint = "probably millinewtons: convert with --force-unit mN"
             else:
                 hint = "not a force in N"
-            raise UnitsError(f"{name}: column 'force_n': {_pct(out)} of the forces exceed the "
+            raise UnitsError(f"{name}: column '{cf}': {_pct(out)} of the forces exceed the "
                              f"configured range ±{fmax:g} N (up to {peak:.4g}): {hint}")
         k = int(np.argmax(np.where(present, np.abs(f), -1.0)))
         if abs(float(f[k])) > 1000.0 * fmax:
             line = f":{tr.lines[k]}" if tr.lines else ""
-            raise UnitsError(f"{name}{line}: column 'force_n': {float(f[k]):.4g} N is not a "
+            raise UnitsError(f"{name}{line}: column '{cf}': {float(f[k]):.4g} N is not a "
                              f"plausible force (the configured range is ±{fmax:g} N)")
         inserting = present & (tr.velocity_mm_s > 0.5) & (d > 0.0)
         if np.count_nonzero(inserting) >= 10:
             fi = f[inserting]
             if float(np.median(fi)) < 0.0:
-                raise UnitsError(f"{name}: column 'force_n': the force is negative in "
+                raise UnitsError(f"{name}: column '{cf}': the force is negative in "
                                  f"{_pct(float(np.mean(fi < 0.0)))} of the samples taken while "
                                  f"inserting: probably the sensor's opposite sign: convert "
                                  f"with --force-sign -1")
@@ -291,15 +369,20 @@ def read_trial(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
                limits: Limits = Limits()) -> Trial:
     """An insertion: t_s, depth_mm, force_n and velocity_mm_s (given or central differences).
 
-    With ``units``, the columns are converted from the file's units and signs to N, s, mm (a
-    given velocity by depth unit / time unit and the depth sign) and, if ``units.check``, the
-    result is checked by :func:`check_units` against ``limits``.  Without, nothing is
-    converted or checked (the library's own files)."""
-    table = read_table(path, required, sparse)
+    With ``units``, the columns are the ones ``units.columns`` names (``required`` and
+    ``sparse`` give standard names; each is read under its mapped name), converted from the
+    file's units and signs to N, s, mm (a given velocity by depth unit / time unit and the depth
+    sign) and, if ``units.check``, the result is checked by :func:`check_units` against
+    ``limits``.  Without, nothing is mapped, converted or checked (the library's own files)."""
+    cmap = units.columns if units is not None else ColumnMap()
+    named = tuple(cmap.name(c) for c in required)
+    if cmap.text and cmap.velocity is not None:
+        named += (cmap.velocity,)       # a velocity the map names must be there
+    table = read_table(path, named, tuple(cmap.name(c) for c in sparse), increasing=cmap.t)
     cols = table.columns
-    t, depth, force = cols["t_s"], cols["depth_mm"], cols["force_n"]
-    given = "velocity_mm_s" in cols
-    vel = cols["velocity_mm_s"] if given else None
+    t, depth, force = cols[cmap.t], cols[cmap.depth], cols[cmap.force]
+    given = cmap.velocity is not None and cmap.velocity in cols
+    vel = cols[cmap.velocity] if given else None  # type: ignore[index]
     if units is not None:
         for kind, unit, known in (("force", units.force, FORCE_UNITS),
                                   ("time", units.time, TIME_UNITS),

@@ -1,0 +1,172 @@
+"""The column map of the one CSV reader (csvio.ColumnMap, ``--columns``) and ``--time-unit us``:
+a logger's CSV (time in microseconds, six force/torque columns, the stage's three axes) runs as
+it is and gives the same estimate, byte for byte, as the same data in the standard t_s,
+depth_mm, force_n form; a malformed map, or a mapped column the file lacks, is refused with
+exit 2 and one line naming it; nte-discrepancy and nte-ref plot read through the same map."""
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import pytest
+
+from reference_py.tools.cli import main
+from reference_py.tools.csvio import ColumnMap, CsvError, Units, read_trial
+
+RIG_MAP = "t=time_us,depth=pz,force=fz"
+RIG_HEADER = "time_us,fx,fy,fz,tx,ty,tz,px,py,pz"
+
+
+def write_rig(path: Path, rows: list[tuple[float, float, float]], *, vel: bool = False) -> Path:
+    """``rows`` (t_s, depth_mm, force_n) as a logger writes them: integer microseconds, the
+    force among six force/torque channels, the depth as the stage's z among three axes."""
+    with open(path, "w") as fh:
+        fh.write(RIG_HEADER + (",vz\n" if vel else "\n"))
+        for k, (t, d, f) in enumerate(rows):
+            cells = [f"{round(t * 1e6)}", "0.012", "-0.03", repr(f), "1e-4", "0", "-2e-4", "12.5",
+                     "-3", repr(d)]
+            fh.write(",".join(cells) + (",0\n" if vel else "\n"))
+    return path
+
+
+def write_standard(path: Path, rows: list[tuple[float, float, float]]) -> Path:
+    """The same samples as :func:`write_rig`, in t_s, depth_mm, force_n (the time converted
+    as the reader converts microseconds: one product by 1e-6)."""
+    with open(path, "w") as fh:
+        fh.write("t_s,depth_mm,force_n\n")
+        for t, d, f in rows:
+            fh.write("%r,%r,%r\n" % (round(t * 1e6) * 1e-6, d, f))
+    return path
+
+
+@pytest.fixture(scope="module")
+def rows(tmp_path_factory) -> list[tuple[float, float, float]]:
+    d = tmp_path_factory.mktemp("colmap")
+    sim = d / "sim.csv"
+    assert main(["simulate", "--preset", "needleB-tissueB-10mms", "--depth", "20", "--dwell",
+                 "0.5", "--seed", "4", "--rate", "50", "--out", str(sim)]) == 0
+    return [(float(r["t_s"]), float(r["depth_mm"]), float(r["force_n"]))
+            for r in csv.DictReader(open(sim))]
+
+
+def estimate(src: Path, out: Path, *extra: str) -> int:
+    return main(["estimate", str(src), "--model", "2", "--out", str(out), *extra])
+
+
+def test_a_logger_file_through_the_map_estimates_as_the_standard_form(rows, tmp_path, capsys):
+    rig = write_rig(tmp_path / "rig.csv", rows)
+    std = write_standard(tmp_path / "std.csv", rows)
+    assert estimate(std, tmp_path / "std_est.csv") == 0
+    assert estimate(rig, tmp_path / "rig_est.csv", "--columns", RIG_MAP, "--time-unit",
+                    "us") == 0
+    assert (tmp_path / "rig_est.csv").read_bytes() == (tmp_path / "std_est.csv").read_bytes()
+    # spaces around keys and names are the header's own rule (stripped), any order
+    assert estimate(rig, tmp_path / "rig_est2.csv", "--columns",
+                    " force = fz , depth=pz,t=time_us", "--time-unit", "us") == 0
+    assert (tmp_path / "rig_est2.csv").read_bytes() == (tmp_path / "std_est.csv").read_bytes()
+
+
+def test_the_map_reads_a_named_velocity_and_otherwise_computes_it(rows, tmp_path):
+    rig = write_rig(tmp_path / "rig.csv", rows, vel=True)
+    units = Units(time="us", columns=ColumnMap.parse(RIG_MAP))
+    tr = read_trial(rig, units=units)
+    assert not tr.velocity_given and tr.velocity_mm_s.max() > 1.0   # central differences
+    with_v = read_trial(rig, units=Units(time="us",
+                                         columns=ColumnMap.parse(RIG_MAP + ",velocity=vz")))
+    assert with_v.velocity_given and not with_v.velocity_mm_s.any()
+    assert list(tr.columns)[:4] == ["time_us", "fx", "fy", "fz"]     # the file's own names
+
+
+def test_microseconds_read_as_seconds_name_the_unit(rows, tmp_path, capsys):
+    rig = write_rig(tmp_path / "rig.csv", rows)
+    out = tmp_path / "e.csv"
+    capsys.readouterr()
+    assert estimate(rig, out, "--columns", RIG_MAP) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"nte-ref: error: {rig}: column 'time_us': median time step 2e+04 s (longer "
+                   f"than the 0.5 s gap limit): probably microseconds: convert with "
+                   f"--time-unit us"]
+    assert not out.exists()
+
+
+BAD_MAPS = [
+    ("t=time_us,depth=pz", "key 'force' missing (t, depth, force are required, velocity is "
+                           "optional)"),
+    ("t=time_us,t=t2,depth=pz,force=fz", "key 't' given twice"),
+    ("t=time_us,depth=pz,force=fz,torque=tz", "unknown key 'torque' (keys: t, depth, force, "
+                                              "velocity)"),
+    ("t=time_us,depth=pz,force", "'force' is not KEY=NAME (expected "
+                                 "t=NAME,depth=NAME,force=NAME[,velocity=NAME])"),
+    ("t=time_us,,depth=pz,force=fz", "'' is not KEY=NAME (expected "
+                                     "t=NAME,depth=NAME,force=NAME[,velocity=NAME])"),
+    ("t=time_us,depth=pz,force=", "key 'force' names no column"),
+    ("t=time_us,depth=pz,force=pz", "column 'pz' given for both 'depth' and 'force'"),
+]
+
+
+@pytest.mark.parametrize("text,why", BAD_MAPS, ids=[w.split(" (")[0] for _, w in BAD_MAPS])
+def test_a_malformed_map_is_refused_naming_the_problem(rows, tmp_path, capsys, text, why):
+    rig = write_rig(tmp_path / "rig.csv", rows[:20])
+    out = tmp_path / "e.csv"
+    capsys.readouterr()
+    assert estimate(rig, out, "--columns", text, "--time-unit", "us") == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"nte-ref: error: --columns {text}: {why}"]
+    assert not out.exists()
+    with pytest.raises(CsvError, match="^--columns "):
+        ColumnMap.parse(text)
+
+
+@pytest.mark.parametrize("text,missing", [("t=time_us,depth=pz,force=f_z", "f_z"),
+                                          (RIG_MAP + ",velocity=vz", "vz")])
+def test_a_mapped_column_the_file_lacks_is_named(rows, tmp_path, capsys, text, missing):
+    rig = write_rig(tmp_path / "rig.csv", rows[:20])
+    out = tmp_path / "e.csv"
+    capsys.readouterr()
+    assert estimate(rig, out, "--columns", text, "--time-unit", "us") == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"nte-ref: error: {rig}:1: column '{missing}': missing from the header "
+                   f"(have: {RIG_HEADER.replace(',', ', ')})"]
+    assert not out.exists()
+
+
+def test_the_mapped_time_must_increase(tmp_path, capsys):
+    rig = tmp_path / "rig.csv"
+    rig.write_text("time_us,pz,fz\n0,0,0\n10000,0.1,0\n10000,0.2,0\n")
+    with pytest.raises(CsvError, match=r"rig.csv:4: column 'time_us': time 10000.0 does not "
+                                       r"increase \(previous 10000.0\)"):
+        read_trial(rig, units=Units(time="us", columns=ColumnMap.parse(RIG_MAP),
+                                    check=False))
+
+
+def test_discrepancy_runs_a_mapped_file(tmp_path, capsys):
+    from discrepancy_generator import make_case
+    from reference_py.discrepancy.cli import main as discrepancy
+    case = make_case(("dwell_relaxation",), 5)
+    std, rig = [], []
+    for i, tr in enumerate(case.trials):
+        rows = [(float(t), float(d), float(f)) for t, d, f in zip(tr.t_s, tr.depth_mm, tr.force_n)]
+        rig.append(str(write_rig(tmp_path / f"rig{i}.csv", rows)))
+        std.append(str(write_standard(tmp_path / f"std{i}.csv", rows)))
+    assert discrepancy(std + ["--out", str(tmp_path / "std"), "--no-figures"]) == 0
+    assert discrepancy(rig + ["--out", str(tmp_path / "rig"), "--no-figures", "--columns",
+                              RIG_MAP, "--time-unit", "us"]) == 0
+    got = json.loads((tmp_path / "rig" / "report.json").read_text())
+    ref = json.loads((tmp_path / "std" / "report.json").read_text())
+    assert got["named"] == ref["named"] and got["verdict"] == ref["verdict"]
+    capsys.readouterr()
+    assert discrepancy(rig + ["--out", str(tmp_path / "bad"), "--columns", "t=time_us"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["nte-discrepancy: --columns t=time_us: key 'depth' missing (t, depth, force "
+                   "are required, velocity is optional)"]
+    assert not (tmp_path / "bad").exists()
+
+
+def test_plot_reads_its_input_through_the_map(rows, tmp_path, capsys):
+    rig = write_rig(tmp_path / "rig.csv", rows)
+    est = tmp_path / "e.csv"
+    assert estimate(rig, est, "--columns", RIG_MAP, "--time-unit", "us") == 0
+    assert main(["plot", str(est), "--input", str(rig), "--columns", RIG_MAP, "--time-unit",
+                 "us", "--out", str(tmp_path / "f.png")]) == 0
+    assert (tmp_path / "f.png").stat().st_size > 1000
