@@ -127,28 +127,30 @@ static size_t split(char* line, char** cells)
 }
 
 static int push(nte_trial_t* tr, size_t* cap, const double t, const double l, const double v,
-                const double f)
+                const double f, const size_t lineno)
 {
     if (tr->n == *cap) {
         const size_t nc = (*cap == 0U) ? 1024U : (*cap * 2U);
-        double* a[4] = {tr->t_s, tr->depth_mm, tr->velocity_mm_s, tr->force_n};
+        double** a[4] = {&tr->t_s, &tr->depth_mm, &tr->velocity_mm_s, &tr->force_n};
         for (size_t i = 0U; i < 4U; i++) {
-            double* b = realloc(a[i], nc * sizeof(double));
+            double* b = realloc(*a[i], nc * sizeof(double));
             if (b == NULL) {
                 return -1;
             }
-            a[i] = b;
+            *a[i] = b;
         }
-        tr->t_s = a[0];
-        tr->depth_mm = a[1];
-        tr->velocity_mm_s = a[2];
-        tr->force_n = a[3];
+        size_t* ln = realloc(tr->line, nc * sizeof(size_t));
+        if (ln == NULL) {
+            return -1;
+        }
+        tr->line = ln;
         *cap = nc;
     }
     tr->t_s[tr->n] = t;
     tr->depth_mm[tr->n] = l;
     tr->velocity_mm_s[tr->n] = v;
     tr->force_n[tr->n] = f;
+    tr->line[tr->n] = lineno;
     tr->n++;
     return 0;
 }
@@ -325,7 +327,7 @@ int nte_trial_read(const char* path, nte_trial_t* tr, char* err, const size_t es
             break;
         }
         prev_t = t;
-        if (push(tr, &cap, t, row[li], (vi >= 0) ? row[vi] : 0.0, row[fi]) != 0) {
+        if (push(tr, &cap, t, row[li], (vi >= 0) ? row[vi] : 0.0, row[fi], lineno) != 0) {
             fail(err, es, "%s:%zu: out of memory", path, lineno);
             rc = -1;
         }
@@ -357,7 +359,27 @@ void nte_trial_free(nte_trial_t* tr)
     free(tr->depth_mm);
     free(tr->velocity_mm_s);
     free(tr->force_n);
+    free(tr->line);
     memset(tr, 0, sizeof *tr);
+}
+
+void nte_trial_convert(nte_trial_t* tr, const nte_units_t* u)
+{
+    const double kt = u->time_factor;
+    const double kd = u->depth_factor * (double)u->depth_sign;
+    const double kf = u->force_factor * (double)u->force_sign;
+    const double kv = kd / kt;
+    for (size_t k = 0U; k < tr->n; k++) {
+        tr->t_s[k] *= kt;
+        tr->depth_mm[k] *= kd;
+        tr->force_n[k] *= kf;
+        if (tr->velocity_given != 0) {
+            tr->velocity_mm_s[k] *= kv;
+        }
+    }
+    if (tr->velocity_given == 0) {
+        nte_central_difference(tr->t_s, tr->depth_mm, tr->n, tr->velocity_mm_s);
+    }
 }
 
 void nte_central_difference(const double* t, const double* x, const size_t n, double* v)

@@ -15,12 +15,38 @@ typedef struct nte_trial_t {
     double* depth_mm;
     double* velocity_mm_s;
     double* force_n;
+    size_t* line;       /**< the physical line of every sample (1-based) */
     int velocity_given;
 } nte_trial_t;
+
+/** How a file's columns are converted to N, s and mm (csvio.Units): the factor of each unit
+ *  (nte_units.h), the sign conventions (depth grows into the tissue, force is positive while
+ *  inserting) and whether the result is checked (units_check.h). */
+typedef struct nte_units_t {
+    const char* force;  /**< the unit names (for the messages), e.g. "mN" */
+    const char* time;
+    const char* depth;
+    double force_factor; /**< to N */
+    double time_factor;  /**< to s */
+    double depth_factor; /**< to mm */
+    int force_sign;      /**< +1 or -1 */
+    int depth_sign;
+    int check;           /**< 0: --no-units-check */
+    /** the file's names of the time, depth, force and velocity columns (the standard names,
+     *  t_s, depth_mm, force_n, velocity_mm_s, unless mapped) */
+    const char* t_column;
+    const char* depth_column;
+    const char* force_column;
+    const char* velocity_column;
+} nte_units_t;
 
 /** Read `path`.  On error returns -1 and writes "FILE:LINE: ..." (no newline) to err. */
 int nte_trial_read(const char* path, nte_trial_t* trial, char* err, size_t err_size);
 void nte_trial_free(nte_trial_t* trial);
+/** Convert the columns from the file's units and signs to N, s, mm (csvio.read_trial with
+ *  units): time by its factor, depth and force by factor and sign, a given velocity by depth
+ *  factor and sign / time factor, else central differences of the converted depth. */
+void nte_trial_convert(nte_trial_t* trial, const nte_units_t* units);
 /** Sample k of the trial as the library takes it: time in integer microseconds,
  * floor(t * 1e6 + 0.5) (csvio.time_us), depth and velocity rounded to nte_real_t, the force
  * too, or 0 when `force_ignored` (--predict-only: the bank is fed 0 N, never rejected). */

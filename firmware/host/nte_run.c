@@ -8,7 +8,14 @@
  *           [--precision P] [--presliding-mm MM] [--tau-fast S] [--tau-slow S]
  *           [--relax-branches 1|2] [--no-relaxation] [--no-direction-memory] [--no-layers]
  *           [--contact on|off] [--surface MM] [--config FILE.json] [--predict-only]
- *           [--export-config FILE.json] --out EST.csv
+ *           [--export-config FILE.json] [--force-unit N|mN] [--time-unit s|ms|us]
+ *           [--depth-unit mm|m] [--force-sign +1|-1] [--depth-sign +1|-1] [--no-units-check]
+ *           --out EST.csv
+ *
+ * The input is converted from its units and signs to N, s and mm and, unless
+ * --no-units-check, refused when implausible (units_check.h: a file in ms, m or mN, a negated
+ * depth or force, a force a thousand times the range, most samples out of range), with the
+ * reference's message naming the likely unit and the option that converts it.
  *
  * -h/--help lists every flag and its default.  Exit status 0 on success, 2 on bad input: one
  * line on stderr ("FILE:LINE: column 'NAME': reason" or "argument --flag: why").
@@ -18,7 +25,9 @@
 #include "csv_in.h"
 #include "nte.h"
 #include "nte_presets.h"
+#include "nte_units.h"
 #include "starts.h"
+#include "units_check.h"
 
 #include <errno.h>
 #include <math.h>
@@ -70,6 +79,7 @@ typedef struct args_t {
     int given_tau_fast;
     int given_tau_slow;
     int given_relax_branches;
+    nte_units_t units; /* the input's units and signs (--force-unit ... --no-units-check) */
 } args_t;
 
 /* A refusal: one line on stderr, exit status 2 (the Python tools' form). */
@@ -79,16 +89,40 @@ static int usage(const char* msg)
     return EXIT_BAD_INPUT;
 }
 
+/* The unit tables (nte_units.h, generated from reference_py/tools/csvio.py). */
+static const nte_unit_t force_units[NTE_FORCE_UNIT_COUNT] = NTE_FORCE_UNITS;
+static const nte_unit_t time_units[NTE_TIME_UNIT_COUNT] = NTE_TIME_UNITS;
+static const nte_unit_t depth_units[NTE_DEPTH_UNIT_COUNT] = NTE_DEPTH_UNITS;
+
+/* The names of a unit table joined by `sep` ("N|mN"). */
+static void unit_names(const nte_unit_t* table, size_t count, const char* sep, char* buf,
+                       size_t cap)
+{
+    size_t o = 0U;
+    buf[0] = '\0';
+    for (size_t i = 0U; (i < count) && (o < cap); i++) {
+        o += (size_t)snprintf(buf + o, cap - o, "%s%s", (i > 0U) ? sep : "", table[i].name);
+    }
+}
+
 /* --help: every flag and its default, on stdout. */
 static void help(void)
 {
+    char fu[64];
+    char tu[64];
+    char du[64];
+    unit_names(force_units, NTE_FORCE_UNIT_COUNT, "|", fu, sizeof fu);
+    unit_names(time_units, NTE_TIME_UNIT_COUNT, "|", tu, sizeof tu);
+    unit_names(depth_units, NTE_DEPTH_UNIT_COUNT, "|", du, sizeof du);
     printf("usage: " PROG " FILE.csv --model 1|2|3 [--estimator bank|robust] [--preset NAME]\n"
            "       [--profile default|paper] [--init-seed K] [--init-factor F]\n"
            "       [--schedule all|rotate] [--precision " PRECISION "]\n"
            "       [--presliding-mm MM] [--tau-fast S] [--tau-slow S] [--relax-branches 1|2]\n"
            "       [--no-relaxation] [--no-direction-memory] [--no-layers] [--contact on|off]\n"
            "       [--surface MM] [--config FILE.json] [--predict-only]\n"
-           "       [--export-config FILE.json] --out EST.csv\n"
+           "       [--export-config FILE.json] [--force-unit %s] [--time-unit %s]\n"
+           "       [--depth-unit %s] [--force-sign +1|-1] [--depth-sign +1|-1]\n"
+           "       [--no-units-check] --out EST.csv\n"
            "\n"
            "Run the estimator (C library, " PRECISION ") over a CSV of t_s, depth_mm, force_n\n"
            "(velocity_mm_s optional, else central differences of depth) and write one row per\n"
@@ -134,13 +168,83 @@ static void help(void)
            "  --predict-only         with --config: the model alone on the depth, parameters\n"
            "                         held, no filter update, the force ignored (default: off)\n"
            "  --export-config FILE.json  also write what was identified as a configuration\n"
-           "                         (default: none)\n"
+           "                         (default: none)\n",
+           fu, tu, du, NTE_PRESET_DEFAULT);
+    printf("units and signs of the input CSV (converted by the reader; implausible values are\n"
+           "refused naming the likely option):\n"
+           "  --force-unit %-9s unit of the force_n column (default: N)\n"
+           "  --time-unit %-10s unit of the t_s column (default: s)\n"
+           "  --depth-unit %-9s unit of the depth_mm (and velocity_mm_s, per time unit)\n"
+           "                         column (default: mm)\n"
+           "  --force-sign +1|-1     -1: the sensor reads the insertion force as negative\n"
+           "                         (default: 1)\n"
+           "  --depth-sign +1|-1     -1: the depth column grows out of the tissue (default: 1)\n"
+           "  --no-units-check       do not refuse implausible units or signs (default: check)\n"
            "  --out EST.csv          the estimates to write (no default)\n"
            "  -h, --help             this help\n"
            "\n"
            "Exit status: 0 success, 2 bad input (one line on stderr naming the flag or\n"
            "FILE:LINE: column 'NAME': reason).\n",
-           NTE_PRESET_DEFAULT);
+           fu, tu, du);
+}
+
+/* --force-unit, --time-unit, --depth-unit, --force-sign, --depth-sign (tools/cli.py
+ * add_unit_arguments).  Returns 0 when `name` is none of them; else 1, with msg empty when
+ * the value was taken, the refusal (argparse's words) when not. */
+static int unit_flag(const char* name, const char* val, nte_units_t* u, char* msg, size_t cap)
+{
+    const nte_unit_t* table = NULL;
+    size_t count = 0U;
+    const char** unit = NULL;
+    double* factor = NULL;
+    int* sign = NULL;
+    msg[0] = '\0';
+    if (strcmp(name, "--force-unit") == 0) {
+        table = force_units;
+        count = NTE_FORCE_UNIT_COUNT;
+        unit = &u->force;
+        factor = &u->force_factor;
+    } else if (strcmp(name, "--time-unit") == 0) {
+        table = time_units;
+        count = NTE_TIME_UNIT_COUNT;
+        unit = &u->time;
+        factor = &u->time_factor;
+    } else if (strcmp(name, "--depth-unit") == 0) {
+        table = depth_units;
+        count = NTE_DEPTH_UNIT_COUNT;
+        unit = &u->depth;
+        factor = &u->depth_factor;
+    } else if (strcmp(name, "--force-sign") == 0) {
+        sign = &u->force_sign;
+    } else if (strcmp(name, "--depth-sign") == 0) {
+        sign = &u->depth_sign;
+    } else {
+        return 0;
+    }
+    if (sign != NULL) {
+        if ((strcmp(val, "1") != 0) && (strcmp(val, "+1") != 0) && (strcmp(val, "-1") != 0)) {
+            (void)snprintf(msg, cap, "argument %s: must be +1 or -1 (got '%s')", name, val);
+        } else {
+            *sign = (strcmp(val, "-1") == 0) ? -1 : 1;
+        }
+        return 1;
+    }
+    for (size_t i = 0U; i < count; i++) {
+        if (strcmp(table[i].name, val) == 0) {
+            *unit = table[i].name;
+            *factor = table[i].factor;
+            return 1;
+        }
+    }
+    size_t o = (size_t)snprintf(msg, cap, "argument %s: invalid choice: '%s' (choose from ",
+                                name, val);
+    for (size_t i = 0U; (i < count) && (o < cap); i++) {
+        o += (size_t)snprintf(msg + o, cap - o, "%s'%s'", (i > 0U) ? ", " : "", table[i].name);
+    }
+    if (o < cap) {
+        (void)snprintf(msg + o, cap - o, ")");
+    }
+    return 1;
 }
 
 static int parse_args(int argc, char** argv, args_t* a)
@@ -173,6 +277,19 @@ static int parse_args(int argc, char** argv, args_t* a)
     a->given_tau_fast = 0;
     a->given_tau_slow = 0;
     a->given_relax_branches = 0;
+    a->units.force = "N";
+    a->units.time = "s";
+    a->units.depth = "mm";
+    a->units.force_factor = 1.0;
+    a->units.time_factor = 1.0;
+    a->units.depth_factor = 1.0;
+    a->units.force_sign = 1;
+    a->units.depth_sign = 1;
+    a->units.check = 1;
+    a->units.t_column = "t_s";
+    a->units.depth_column = "depth_mm";
+    a->units.force_column = "force_n";
+    a->units.velocity_column = "velocity_mm_s";
     for (int i = 1; i < argc; i++) {
         if ((strcmp(argv[i], "--help") == 0) || (strcmp(argv[i], "-h") == 0)) {
             help();
@@ -199,6 +316,10 @@ static int parse_args(int argc, char** argv, args_t* a)
         }
         if (strcmp(opt, "--predict-only") == 0) {
             a->predict_only = 1;
+            continue;
+        }
+        if (strcmp(opt, "--no-units-check") == 0) {
+            a->units.check = 0;
             continue;
         }
         if (strncmp(opt, "--", 2) != 0) {
@@ -333,6 +454,10 @@ static int parse_args(int argc, char** argv, args_t* a)
                 (void)snprintf(msg, sizeof msg,
                                "argument --surface: must be a number >= -500 and <= 500 "
                                "(got %s)", val);
+                return usage(msg);
+            }
+        } else if (unit_flag(name, val, &a->units, msg, sizeof msg) != 0) {
+            if (msg[0] != '\0') {
                 return usage(msg);
             }
         } else if (strcmp(name, "--out") == 0) {
@@ -706,9 +831,32 @@ int main(int argc, char** argv)
         (check_out("--export-config", a.export_config, &exp_out, msg, sizeof msg) != 0)) {
         return bad(msg);
     }
+    nte_config_t cfg;
+    const nte_schedule_t sch =
+        (strcmp(a.schedule, "rotate") == 0) ? nte_schedule_rotate : nte_schedule_all;
+    if (strcmp(a.profile, "paper") == 0) {
+        nte_config_paper(&cfg, a.model, sch);
+    } else {
+        nte_config_default(&cfg, a.model, sch);
+    }
     nte_trial_t tr;
     if (nte_trial_read(a.csv, &tr, msg, sizeof msg) != 0) {
         return bad(msg);
+    }
+    nte_trial_convert(&tr, &a.units);
+    if (a.units.check != 0) {
+        /* the configuration's accepted ranges (csvio.Limits.from_config); with the front end
+         * on, the stage position may lie anywhere in +-depth_max_mm (the air gap is no error) */
+        nte_limits_t lim;
+        lim.depth_max_mm = (double)cfg.depth_max_mm;
+        lim.depth_min_mm = (a.contact == 1) ? -lim.depth_max_mm : (double)cfg.depth_min_mm;
+        lim.speed_max_mm_s = (double)cfg.speed_max_mm_s;
+        lim.force_max_n = (double)cfg.force_max_n;
+        lim.dt_max_s = (double)cfg.dt_max_s;
+        if (nte_units_check(a.csv, &tr, &a.units, &lim, msg, sizeof msg) != 0) {
+            nte_trial_free(&tr);
+            return bad(msg);
+        }
     }
     /* the config's params are the new nominal values unless --preset is given */
     const double* values = (have_fc && !a.given_preset) ? fc.params : preset->values;
@@ -717,14 +865,6 @@ int main(int argc, char** argv)
         nte_trial_free(&tr);
         (void)snprintf(msg, sizeof msg, "init factor must be >= 1 (got %g)", a.factor);
         return bad(msg);
-    }
-    nte_config_t cfg;
-    const nte_schedule_t sch =
-        (strcmp(a.schedule, "rotate") == 0) ? nte_schedule_rotate : nte_schedule_all;
-    if (strcmp(a.profile, "paper") == 0) {
-        nte_config_paper(&cfg, a.model, sch);
-    } else {
-        nte_config_default(&cfg, a.model, sch);
     }
     /* Model I's fixed beta0 is the preset's beta (reference_py/MODEL.md §2) */
     cfg.beta0 = (nte_real_t)values[6];

@@ -1,0 +1,214 @@
+/* The plausibility check of an insertion's units and signs; mirrors
+ * reference_py/tools/csvio.py check_units (its numbers formatted as Python formats them:
+ * "{x:.4g}" and "{x:g}" are C's %.4g and %g, a share "{100 x:.0f} %" is %.0f). */
+#include "units_check.h"
+
+#include "nte_units.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static int ascending(const void* a, const void* b)
+{
+    const double x = *(const double*)a;
+    const double y = *(const double*)b;
+    return (x < y) ? -1 : ((x > y) ? 1 : 0);
+}
+
+/* np.median of n > 0 values (sorted in place): the middle one, or the mean of the two. */
+static double median(double* v, const size_t n)
+{
+    qsort(v, n, sizeof *v, ascending);
+    const size_t h = n / 2U;
+    return ((n % 2U) != 0U) ? v[h] : ((v[h - 1U] + v[h]) / 2.0);
+}
+
+/* np.mean of a boolean array: the share of true. */
+static double share(const size_t count, const size_t n)
+{
+    return (double)count / (double)n;
+}
+
+static double force_unit(const char* name)
+{
+    static const nte_unit_t units[NTE_FORCE_UNIT_COUNT] = NTE_FORCE_UNITS;
+    for (size_t i = 0U; i < NTE_FORCE_UNIT_COUNT; i++) {
+        if (strcmp(units[i].name, name) == 0) {
+            return units[i].factor;
+        }
+    }
+    return (double)NAN;
+}
+
+/* Why a median time step of dt s, read in `unit`, is too long (csvio._time_hint): the first
+ * smaller unit of the table that makes it fit the gap limit, or too coarse. */
+static void time_hint(double dt, const char* unit, double dt_max, char* buf, size_t cap)
+{
+    static const nte_unit_t units[NTE_TIME_UNIT_COUNT] = NTE_TIME_UNITS;
+    static const char* const words[NTE_TIME_UNIT_COUNT] = NTE_TIME_UNIT_WORDS;
+    size_t i = 0U;
+    while ((i < NTE_TIME_UNIT_COUNT) && (strcmp(units[i].name, unit) != 0)) {
+        i++;
+    }
+    for (size_t j = i + 1U; j < NTE_TIME_UNIT_COUNT; j++) {
+        if (((dt * units[j].factor) / units[i].factor) <= dt_max) {
+            (void)snprintf(buf, cap, "probably %s: convert with --time-unit %s", words[j],
+                           units[j].name);
+            return;
+        }
+    }
+    (void)snprintf(buf, cap, "too coarse for the estimator");
+}
+
+/* Rule 1: time steps of seconds (ms or us read as s).  v: n - 1 scratch values. */
+static int check_time(const char* path, const nte_trial_t* tr, const nte_units_t* u,
+                      const nte_limits_t* lim, double* v, char* err, size_t es)
+{
+    if (tr->n < 2U) {
+        return 0;
+    }
+    for (size_t k = 0U; (k + 1U) < tr->n; k++) {
+        v[k] = tr->t_s[k + 1U] - tr->t_s[k];
+    }
+    const double dt = median(v, tr->n - 1U);
+    if (dt > lim->dt_max_s) {
+        char hint[128];
+        time_hint(dt, u->time, lim->dt_max_s, hint, sizeof hint);
+        (void)snprintf(err, es, "%s: column '%s': median time step %.4g s (longer than the %g "
+                       "s gap limit): %s", path, u->t_column, dt, lim->dt_max_s, hint);
+        return -1;
+    }
+    return 0;
+}
+
+/* Rules 2 and 3: a stroke under a millimetre (metres read as mm), mostly negative depths. */
+static int check_depth(const char* path, const nte_trial_t* tr, const nte_units_t* u,
+                       char* err, size_t es)
+{
+    double lo = tr->depth_mm[0];
+    double hi = tr->depth_mm[0];
+    size_t neg = 0U;
+    for (size_t k = 0U; k < tr->n; k++) {
+        const double d = tr->depth_mm[k];
+        lo = (d < lo) ? d : lo;
+        hi = (d > hi) ? d : hi;
+        neg += (d < 0.0) ? 1U : 0U;
+    }
+    const double stroke = hi - lo;
+    if ((0.0 < stroke) && (stroke < NTE_UNITS_MIN_STROKE_MM)) {
+        (void)snprintf(err, es, "%s: column '%s': the depth spans only %.4g mm (less than "
+                       "%g mm): %s", path, u->depth_column, stroke, NTE_UNITS_MIN_STROKE_MM,
+                       (strcmp(u->depth, "mm") == 0)
+                           ? "probably metres: convert with --depth-unit m" : "no insertion");
+        return -1;
+    }
+    const double ns = share(neg, tr->n);
+    if (ns > NTE_UNITS_NEGATIVE_DEPTH_SHARE) {
+        (void)snprintf(err, es, "%s: column '%s': %.0f %% of the depths are negative (down to "
+                       "%.4g mm): probably measured the other way: convert with --depth-sign -1",
+                       path, u->depth_column, 100.0 * ns, lo);
+        return -1;
+    }
+    return 0;
+}
+
+/* Rules 4 to 6: forces mostly beyond the range (mN read as N), one force beyond a thousand
+ * times the range, the force mostly negative while inserting (the sensor's other sign).
+ * v: n scratch values. */
+static int check_force(const char* path, const nte_trial_t* tr, const nte_units_t* u,
+                       const nte_limits_t* lim, double* v, char* err, size_t es)
+{
+    const double fmax = lim->force_max_n;
+    size_t present = 0U;
+    size_t out = 0U;
+    double peak = -1.0;
+    size_t kpeak = 0U;
+    for (size_t k = 0U; k < tr->n; k++) {
+        if (isfinite(tr->force_n[k])) {
+            const double fa = fabs(tr->force_n[k]);
+            present++;
+            out += (fa > fmax) ? 1U : 0U;
+            if (fa > peak) { /* np.argmax: the first of the largest */
+                peak = fa;
+                kpeak = k;
+            }
+        }
+    }
+    if (present == 0U) {
+        return 0;
+    }
+    const double os = share(out, present);
+    if (os > NTE_UNITS_MAX_FORCE_OUT_SHARE) {
+        const int mn = (strcmp(u->force, "N") == 0) && ((peak * force_unit("mN")) <= fmax);
+        (void)snprintf(err, es, "%s: column '%s': %.0f %% of the forces exceed the configured "
+                       "range \xc2\xb1%g N (up to %.4g): %s", path, u->force_column, 100.0 * os,
+                       fmax, peak, mn ? "probably millinewtons: convert with --force-unit mN"
+                                : "not a force in N");
+        return -1;
+    }
+    if (peak > (NTE_UNITS_FORCE_IMPLAUSIBLE_FACTOR * fmax)) {
+        (void)snprintf(err, es, "%s:%zu: column '%s': %.4g N is not a plausible force (the "
+                       "configured range is \xc2\xb1%g N)", path, tr->line[kpeak],
+                       u->force_column, tr->force_n[kpeak], fmax);
+        return -1;
+    }
+    size_t m = 0U;
+    size_t negative = 0U;
+    for (size_t k = 0U; k < tr->n; k++) {
+        if (isfinite(tr->force_n[k]) && (tr->velocity_mm_s[k] > NTE_UNITS_INSERTING_SPEED_MM_S) &&
+            (tr->depth_mm[k] > 0.0)) {
+            v[m++] = tr->force_n[k];
+            negative += (tr->force_n[k] < 0.0) ? 1U : 0U;
+        }
+    }
+    if ((m >= NTE_UNITS_INSERTING_MIN_SAMPLES) && (median(v, m) < 0.0)) {
+        (void)snprintf(err, es, "%s: column '%s': the force is negative in %.0f %% of the "
+                       "samples taken while inserting: probably the sensor's opposite sign: "
+                       "convert with --force-sign -1", path, u->force_column,
+                       100.0 * share(negative, m));
+        return -1;
+    }
+    return 0;
+}
+
+/* Rule 7: most samples outside the estimator's accepted ranges. */
+static int check_ranges(const char* path, const nte_trial_t* tr, const nte_limits_t* lim,
+                        char* err, size_t es)
+{
+    size_t bad = 0U;
+    for (size_t k = 0U; k < tr->n; k++) {
+        const double d = tr->depth_mm[k];
+        const double f = tr->force_n[k];
+        bad += ((d < lim->depth_min_mm) || (d > lim->depth_max_mm) ||
+                (fabs(tr->velocity_mm_s[k]) > lim->speed_max_mm_s) ||
+                (isfinite(f) && (fabs(f) > lim->force_max_n))) ? 1U : 0U;
+    }
+    const double bs = share(bad, tr->n);
+    if (bs > NTE_UNITS_MAX_REJECTED_SHARE) {
+        (void)snprintf(err, es, "%s: %zu of %zu samples (%.0f %%) are outside the estimator's "
+                       "accepted ranges (depth %g..%g mm, speed \xc2\xb1%g mm/s, force \xc2\xb1%g "
+                       "N): check the units (--time-unit, --depth-unit, --force-unit) and signs",
+                       path, bad, tr->n, 100.0 * bs, lim->depth_min_mm, lim->depth_max_mm,
+                       lim->speed_max_mm_s, lim->force_max_n);
+        return -1;
+    }
+    return 0;
+}
+
+int nte_units_check(const char* path, const nte_trial_t* tr, const nte_units_t* u,
+                    const nte_limits_t* lim, char* err, size_t es)
+{
+    double* scratch = malloc(((tr->n > 0U) ? tr->n : 1U) * sizeof(double));
+    if (scratch == NULL) {
+        (void)snprintf(err, es, "%s: out of memory", path);
+        return -1;
+    }
+    const int rc = ((check_time(path, tr, u, lim, scratch, err, es) != 0) ||
+                    (check_depth(path, tr, u, err, es) != 0) ||
+                    (check_force(path, tr, u, lim, scratch, err, es) != 0) ||
+                    (check_ranges(path, tr, lim, err, es) != 0)) ? -1 : 0;
+    free(scratch);
+    return rc;
+}

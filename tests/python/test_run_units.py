@@ -1,0 +1,312 @@
+"""nte-run refuses what `nte-ref estimate` refuses: a file in the wrong unit or sign (issue 23).
+
+Two correct records — the phantom `nte-ref phantom skin --seed 3` (velocity column given) and a
+measured-like record (discrepancy_measured_like.make_trial, written without a velocity column
+by config_loop_figures.write_record) — are spoiled the ways a rig's file goes wrong: time in
+ms, depth in m, force in mN, depth measured the other way, the sensor's opposite sign, one
+force a million times too large, the depth in micrometres (most samples out of range).  Each
+spoiled file goes through `nte-ref estimate`, nte-run-double and nte-run: exit status 2, one
+line on stderr, the same message after the program's "PROG: error: " prefix, no output file.
+With the option that converts it (--no-units-check where none does) the reference
+(float64) and nte-run-double write the same bytes, and nte-run runs too.  The correct records
+are never refused.  The rules written inline in csvio.check_units, which
+firmware/tools/gen_constants.py copies into firmware/host/nte_units.h, are probed on the
+reference at each threshold and on both sides of it through the C programs.
+
+Requires build/host/bin/nte-run{,-double} (``make build``).
+"""
+from __future__ import annotations
+
+import ctypes
+import math
+import subprocess
+import sys
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import pytest
+
+from c_twin import EXE, ROOT
+
+pytestmark = pytest.mark.skipif(
+    not all(p.exists() for p in EXE.values()),
+    reason="build/host/bin/nte-run{,-double} missing: build the firmware first (make build)")
+
+PROGS = {"nte-run-double": EXE["float64"], "nte-run": EXE["float32"]}
+
+Table = tuple[list[str], np.ndarray]
+Spoil = Callable[[list[str], np.ndarray], None]
+
+
+def _load(path: Path) -> Table:
+    lines = [ln for ln in path.read_text().split("\n") if ln and not ln.startswith("#")]
+    return lines[0].split(","), np.array([[float(c) for c in ln.split(",")] for ln in lines[1:]])
+
+
+def _save(path: Path, table: Table) -> Path:
+    header, rows = table
+    path.write_text(",".join(header) + "\n" + "".join(
+        ",".join("%.17g" % x for x in r) + "\n" for r in rows))
+    return path
+
+
+def _scale(*pairs: tuple[str, float]) -> Spoil:
+    """Multiply columns (those the file has) by factors."""
+    def spoil(header: list[str], rows: np.ndarray) -> None:
+        for name, k in pairs:
+            if name in header:
+                rows[:, header.index(name)] *= k
+    return spoil
+
+
+def _one_force_times(k: float) -> Spoil:
+    def spoil(header: list[str], rows: np.ndarray) -> None:
+        rows[len(rows) // 2, header.index("force_n")] *= k
+    return spoil
+
+
+#: name: (how the file is spoiled, the flags that read it right)
+SPOILED: dict[str, tuple[Spoil, list[str]]] = {
+    "ms-read-as-s": (_scale(("t_s", 1e3), ("velocity_mm_s", 1e-3)), ["--time-unit", "ms"]),
+    "m-read-as-mm": (_scale(("depth_mm", 1e-3), ("velocity_mm_s", 1e-3)), ["--depth-unit", "m"]),
+    "mN-read-as-N": (_scale(("force_n", 1e3)), ["--force-unit", "mN"]),
+    "negated-depth": (_scale(("depth_mm", -1.0), ("velocity_mm_s", -1.0)),
+                      ["--depth-sign", "-1"]),
+    "negated-force": (_scale(("force_n", -1.0)), ["--force-sign", "-1"]),
+    "one-force-x1e6": (_one_force_times(1e6), ["--no-units-check"]),
+    "most-out-of-range": (_scale(("depth_mm", 1e3), ("velocity_mm_s", 1e3)),
+                          ["--no-units-check"]),
+}
+
+
+def _time_units() -> dict[str, float]:
+    from reference_py.tools.csvio import TIME_UNITS
+    return TIME_UNITS
+
+
+if "us" in _time_units():   # microseconds: csvio.TIME_UNITS and nte_units.h hold them alike
+    SPOILED["us-read-as-s"] = (_scale(("t_s", 1e6), ("velocity_mm_s", 1e-6)),
+                               ["--time-unit", "us"])
+
+#: the spoiled files whose converted run is compared byte for byte (one record each: the
+#: reference's run takes seconds); the others' converted runs are checked in C only
+COMPARED = {"ms-read-as-s": "ml", "m-read-as-mm": "ph", "mN-read-as-N": "ml",
+            "negated-depth": "ml", "negated-force": "ph", "one-force-x1e6": "ml",
+            "most-out-of-range": "ph", "us-read-as-s": "ph"}
+
+
+@pytest.fixture(scope="module")
+def records(tmp_path_factory) -> dict[str, Path]:
+    d = tmp_path_factory.mktemp("units")
+    subprocess.run([sys.executable, "-m", "reference_py", "phantom", "skin", "--seed", "3",
+                    "--out", str(d / "ph.csv")], check=True, capture_output=True, cwd=ROOT)
+    from config_loop_figures import write_record
+    from discrepancy_measured_like import make_trial
+    tr = make_trial(5)[0]
+    write_record(d / "ml.csv", tr.t_s, tr.depth_mm, tr.force_n)
+    out = {"ph": d / "ph.csv", "ml": d / "ml.csv"}
+    for base in ("ph", "ml"):
+        for name, (spoil, _) in SPOILED.items():
+            header, rows = _load(out[base])
+            spoil(header, rows)
+            out[f"{base}-{name}"] = _save(d / f"{base}-{name}.csv", (header, rows))
+    return out
+
+
+def reference(csv: Path, out: Path, *flags: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "reference_py", "estimate", str(csv),
+                           "--out", str(out), *flags], capture_output=True, text=True, cwd=ROOT)
+
+
+def c_run(prog: str, csv: Path, out: Path, *flags: str) -> subprocess.CompletedProcess:
+    return subprocess.run([str(PROGS[prog]), str(csv), "--out", str(out), *flags],
+                          capture_output=True, text=True, timeout=120)
+
+
+def body(stderr: str, prog: str) -> str:
+    """The one line of a refusal without its "PROG: error: " prefix (and the argument
+    parser's " (see PROG --help)" suffix)."""
+    lines = stderr.splitlines()
+    assert len(lines) == 1, stderr
+    prefix, suffix = f"{prog}: error: ", f" (see {prog} --help)"
+    assert lines[0].startswith(prefix), lines[0]
+    text = lines[0][len(prefix):]
+    return text[:-len(suffix)] if text.endswith(suffix) else text
+
+
+@pytest.mark.parametrize("base", ["ph", "ml"])
+@pytest.mark.parametrize("name", list(SPOILED))
+def test_spoiled_file_is_refused_alike(records, tmp_path, base, name):
+    csv = records[f"{base}-{name}"]
+    out = tmp_path / "est.csv"
+    r = reference(csv, out, "--model", "2")
+    assert r.returncode == 2, r.stderr
+    want = body(r.stderr, "nte-ref")
+    assert not out.exists()
+    for prog in PROGS:
+        c = c_run(prog, csv, out, "--model", "2")
+        assert c.returncode == 2, (prog, c.stderr)
+        assert body(c.stderr, prog) == want, prog
+        assert c.stdout == "" and not out.exists()
+    print(f"\n{base}-{name}: {want}")
+
+
+@pytest.mark.parametrize("name", list(SPOILED))
+def test_converted_file_runs_alike(records, tmp_path, name):
+    """The right option reads the spoiled file: the reference (float64) and nte-run-double
+    write the same bytes; nte-run runs too."""
+    flags = SPOILED[name][1]
+    csv = records[f"{COMPARED[name]}-{name}"]
+    py, c = tmp_path / "py.csv", tmp_path / "c.csv"
+    r = reference(csv, py, "--model", "2", "--precision", "float64", *flags)
+    assert r.returncode == 0, r.stderr
+    d = c_run("nte-run-double", csv, c, "--model", "2", *flags)
+    assert d.returncode == 0, d.stderr
+    assert c.read_bytes() == py.read_bytes()
+    f = c_run("nte-run", csv, tmp_path / "f.csv", "--model", "2", *flags)
+    assert f.returncode == 0, f.stderr
+    other = "ml" if COMPARED[name] == "ph" else "ph"
+    for prog in PROGS:
+        o = c_run(prog, records[f"{other}-{name}"], tmp_path / "o.csv", "--model", "2", *flags)
+        assert o.returncode == 0, (prog, o.stderr)
+
+
+@pytest.mark.parametrize("base", ["ph", "ml"])
+def test_correct_records_are_never_refused(records, tmp_path, base):
+    from reference_py.tools.csvio import Limits, Units, read_trial
+    from dataclasses import replace
+    read_trial(records[base], units=Units())
+    read_trial(records[base], units=Units(), limits=replace(Limits(), depth_min_mm=-500.0))
+    for prog in PROGS:
+        for flags in (["--model", "2"], ["--model", "3"], ["--model", "1", "--contact", "on"]):
+            c = c_run(prog, records[base], tmp_path / "est.csv", *flags)
+            assert c.returncode == 0, (prog, flags, c.stderr)
+
+
+def test_converted_nothing_without_flags(records, tmp_path):
+    """The default units convert nothing: the same bytes as --no-units-check, and as the
+    units spelled out."""
+    outs = []
+    for flags in ([], ["--no-units-check"],
+                  ["--force-unit", "N", "--time-unit", "s", "--depth-unit", "mm",
+                   "--force-sign", "+1", "--depth-sign", "1"]):
+        out = tmp_path / f"e{len(outs)}.csv"
+        assert c_run("nte-run-double", records["ph"], out, "--model", "2", *flags).returncode == 0
+        outs.append(out.read_bytes())
+    assert outs[0] == outs[1] == outs[2]
+
+
+@pytest.mark.parametrize("flags", [
+    ["--force-unit", "kN"], ["--time-unit", "min"], ["--depth-unit", "cm"],
+    ["--force-sign", "2"], ["--depth-sign", "+2"], ["--force-sign", "-"],
+    ["--depth-unit"],
+])
+def test_unit_flag_refusals_alike(records, tmp_path, flags):
+    out = tmp_path / "est.csv"
+    r = reference(records["ph"], out, "--model", "2", *flags)
+    assert r.returncode == 2
+    want = body(r.stderr, "nte-ref estimate")
+    for prog in PROGS:
+        c = c_run(prog, records["ph"], out, "--model", "2", *flags)
+        assert c.returncode == 2, c.stderr
+        assert body(c.stderr, prog) == want
+        assert not out.exists()
+
+
+def test_help_names_the_unit_flags():
+    for prog, exe in PROGS.items():
+        r = subprocess.run([str(exe), "--help"], capture_output=True, text=True)
+        assert r.returncode == 0
+        units = "|".join(_time_units())
+        for text in ("--force-unit N|mN", f"--time-unit {units}", "--depth-unit mm|m",
+                     "--force-sign +1|-1", "--depth-sign +1|-1", "--no-units-check"):
+            assert text in r.stdout, (prog, text)
+    source = (ROOT / "firmware" / "host" / "nte_run.c").read_text().split("*/", 1)[0]
+    assert "[--time-unit s|ms|us]" in source and "[--no-units-check]" in source
+
+
+# -- the rules csvio.check_units writes inline, probed at their thresholds --------------------
+
+def _inline() -> dict[str, float]:
+    sys.path.insert(0, str(ROOT / "firmware" / "tools"))
+    try:
+        import gen_constants
+    finally:
+        sys.path.pop(0)
+    return dict(gen_constants.CHECK_INLINE)
+
+
+def _probe(n: int, depth: np.ndarray, vel: np.ndarray, force: np.ndarray) -> Table:
+    t = np.arange(n) * 0.01
+    return ["t_s", "depth_mm", "velocity_mm_s", "force_n"], np.column_stack([t, depth, vel,
+                                                                             force])
+
+
+def _probes(k: dict[str, float]) -> dict[str, tuple[Table, bool]]:
+    """name: (a file, refused?) on each side of every inline threshold."""
+    n = 100
+    ramp = np.linspace(0.0, 20.0, n)
+    flat = np.full(n, 1.0)
+    fmax = 50.0
+    out: dict[str, tuple[Table, bool]] = {}
+    for side, f in (("at", k["FORCE_IMPLAUSIBLE_FACTOR"] * fmax),
+                    ("above", math.nextafter(k["FORCE_IMPLAUSIBLE_FACTOR"] * fmax, math.inf))):
+        force = flat.copy()
+        force[n // 2] = f
+        out[f"force-{side}-limit"] = (_probe(n, ramp, flat, force), side == "above")
+    share = k["NEGATIVE_DEPTH_SHARE"]
+    for side, m in (("at", int(share * n)), ("above", int(share * n) + 1)):
+        depth = np.where(np.arange(n) < m, -5.0, 5.0) + ramp * 1e-3
+        out[f"negative-depths-{side}-share"] = (_probe(n, depth, np.zeros(n), flat),
+                                                side == "above")
+    v0 = k["INSERTING_SPEED_MM_S"]
+    mins = int(k["INSERTING_MIN_SAMPLES"])
+    for side, v, m in (("at-speed", v0, mins), ("above-speed", math.nextafter(v0, math.inf), mins),
+                       ("fewer-samples", 2.0 * v0 + 1.0, mins - 1)):
+        vel = np.where(np.arange(n) < m, v, 0.0)
+        force = np.where(np.arange(n) < m, -1.0, 0.0)
+        out[f"inserting-{side}"] = (_probe(n, ramp + 1.0, vel, force), side == "above-speed")
+    return out
+
+
+def test_inline_rules_agree_with_the_reference(tmp_path):
+    """gen_constants.CHECK_INLINE (nte_units.h) holds check_units's inline thresholds: the
+    reference refuses exactly the probes above them, and both C programs do the same with the
+    same message."""
+    from reference_py.tools.csvio import UnitsError, Units, read_trial
+    k = _inline()
+    header = (ROOT / "firmware" / "host" / "nte_units.h").read_text()
+    for name, v in k.items():
+        lit = f"{v}U" if isinstance(v, int) else f"({float(v).hex()})"
+        assert f"#define NTE_UNITS_{name} {lit}\n" in header, name
+    out = tmp_path / "est.csv"
+    for name, (table, refused) in _probes(k).items():
+        csv = _save(tmp_path / f"{name}.csv", table)
+        try:
+            read_trial(csv, units=Units())
+            message = None
+        except UnitsError as exc:
+            message = str(exc)
+        assert (message is not None) == refused, (name, message)
+        for prog in PROGS:
+            c = c_run(prog, csv, out, "--model", "2")
+            if refused:
+                assert c.returncode == 2 and body(c.stderr, prog) == message, (prog, name)
+            else:
+                assert c.returncode == 0, (prog, name, c.stderr)
+
+
+@pytest.mark.parametrize("spec", [".4g", "g", ".0f", ".1f", ".3g"])
+def test_c_formats_numbers_as_python(spec):
+    """The refusals print numbers with C's %.4g, %g and %.0f: glibc writes what Python's
+    format() does (halves, exponents, large and small values)."""
+    libc = ctypes.CDLL(None)
+    rng = np.random.default_rng(23)
+    values = [0.0, -0.0, 0.5, 1.5, 2.5, 12345.5, 99.95, 0.025, 1e-5, 1.23456e-7, 2.714e6,
+              5.585e5, 1e16, 1e100, 4372.0, 10.48, 99.5, 100.0 * 0.745, 100.0 * 0.125]
+    values += list(rng.normal(0.0, 1.0, 200) * 10.0 ** rng.integers(-8, 12, 200))
+    buf = ctypes.create_string_buffer(128)
+    for x in values:
+        libc.snprintf(buf, 128, f"%{spec}".encode(), ctypes.c_double(x))
+        assert buf.value.decode() == format(x, spec), (spec, x)
