@@ -384,6 +384,7 @@ def _estimate(a: argparse.Namespace) -> int:
             # the stage position may lie anywhere in +-depth_max_mm (the air gap is no error)
             limits = replace(limits, depth_min_mm=-limits.depth_max_mm)
         trial = read_trial(a.csv, units=units_from(a), limits=limits)
+        force_read = trial.force_n        # the verdict measures the noise on the force read
         if a.predict_only:
             # the force is ignored: the bank is fed 0 N (never rejected, never learned)
             trial = replace(trial, force_n=np.zeros_like(trial.force_n))
@@ -403,10 +404,10 @@ def _estimate(a: argparse.Namespace) -> int:
             choice = choose_export(run, run.config, preset, trial)
             outs.write_text(exported, json.dumps(export_config(run, choice), indent=2) + "\n")
         outs.commit()
-    print(f"{len(run.t_s)} samples, Model {'I' * a.model}, {a.precision}; "
-          f"final estimates (± 1 sd):")
-    for j, name in enumerate(run.names):
-        print(f"  {name:7s} = {float(run.params[-1, j]):.6g} ± {float(run.params_sd[-1, j]):.3g}")
+    from .estimate import final_estimates_lines
+    from .verdict import verdict
+    for line in final_estimates_lines(run):
+        print(line)
     print(f"wrote {a.out}" + (f" and {a.plot}" if a.plot else "")
           + (f" and {a.export_config}" if a.export_config else ""))
     print(status_counts(run.status))
@@ -416,6 +417,12 @@ def _estimate(a: argparse.Namespace) -> int:
         warning = replay_warning(choice)
         if warning is not None:
             print(warning, file=sys.stderr)
+    judged = verdict(run.t_s, run.depth_mm, force_read, run.innovation_n, run.status,
+                     predict_only=a.predict_only, noise_n=None,
+                     confidence=None if run.confidence is None else float(run.confidence[-1]))
+    print(judged.line)
+    if judged.warning is not None:
+        print(judged.warning, file=sys.stderr)
     return 0
 
 

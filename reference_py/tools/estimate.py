@@ -149,6 +149,22 @@ def _json_real(x: float) -> float | None:
     return float(x) if math.isfinite(x) else None
 
 
+def final_estimates_lines(run: EstimateRun) -> list[str]:
+    """What ``estimate`` prints of the estimates: the bank's shared model at the last sample,
+    each parameter as the filter that owns it (Table I) left it, with its standard deviation."""
+    from ..bank import filter_subsets
+    assert run.config is not None
+    owner = {name: i + 1 for i, names in enumerate(filter_subsets(run.config)) for name in names}
+    roman = "I" * run.model
+    lines = [f"{len(run.t_s)} samples, Model {roman}, {run.precision}; final estimates (± 1 sd): "
+             f"the bank's shared model at the last sample, each parameter as the filter that "
+             f"owns it (Table I) left it:"]
+    for j, name in enumerate(run.names):
+        lines.append(f"  {name:7s} = {float(run.params[-1, j]):.6g} ± "
+                     f"{float(run.params_sd[-1, j]):.3g}  (filter {owner[name]})")
+    return lines
+
+
 def estimate_csv_lines(run: EstimateRun) -> list[str]:
     """The estimate file, line by line: the same text the C host program writes."""
     header = ["t_s", "force_hat_n", "z", "innovation_n", "status"]
@@ -179,5 +195,5 @@ def estimate_csv_lines(run: EstimateRun) -> list[str]:
     return lines
 
 
-__all__ = ["EstimateRun", "run_estimate", "estimate_csv_lines", "make_config", "export_config",
-           "CONFIG_SCHEMA"]
+__all__ = ["EstimateRun", "run_estimate", "estimate_csv_lines", "final_estimates_lines",
+           "make_config", "export_config", "CONFIG_SCHEMA"]

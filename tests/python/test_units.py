@@ -72,7 +72,8 @@ def test_refused_with_the_probable_unit_then_converted(base, tmp_path, capsys, l
     assert err == [f"nte-ref: error: {src}: {message}"]
     assert not out.exists()
     assert estimate(src, out, option) == 0
-    assert capsys.readouterr().out.strip().splitlines()[-1] == \
+    # the counts, then the verdict (the last line)
+    assert capsys.readouterr().out.strip().splitlines()[-2] == \
         f"samples: {len(rows)}; rejected 0, gated 0, clipped 0"
     ref = np.loadtxt(ref_out, delimiter=",", skiprows=1)
     got = np.loadtxt(out, delimiter=",", skiprows=1)
@@ -85,7 +86,7 @@ def test_no_units_check_accepts_and_counts_the_rejected(base, tmp_path, capsys):
     src = write(tmp_path / "in.csv", rows, lambda t, dd, f: (t, dd, f * 1000.0))
     capsys.readouterr()
     assert estimate(src, tmp_path / "e.csv", ["--no-units-check"]) == 0
-    last = capsys.readouterr().out.strip().splitlines()[-1]
+    last = capsys.readouterr().out.strip().splitlines()[-2]
     n_out = sum(1 for _, _, f in rows if abs(f * 1000.0) > 50.0)
     assert last.startswith(f"samples: {len(rows)}; rejected {n_out}, ")
 
