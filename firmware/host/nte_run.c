@@ -28,6 +28,7 @@
 #include "nte_units.h"
 #include "starts.h"
 #include "units_check.h"
+#include "verdict.h"
 
 #include <errno.h>
 #include <math.h>
@@ -587,7 +588,8 @@ typedef struct counts_t {
 /* Write every row to a temporary file beside the target, then rename it into place.
  * Returns 0, EXIT_BAD_INPUT (the place cannot be written) or 1 (a write failed). */
 static int run(const args_t* a, const out_t* out, const nte_trial_t* tr, nte_t* est,
-               counts_t* counts, nte_output_t* last, nte_export_snapshot_t* snaps)
+               counts_t* counts, nte_output_t* last, nte_export_snapshot_t* snaps,
+               nte_verdict_acc_t* verdict)
 {
     char tmp[sizeof out->target + 16U];
     const char* slash = strrchr(out->target, '/');
@@ -628,6 +630,8 @@ static int run(const args_t* a, const out_t* out, const nte_trial_t* tr, nte_t* 
         counts->rejected += ((o.status & NTE_STATUS_REJECTED) != 0U) ? 1U : 0U;
         counts->gated += ((o.status & NTE_STATUS_GATED) != 0U) ? 1U : 0U;
         counts->clipped += ((o.status & NTE_STATUS_CLIPPED) != 0U) ? 1U : 0U;
+        nte_verdict_add(verdict, tr->t_s[k], (double)o.innovation_n, o.status,
+                        (double)o.confidence);
         (void)nte_get_params(est, pe, NTE_IDENTIFIED_MAX);
         if (snaps != NULL) { /* --export-config's candidates (export_select.h) */
             for (size_t c = 0U; c < NTE_EXPORT_CANDIDATES; c++) {
@@ -746,6 +750,26 @@ static void print_replay(const nte_export_snapshot_t* snap, const nte_export_cho
                 "%.0f %% of its peak force (more than %.0f %%): a prediction from them will miss "
                 "by about as much\n",
                 100.0 * frac, 100.0 * NTE_EXPORT_WARN_FRACTION);
+    }
+}
+
+/* The closing verdict (verdict.h), the last line on stdout; the start's warning on stderr.
+ * The noise is measured on the force as read (converted; --predict-only does not zero it). */
+static void print_verdict(const args_t* a, const nte_trial_t* tr, const nte_verdict_acc_t* acc)
+{
+    nte_verdict_opts_t vo;
+    double sd = (double)NAN;
+    vo.rest_n = nte_verdict_rest_noise(tr->depth_mm, tr->force_n, tr->n, &sd);
+    vo.noise_n = sd;
+    vo.predict_only = a->predict_only;
+    vo.robust = a->robust;
+    char line[1024];
+    char warning[512];
+    if (nte_verdict_text(acc, &vo, line, sizeof line, warning, sizeof warning) == 0) {
+        printf("%s\n", line);
+        if (warning[0] != '\0') {
+            fprintf(stderr, "%s\n", warning);
+        }
     }
 }
 
@@ -904,8 +928,10 @@ int main(int argc, char** argv)
     (void)memset(&last, 0, sizeof last);
     last.surface_mm = (nte_real_t)NAN;
     static nte_export_snapshot_t snaps[NTE_EXPORT_CANDIDATES];
+    nte_verdict_acc_t verdict;
+    nte_verdict_start(&verdict);
     int rc = run(&a, &out, &tr, &est, &counts, &last,
-                 (a.export_config != NULL) ? snaps : NULL);
+                 (a.export_config != NULL) ? snaps : NULL, &verdict);
     nte_export_choice_t choice;
     (void)memset(&choice, 0, sizeof choice);
     if ((rc == 0) && (a.export_config != NULL)) {
@@ -929,6 +955,7 @@ int main(int argc, char** argv)
         if (a.export_config != NULL) {
             print_replay(&snaps[choice.candidate], &choice);
         }
+        print_verdict(&a, &tr, &verdict);
     }
     nte_trial_free(&tr);
     return rc;

@@ -273,7 +273,8 @@ def test_phantom_sizes_are_bounded(tmp_path, capsys, flags, message):
 
 def test_c_run_writes_by_the_safe_writer_rules(sim_csv, tmp_path):
     """nte-run refuses what nte-ref refuses (device, directory, missing parent, under a file),
-    writes through a symlink, keeps a replaced file's mode, and ends with the counts line."""
+    writes through a symlink, keeps a replaced file's mode, and ends with the counts line and
+    the verdict."""
     sub = tmp_path / "sub"
     sub.mkdir()
     cases = [("/dev/null", "--out /dev/null: is a character device, not a regular file; "
@@ -296,7 +297,9 @@ def test_c_run_writes_by_the_safe_writer_rules(sim_csv, tmp_path):
     assert link.is_symlink() and real.read_text().startswith("t_s,force_hat_n")
     assert stat.S_IMODE(os.stat(real).st_mode) == 0o640
     n = len(real.read_text().splitlines()) - 1
-    assert r.stdout.splitlines()[-1] == f"samples: {n}; rejected 0, gated 0, clipped 0"
+    lines = r.stdout.splitlines()
+    assert lines[-2:-1] == [f"samples: {n}; rejected 0, gated 0, clipped 0"]
+    assert lines[-1].startswith("verdict: ")    # the closing verdict (test_run_verdict.py)
 
 
 def test_estimate_exports_what_it_identified(sim_csv, tmp_path, capsys):

@@ -28,12 +28,11 @@ import numpy as np
 import pytest
 
 from c_twin import EXE, ROOT
+from run_records import PROGS, c_run, reference, write_records
 
 pytestmark = pytest.mark.skipif(
     not all(p.exists() for p in EXE.values()),
     reason="build/host/bin/nte-run{,-double} missing: build the firmware first (make build)")
-
-PROGS = {"nte-run-double": EXE["float64"], "nte-run": EXE["float32"]}
 
 Table = tuple[list[str], np.ndarray]
 Spoil = Callable[[list[str], np.ndarray], None]
@@ -99,29 +98,13 @@ COMPARED = {"ms-read-as-s": "ml", "m-read-as-mm": "ph", "mN-read-as-N": "ml",
 @pytest.fixture(scope="module")
 def records(tmp_path_factory) -> dict[str, Path]:
     d = tmp_path_factory.mktemp("units")
-    subprocess.run([sys.executable, "-m", "reference_py", "phantom", "skin", "--seed", "3",
-                    "--out", str(d / "ph.csv")], check=True, capture_output=True, cwd=ROOT)
-    from config_loop_figures import write_record
-    from discrepancy_measured_like import make_trial
-    tr = make_trial(5)[0]
-    write_record(d / "ml.csv", tr.t_s, tr.depth_mm, tr.force_n)
-    out = {"ph": d / "ph.csv", "ml": d / "ml.csv"}
+    out = write_records(d)
     for base in ("ph", "ml"):
         for name, (spoil, _) in SPOILED.items():
             header, rows = _load(out[base])
             spoil(header, rows)
             out[f"{base}-{name}"] = _save(d / f"{base}-{name}.csv", (header, rows))
     return out
-
-
-def reference(csv: Path, out: Path, *flags: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "reference_py", "estimate", str(csv),
-                           "--out", str(out), *flags], capture_output=True, text=True, cwd=ROOT)
-
-
-def c_run(prog: str, csv: Path, out: Path, *flags: str) -> subprocess.CompletedProcess:
-    return subprocess.run([str(PROGS[prog]), str(csv), "--out", str(out), *flags],
-                          capture_output=True, text=True, timeout=120)
 
 
 def body(stderr: str, prog: str) -> str:
