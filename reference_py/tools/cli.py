@@ -3,6 +3,7 @@
     nte-ref simulate --preset NAME --depth MM --dwell S [--speed MM_S] [--rate HZ] [--noise N]
                      [--seed K] [--cycles C] [--accel MM_S2] --out FILE.csv
     nte-ref estimate FILE.csv --model 1|2|3 [--estimator bank|robust] [--preset NAME]
+                     [--start NAME=VALUE,...] [--noise N]
                      [--init-seed K] [--init-factor F] [--precision float64|float32]
                      [--schedule all|rotate] [--profile default|paper] [--presliding-mm MM]
                      [--tau-fast S] [--tau-slow S] [--relax-branches 1|2] [--no-relaxation] [--no-layers]
@@ -92,6 +93,57 @@ def bounded(lo: float, hi: float, unit: str = "", *, integer: bool = False,
 
     parse.__name__ = kind  # argparse names the type in its own messages
     return parse
+
+
+def sensor_noise(text: str) -> float:
+    """An argparse type: the sensor's noise standard deviation in N, finite, > 0 and < 1 (a
+    value of 1 or more is taken for millinewtons and refused saying so)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if math.isfinite(value) and value >= 1.0:
+        raise argparse.ArgumentTypeError(f"{text} N is not a plausible sensor noise: probably "
+                                         f"millinewtons, give it in N")
+    if not (math.isfinite(value) and value > 0.0):
+        raise argparse.ArgumentTypeError(f"must be > 0 and < 1 N (got {text})")
+    return value
+
+
+def start_values(text: str) -> dict[str, float]:
+    """An argparse type: ``NAME=VALUE[,NAME=VALUE...]``, starting (nominal) values of the
+    parameters by name (params.ALL_NAMES), each finite and in the range a configuration file
+    allows it (estconfig.py: the physical ones positive but f2, |x| <= 1000; the strengths in
+    (0, 1)).  Combinations (g(0) = f1 + f2 > 0, strengths summing below 1) are the bank's to
+    refuse, with its own message."""
+    from ..params import ALL_NAMES, RELAX_NAMES
+    from .estconfig import PARAM_MAX, POSITIVE_PARAMS
+    out: dict[str, float] = {}
+    for item in text.split(","):
+        name, eq, value = (part.strip() for part in item.partition("="))
+        if not eq or not name:
+            raise argparse.ArgumentTypeError(f"{item.strip()!r} is not NAME=VALUE")
+        if name not in ALL_NAMES:
+            raise argparse.ArgumentTypeError(f"unknown parameter {name!r} (valid: "
+                                             f"{', '.join(ALL_NAMES)})")
+        if name in out:
+            raise argparse.ArgumentTypeError(f"{name!r} given twice")
+        try:
+            x = float(value)
+        except ValueError:
+            x = math.nan
+        if not math.isfinite(x):
+            raise argparse.ArgumentTypeError(f"{name}={value}: not a finite number")
+        if name in RELAX_NAMES:
+            ok, rule = 0.0 < x < 1.0, "must be > 0 and < 1 (a fraction of the elastic force)"
+        elif name in POSITIVE_PARAMS:
+            ok, rule = 0.0 < x <= PARAM_MAX, f"must be > 0 and <= {PARAM_MAX:g}"
+        else:
+            ok, rule = abs(x) <= PARAM_MAX, f"must be within ±{PARAM_MAX:g}"
+        if not ok:
+            raise argparse.ArgumentTypeError(f"{name}={value}: {rule}")
+        out[name] = x
+    return out
 
 
 def _sign(text: str) -> int:
@@ -186,6 +238,15 @@ def build_parser() -> argparse.ArgumentParser:
                    help="starting (nominal) parameters; Model II also takes its fixed f2 and "
                         "alpha from it, Model I its beta0 (default: paper-10mms, or --config's "
                         "params)")
+    e.add_argument("--start", type=start_values, metavar="NAME=VALUE,...",
+                   help="starting (nominal) values of named parameters, on top of --preset's "
+                        "or --config's: sigma0, sigma1, sigma2, f1, f2, alpha, beta, and Model "
+                        "III's strengths g_fast, g_slow (default: none)")
+    e.add_argument("--noise", type=sensor_noise, metavar="N",
+                   help="the force sensor's noise standard deviation, N (0 < N < 1): the "
+                        "filters' measurement noise (r_n2 = N^2, over --config's) and the "
+                        "verdict's yardstick (default: r_n2 of the profile or --config; the "
+                        "verdict measures the noise at rest before the stage moves)")
     e.add_argument("--init-seed", type=bounded(0, 2**63 - 1, integer=True), default=0,
                    metavar="K",
                    help="0: start at the preset; K > 0: multiply each identified parameter by "
@@ -371,6 +432,7 @@ def _estimate(a: argparse.Namespace) -> int:
     from .estimate import estimate_csv_lines, make_config, run_estimate
 
     fc, preset = _file_config(a)
+    preset, strengths = _started(a, preset, fc.strengths if fc is not None else {})
     overrides = model3_overrides(a, fc)
     with Outputs() as outs:
         out = outs.add(a.out, "--out")
@@ -391,7 +453,7 @@ def _estimate(a: argparse.Namespace) -> int:
         run = run_estimate(trial, preset, a.model, a.estimator, a.precision, a.profile,
                            a.schedule, a.init_seed, a.init_factor, progress=True,
                            overrides=overrides, contact=contact,
-                           strengths=fc.strengths if fc is not None else None)
+                           strengths=strengths)
         outs.write_lines(out, estimate_csv_lines(run))
         if png is not None:
             from .plotting import plot_estimate
@@ -418,7 +480,7 @@ def _estimate(a: argparse.Namespace) -> int:
         if warning is not None:
             print(warning, file=sys.stderr)
     judged = verdict(run.t_s, run.depth_mm, force_read, run.innovation_n, run.status,
-                     predict_only=a.predict_only, noise_n=None,
+                     predict_only=a.predict_only, noise_n=a.noise,
                      confidence=None if run.confidence is None else float(run.confidence[-1]))
     print(judged.line)
     if judged.warning is not None:
@@ -481,6 +543,8 @@ def model3_overrides(a: argparse.Namespace, fc: "FileConfig | None" = None) -> d
         out.update(fc.m3)
         if fc.r_n2 is not None:
             out["r_n2"] = fc.r_n2
+    if getattr(a, "noise", None) is not None:
+        out["r_n2"] = a.noise * a.noise
     for key, flag in (("presliding_mm", a.presliding_mm), ("tau_fast_s", a.tau_fast),
                       ("tau_slow_s", a.tau_slow), ("relax_branches", a.relax_branches)):
         if flag is not None:
@@ -529,6 +593,28 @@ def _file_config(a: argparse.Namespace) -> "tuple[FileConfig | None, Preset]":
     if a.preset is not None or fc is None:
         return fc, get_preset(a.preset or "paper-10mms")
     return fc, Preset(f"config {a.config}", ParamSet(*fc.params), 0.0, "from --config")
+
+
+def _started(a: argparse.Namespace, preset: "Preset", strengths: dict[str, float]
+             ) -> "tuple[Preset, dict[str, float] | None]":
+    """The starting values with --start on top: the preset (--preset's or --config's params)
+    and Model III's strengths (--config's or, for the ones --start gives, the bank's nominal
+    for the other); None: the bank's own nominal strengths."""
+    from dataclasses import replace
+    from ..params import PARAM_NAMES, RELAX_NAMES, RELAX_NOMINAL
+    start = a.start or {}
+    given = [nm for nm in RELAX_NAMES if nm in start]
+    if given and a.model != 3:
+        raise ValueError(f"argument --start: {given[0]} is a relaxation strength of Model III "
+                         f"(not of Model {'I' * a.model})")
+    physical = {nm: v for nm, v in start.items() if nm in PARAM_NAMES}
+    if physical:
+        preset = replace(preset, name=f"{preset.name} with --start",
+                         params=preset.params.with_values(**physical))
+    if given:
+        strengths = {nm: start.get(nm, strengths.get(nm, RELAX_NOMINAL[nm]))
+                     for nm in RELAX_NAMES}
+    return preset, strengths or None
 
 
 def status_counts(status: np.ndarray) -> str:
