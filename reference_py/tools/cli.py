@@ -3,7 +3,7 @@
     nte-ref simulate --preset NAME --depth MM --dwell S [--speed MM_S] [--rate HZ] [--noise N]
                      [--seed K] [--cycles C] [--accel MM_S2] --out FILE.csv
     nte-ref estimate FILE.csv --model 1|2|3 [--estimator bank|robust] [--preset NAME]
-                     [--start NAME=VALUE,...] [--noise N]
+                     [--start NAME=VALUE,...] [--noise N] [--engine reference|c [--c-bin DIR]]
                      [--init-seed K] [--init-factor F] [--precision float64|float32]
                      [--schedule all|rotate] [--profile default|paper] [--presliding-mm MM]
                      [--tau-fast S] [--tau-slow S] [--relax-branches 1|2] [--no-relaxation] [--no-layers]
@@ -36,9 +36,9 @@ from .safe_write import Outputs
 from ..params import PRESETS, get_preset
 
 if TYPE_CHECKING:
-    from .csvio import Units
+    from .csvio import Trial, Units
     from .estconfig import FileConfig
-    from ..config import ContactConfig
+    from ..config import ContactConfig, EstimatorConfig
     from ..params import Preset
 
 EXIT_BAD_INPUT = 2
@@ -303,6 +303,14 @@ def build_parser() -> argparse.ArgumentParser:
                    help="with --config: the model alone on the depth, parameters held at the "
                         "config's, no filter update, the force column ignored; force_hat_n is "
                         "the prediction; the surface is --surface or the config's (default: off)")
+    e.add_argument("--engine", choices=("reference", "c"), default="reference",
+                   help="reference: this numpy reference; c: the C library's host program "
+                        "(nte-run-double, or nte-run for float32, in --c-bin; make build "
+                        "builds them) with the same flags: the same estimate file, byte for "
+                        "byte, and the program's own output (reference_py/tools/c_engine.py)")
+    e.add_argument("--c-bin", metavar="DIR",
+                   help="with --engine c: where nte-run and nte-run-double are (default: "
+                        "build/host/bin of the repository)")
     e.add_argument("--export-config", metavar="FILE.json",
                    help="also write what the estimator identified (the final parameters, "
                         "their sd, Model III's constants) as an estimator configuration, "
@@ -389,6 +397,13 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def subcommand(name: str) -> argparse.ArgumentParser:
+    """The parser of one nte-ref command (its options: ``._actions``)."""
+    sub = next(act for act in build_parser()._actions
+               if isinstance(act, argparse._SubParsersAction))
+    return sub.choices[name]
+
+
 def _simulate(a: argparse.Namespace) -> int:
     from .simulate import simulate_force
     from .trajectory import TrajectorySpec, lspb_profile
@@ -427,25 +442,46 @@ def _contact_config(a: argparse.Namespace) -> "ContactConfig | None":
                          surface_mm=math.nan if a.surface is None else float(a.surface))
 
 
-def _estimate(a: argparse.Namespace) -> int:
-    from .csvio import Limits
-    from .estimate import estimate_csv_lines, make_config, run_estimate
+_Setup = "tuple[FileConfig | None, Preset, dict[str, float] | None, dict[str, object]]"
 
+
+def _estimate_setup(a: argparse.Namespace) -> _Setup:
+    """--config read and merged into the flags, --start on top of the starting values: the
+    file's configuration, the preset that starts the filters, Model III's starting strengths
+    and the configuration fields the flags set."""
     fc, preset = _file_config(a)
     preset, strengths = _started(a, preset, fc.strengths if fc is not None else {})
-    overrides = model3_overrides(a, fc)
+    return fc, preset, strengths, model3_overrides(a, fc)
+
+
+def read_estimate_input(a: argparse.Namespace, cfg: "EstimatorConfig"
+                        ) -> "tuple[Trial, ContactConfig | None]":
+    """The insertion to estimate from, by the one reader (mapped, converted and checked against
+    ``cfg``'s ranges), and the front end the flags ask for."""
+    from dataclasses import replace
+    from .csvio import Limits
+    contact = _contact_config(a)
+    limits = Limits.from_config(cfg)
+    if contact is not None:
+        # the stage position may lie anywhere in +-depth_max_mm (the air gap is no error)
+        limits = replace(limits, depth_min_mm=-limits.depth_max_mm)
+    return read_trial(a.csv, units=units_from(a), limits=limits), contact
+
+
+def _estimate(a: argparse.Namespace) -> int:
+    from .estimate import estimate_csv_lines, make_config, run_estimate
+
+    if a.engine == "c":
+        from .c_engine import run_c_estimate
+        return run_c_estimate(a, subcommand("estimate")._actions)
+    fc, preset, strengths, overrides = _estimate_setup(a)
     with Outputs() as outs:
         out = outs.add(a.out, "--out")
         png = outs.add(a.plot, "--plot") if a.plot else None
         exported = outs.add(a.export_config, "--export-config") if a.export_config else None
         cfg = make_config(preset, a.model, a.profile, a.schedule, overrides)
         from dataclasses import replace
-        contact = _contact_config(a)
-        limits = Limits.from_config(cfg)
-        if contact is not None:
-            # the stage position may lie anywhere in +-depth_max_mm (the air gap is no error)
-            limits = replace(limits, depth_min_mm=-limits.depth_max_mm)
-        trial = read_trial(a.csv, units=units_from(a), limits=limits)
+        trial, contact = read_estimate_input(a, cfg)
         force_read = trial.force_n        # the verdict measures the noise on the force read
         if a.predict_only:
             # the force is ignored: the bank is fed 0 N (never rejected, never learned)
