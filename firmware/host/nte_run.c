@@ -8,14 +8,20 @@
  *           [--precision P] [--presliding-mm MM] [--tau-fast S] [--tau-slow S]
  *           [--relax-branches 1|2] [--no-relaxation] [--no-direction-memory] [--no-layers]
  *           [--contact on|off] [--surface MM] [--config FILE.json] [--predict-only]
- *           [--export-config FILE.json] [--force-unit N|mN] [--time-unit s|ms|us]
- *           [--depth-unit mm|m] [--force-sign +1|-1] [--depth-sign +1|-1] [--no-units-check]
- *           --out EST.csv
+ *           [--start NAME=VALUE,...] [--noise N] [--export-config FILE.json]
+ *           [--force-unit N|mN] [--time-unit s|ms|us] [--depth-unit mm|m]
+ *           [--force-sign +1|-1] [--depth-sign +1|-1] [--no-units-check] --out EST.csv
  *
  * The input is converted from its units and signs to N, s and mm and, unless
  * --no-units-check, refused when implausible (units_check.h: a file in ms, m or mN, a negated
  * depth or force, a force a thousand times the range, most samples out of range), with the
  * reference's message naming the likely unit and the option that converts it.
+ *
+ * --start sets the starting (nominal) value of parameters by name over --preset's or
+ * --config's (start_flag.h); --noise N (newtons) sets the measurement noise variance
+ * r_n2 = N^2 over the profile's and --config's.  The last line on stdout is the verdict
+ * (verdict.h): the innovation RMS in tissue against the sensor's noise (--noise N, else
+ * measured at rest before the stage moves).
  *
  * -h/--help lists every flag and its default.  Exit status 0 on success, 2 on bad input: one
  * line on stderr ("FILE:LINE: column 'NAME': reason" or "argument --flag: why").
@@ -26,6 +32,7 @@
 #include "nte.h"
 #include "nte_presets.h"
 #include "nte_units.h"
+#include "start_flag.h"
 #include "starts.h"
 #include "units_check.h"
 #include "verdict.h"
@@ -81,6 +88,8 @@ typedef struct args_t {
     int given_tau_slow;
     int given_relax_branches;
     nte_units_t units; /* the input's units and signs (--force-unit ... --no-units-check) */
+    double noise;      /* --noise N: the sensor's noise sd, N; NaN: not given */
+    nte_start_flag_t start; /* --start NAME=VALUE,...: starting values over preset/config */
 } args_t;
 
 /* A refusal: one line on stderr, exit status 2 (the Python tools' form). */
@@ -121,6 +130,7 @@ static void help(void)
            "       [--presliding-mm MM] [--tau-fast S] [--tau-slow S] [--relax-branches 1|2]\n"
            "       [--no-relaxation] [--no-direction-memory] [--no-layers] [--contact on|off]\n"
            "       [--surface MM] [--config FILE.json] [--predict-only]\n"
+           "       [--start NAME=VALUE,...] [--noise N]\n"
            "       [--export-config FILE.json] [--force-unit %s] [--time-unit %s]\n"
            "       [--depth-unit %s] [--force-sign +1|-1] [--depth-sign +1|-1]\n"
            "       [--no-units-check] --out EST.csv\n"
@@ -136,14 +146,24 @@ static void help(void)
            "  --estimator bank|robust  (default: bank)\n"
            "  --preset NAME          starting parameters (default: %s)\n"
            "                         with --config: the file's params unless given\n"
+           "  --start NAME=VALUE,... starting (nominal) values of named parameters, on top of\n"
+           "                         --preset's or --config's: sigma0, sigma1, sigma2, f1, f2,\n"
+           "                         alpha, beta, and Model III's strengths g_fast, g_slow\n"
+           "                         (default: none)\n"
+           "  --noise N              the force sensor's noise sd, N (0 < N < 1): the filters'\n"
+           "                         measurement noise (r_n2 = N^2, over --config's) and the\n"
+           "                         verdict's yardstick (default: r_n2 of the profile or\n"
+           "                         --config; the verdict measures the noise at rest before\n"
+           "                         the stage moves)\n"
            "  --profile default|paper  tuning (default: default)\n"
            "  --init-seed K          0: start at the preset; K > 0: factors drawn with seed K,\n"
            "                         0..9223372036854775807 (default: 0)\n"
            "  --init-factor F        spread of the starting factors, 1..100 (default: 5)\n"
            "  --schedule all|rotate  filters per sample (default: all)\n"
            "  --precision " PRECISION "    the only precision of this binary\n"
-           "                         (default: " PRECISION ")\n"
-           "  --presliding-mm MM     Model III: turn-over length of the direction state,\n"
+           "                         (default: " PRECISION ")\n",
+           fu, tu, du, NTE_PRESET_DEFAULT);
+    printf("  --presliding-mm MM     Model III: turn-over length of the direction state,\n"
            "                         > 0 and <= 1000 (default: 2.5, or --config's)\n"
            "  --tau-fast S           Model III: fast relaxation time constant, s,\n"
            "                         > 0 and <= 3600 (default: 0.3, or --config's)\n"
@@ -169,8 +189,7 @@ static void help(void)
            "  --predict-only         with --config: the model alone on the depth, parameters\n"
            "                         held, no filter update, the force ignored (default: off)\n"
            "  --export-config FILE.json  also write what was identified as a configuration\n"
-           "                         (default: none)\n",
-           fu, tu, du, NTE_PRESET_DEFAULT);
+           "                         (default: none)\n");
     printf("units and signs of the input CSV (converted by the reader; implausible values are\n"
            "refused naming the likely option):\n"
            "  --force-unit %-9s unit of the force_n column (default: N)\n"
@@ -183,6 +202,9 @@ static void help(void)
            "  --no-units-check       do not refuse implausible units or signs (default: check)\n"
            "  --out EST.csv          the estimates to write (no default)\n"
            "  -h, --help             this help\n"
+           "\n"
+           "The last line on stdout is the verdict: the innovation RMS in tissue against the\n"
+           "noise, and whether the model follows this file.\n"
            "\n"
            "Exit status: 0 success, 2 bad input (one line on stderr naming the flag or\n"
            "FILE:LINE: column 'NAME': reason).\n",
@@ -291,6 +313,8 @@ static int parse_args(int argc, char** argv, args_t* a)
     a->units.depth_column = "depth_mm";
     a->units.force_column = "force_n";
     a->units.velocity_column = "velocity_mm_s";
+    a->noise = (double)NAN;
+    (void)memset(&a->start, 0, sizeof a->start);
     for (int i = 1; i < argc; i++) {
         if ((strcmp(argv[i], "--help") == 0) || (strcmp(argv[i], "-h") == 0)) {
             help();
@@ -459,6 +483,29 @@ static int parse_args(int argc, char** argv, args_t* a)
             }
         } else if (unit_flag(name, val, &a->units, msg, sizeof msg) != 0) {
             if (msg[0] != '\0') {
+                return usage(msg);
+            }
+        } else if (strcmp(name, "--noise") == 0) {
+            /* tools/cli.py sensor_noise: a value of 1 or more is taken for millinewtons */
+            a->noise = strtod(val, &end);
+            if ((end == val) || (*end != '\0')) {
+                (void)snprintf(msg, sizeof msg, "argument --noise: not a number: '%s'", val);
+                return usage(msg);
+            }
+            if (isfinite(a->noise) && (a->noise >= 1.0)) {
+                (void)snprintf(msg, sizeof msg, "argument --noise: %s N is not a plausible "
+                               "sensor noise: probably millinewtons, give it in N", val);
+                return usage(msg);
+            }
+            if (!(isfinite(a->noise) && (a->noise > 0.0))) {
+                (void)snprintf(msg, sizeof msg, "argument --noise: must be > 0 and < 1 N (got "
+                               "%s)", val);
+                return usage(msg);
+            }
+        } else if (strcmp(name, "--start") == 0) {
+            char why[200];
+            if (nte_start_flag_parse(val, &a->start, why, sizeof why) != 0) {
+                (void)snprintf(msg, sizeof msg, "argument --start: %s", why);
                 return usage(msg);
             }
         } else if (strcmp(name, "--out") == 0) {
@@ -759,8 +806,9 @@ static void print_verdict(const args_t* a, const nte_trial_t* tr, const nte_verd
 {
     nte_verdict_opts_t vo;
     double sd = (double)NAN;
-    vo.rest_n = nte_verdict_rest_noise(tr->depth_mm, tr->force_n, tr->n, &sd);
-    vo.noise_n = sd;
+    vo.rest_n = isnan(a->noise) ? nte_verdict_rest_noise(tr->depth_mm, tr->force_n, tr->n, &sd)
+                                : 0U;
+    vo.noise_n = isnan(a->noise) ? sd : a->noise;
     vo.predict_only = a->predict_only;
     vo.robust = a->robust;
     char line[1024];
@@ -844,6 +892,14 @@ int main(int argc, char** argv)
         }
         return bad(msg);
     }
+    for (int j = (int)nte_param_g_fast; (j <= (int)nte_param_g_slow) && (a.model != 3); j++) {
+        if (a.start.given[j] != 0) {
+            (void)snprintf(msg, sizeof msg, "argument --start: %s is a relaxation strength of "
+                           "Model III (not of Model %s)", nte_param_name((nte_param_id_t)j),
+                           (a.model == 1) ? "I" : "II");
+            return bad(msg);
+        }
+    }
     out_t out;
     (void)memset(&out, 0, sizeof out);
     if (check_out("--out", a.out, &out, msg, sizeof msg) != 0) {
@@ -882,8 +938,14 @@ int main(int argc, char** argv)
             return bad(msg);
         }
     }
-    /* the config's params are the new nominal values unless --preset is given */
-    const double* values = (have_fc && !a.given_preset) ? fc.params : preset->values;
+    /* the config's params are the new nominal values unless --preset is given; --start's
+     * on top of either */
+    double values[7];
+    (void)memcpy(values, (have_fc && !a.given_preset) ? fc.params : preset->values,
+                 sizeof values);
+    for (size_t j = 0U; j < 7U; j++) {
+        values[j] = (a.start.given[j] != 0) ? a.start.value[j] : values[j];
+    }
     double start[7];
     if (nte_start_values(values, (uint64_t)a.seed, a.factor, a.model, start) != 0) {
         nte_trial_free(&tr);
@@ -902,9 +964,13 @@ int main(int argc, char** argv)
         cfg.nominal[7] = (nte_real_t)fc.g[0];
         cfg.nominal[8] = (nte_real_t)fc.g[1];
     }
-    if (have_fc && fc.has_r_n2) {
-        cfg.r_n2 = (nte_real_t)fc.r_n2;
+    for (size_t j = 7U; j < NTE_PARAM_COUNT; j++) {
+        cfg.nominal[j] = (a.start.given[j] != 0) ? (nte_real_t)a.start.value[j] : cfg.nominal[j];
     }
+    /* the measurement noise variance: the profile's, --config's, --noise's squared */
+    const double r_n2 = isnan(a.noise) ? ((have_fc && fc.has_r_n2) ? fc.r_n2 : (double)cfg.r_n2)
+                                       : (a.noise * a.noise);
+    cfg.r_n2 = (nte_real_t)r_n2;
     cfg.predict_only = a.predict_only != 0;
     cfg.presliding_mm = (nte_real_t)a.presliding_mm;
     cfg.tau_fast_s = (nte_real_t)a.tau_fast_s;
@@ -920,6 +986,10 @@ int main(int argc, char** argv)
     const nte_err_t err = nte_init(&est, &cfg);
     if (err != nte_err_ok) {
         nte_trial_free(&tr);
+        if ((err == nte_err_bad_nominal) && (a.model == 3) && cfg.relaxation) {
+            /* every nominal value was checked in range before: the strengths' sum */
+            return bad("nominal relaxation strengths g_fast, g_slow must be > 0 with a sum < 1");
+        }
         (void)snprintf(msg, sizeof msg, "invalid estimator configuration (nte_err %d)", (int)err);
         return bad(msg);
     }
@@ -943,8 +1013,7 @@ int main(int argc, char** argv)
             rc = 1;
         } else {
             rc = export_config(&a, &exp_out, &snaps[choice.candidate], &choice, &cfg, tr.n,
-                               &last,
-                               (have_fc && fc.has_r_n2) ? fc.r_n2 : (double)cfg.r_n2);
+                               &last, r_n2);
         }
     }
     if (rc == 0) {

@@ -27,12 +27,10 @@ from typing import Callable
 import numpy as np
 import pytest
 
-from c_twin import EXE, ROOT
-from run_records import PROGS, c_run, reference, write_records
+from c_twin import ROOT
+from run_records import NEEDS_C, PROGS, body, c_run, records_fixture, reference
 
-pytestmark = pytest.mark.skipif(
-    not all(p.exists() for p in EXE.values()),
-    reason="build/host/bin/nte-run{,-double} missing: build the firmware first (make build)")
+pytestmark = NEEDS_C
 
 Table = tuple[list[str], np.ndarray]
 Spoil = Callable[[list[str], np.ndarray], None]
@@ -95,27 +93,18 @@ COMPARED = {"ms-read-as-s": "ml", "m-read-as-mm": "ph", "mN-read-as-N": "ml",
             "most-out-of-range": "ph", "us-read-as-s": "ph"}
 
 
-@pytest.fixture(scope="module")
-def records(tmp_path_factory) -> dict[str, Path]:
-    d = tmp_path_factory.mktemp("units")
-    out = write_records(d)
+def _spoiled(d: Path, good: dict[str, Path]) -> dict[str, Path]:
+    """Every correct record spoiled every way."""
+    out = {}
     for base in ("ph", "ml"):
         for name, (spoil, _) in SPOILED.items():
-            header, rows = _load(out[base])
+            header, rows = _load(good[base])
             spoil(header, rows)
             out[f"{base}-{name}"] = _save(d / f"{base}-{name}.csv", (header, rows))
     return out
 
 
-def body(stderr: str, prog: str) -> str:
-    """The one line of a refusal without its "PROG: error: " prefix (and the argument
-    parser's " (see PROG --help)" suffix)."""
-    lines = stderr.splitlines()
-    assert len(lines) == 1, stderr
-    prefix, suffix = f"{prog}: error: ", f" (see {prog} --help)"
-    assert lines[0].startswith(prefix), lines[0]
-    text = lines[0][len(prefix):]
-    return text[:-len(suffix)] if text.endswith(suffix) else text
+records = records_fixture(_spoiled)
 
 
 @pytest.mark.parametrize("base", ["ph", "ml"])

@@ -19,26 +19,23 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from c_twin import EXE
-from run_records import PROGS, c_run, reference, write_records
+from run_records import NEEDS_C, PROGS, c_run, records_fixture, reference
 
-pytestmark = pytest.mark.skipif(
-    not all(p.exists() for p in EXE.values()),
-    reason="build/host/bin/nte-run{,-double} missing: build the firmware first (make build)")
+pytestmark = NEEDS_C
 
 
-@pytest.fixture(scope="module")
-def records(tmp_path_factory) -> dict[str, Path]:
+def _air_and_moving(d: Path, _: dict[str, Path]) -> dict[str, Path]:
     from config_loop_figures import write_record
-    d = tmp_path_factory.mktemp("verdict")
-    out = write_records(d)
     # never in tissue: the stage holds still at 0 mm
     t = np.arange(400) * 0.01
     force = np.random.default_rng(1).normal(0.0, 2e-3, len(t))
     write_record(d / "air.csv", t, np.zeros_like(t), force)
     # no rest: the stage moves at 10 mm/s from the first sample
     write_record(d / "moving.csv", t, 10.0 * t, 0.02 * (10.0 * t) + force)
-    return {**out, "air": d / "air.csv", "moving": d / "moving.csv"}
+    return {"air": d / "air.csv", "moving": d / "moving.csv"}
+
+
+records = records_fixture(_air_and_moving)
 
 
 def _column(est: Path, name: str) -> np.ndarray:
