@@ -14,6 +14,8 @@ import pytest
 from reference_py.tools.cli import main
 from reference_py.tools.csvio import ColumnMap, CsvError, Units, read_trial
 
+from estimate_run import refused
+
 RIG_MAP = "t=time_us,depth=pz,force=fz"
 RIG_HEADER = "time_us,fx,fy,fz,tx,ty,tz,px,py,pz"
 
@@ -80,14 +82,9 @@ def test_the_map_reads_a_named_velocity_and_otherwise_computes_it(rows, tmp_path
 
 def test_microseconds_read_as_seconds_name_the_unit(rows, tmp_path, capsys):
     rig = write_rig(tmp_path / "rig.csv", rows)
-    out = tmp_path / "e.csv"
-    capsys.readouterr()
-    assert estimate(rig, out, "--columns", RIG_MAP) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert err == [f"nte-ref: error: {rig}: column 'time_us': median time step 2e+04 s (longer "
-                   f"than the 0.5 s gap limit): probably microseconds: convert with "
-                   f"--time-unit us"]
-    assert not out.exists()
+    assert refused(capsys, rig, tmp_path / "e.csv", "--model", "2", "--columns", RIG_MAP) == [
+        f"nte-ref: error: {rig}: column 'time_us': median time step 2e+04 s (longer than the "
+        f"0.5 s gap limit): probably microseconds: convert with --time-unit us"]
 
 
 BAD_MAPS = [
@@ -108,12 +105,8 @@ BAD_MAPS = [
 @pytest.mark.parametrize("text,why", BAD_MAPS, ids=[w.split(" (")[0] for _, w in BAD_MAPS])
 def test_a_malformed_map_is_refused_naming_the_problem(rows, tmp_path, capsys, text, why):
     rig = write_rig(tmp_path / "rig.csv", rows[:20])
-    out = tmp_path / "e.csv"
-    capsys.readouterr()
-    assert estimate(rig, out, "--columns", text, "--time-unit", "us") == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert err == [f"nte-ref: error: --columns {text}: {why}"]
-    assert not out.exists()
+    assert refused(capsys, rig, tmp_path / "e.csv", "--model", "2", "--columns", text,
+                   "--time-unit", "us") == [f"nte-ref: error: --columns {text}: {why}"]
     with pytest.raises(CsvError, match="^--columns "):
         ColumnMap.parse(text)
 
@@ -122,13 +115,10 @@ def test_a_malformed_map_is_refused_naming_the_problem(rows, tmp_path, capsys, t
                                           (RIG_MAP + ",velocity=vz", "vz")])
 def test_a_mapped_column_the_file_lacks_is_named(rows, tmp_path, capsys, text, missing):
     rig = write_rig(tmp_path / "rig.csv", rows[:20])
-    out = tmp_path / "e.csv"
-    capsys.readouterr()
-    assert estimate(rig, out, "--columns", text, "--time-unit", "us") == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert err == [f"nte-ref: error: {rig}:1: column '{missing}': missing from the header "
-                   f"(have: {RIG_HEADER.replace(',', ', ')})"]
-    assert not out.exists()
+    assert refused(capsys, rig, tmp_path / "e.csv", "--model", "2", "--columns", text,
+                   "--time-unit", "us") == [
+        f"nte-ref: error: {rig}:1: column '{missing}': missing from the header (have: "
+        f"{RIG_HEADER.replace(',', ', ')})"]
 
 
 def test_the_mapped_time_must_increase(tmp_path, capsys):

@@ -18,18 +18,13 @@ import pytest
 from reference_py.tools.c_engine import C_BIN, C_EXE
 from reference_py.tools.cli import main
 
+from estimate_run import estimate, refused
+
 
 def need_c() -> None:
     for exe in C_EXE.values():
         if not os.access(C_BIN / exe, os.X_OK):
             pytest.skip(f"{C_BIN / exe} missing: make build")
-
-
-def estimate(capsys, src: Path, out: Path, *flags: str) -> tuple[int, list[str], list[str]]:
-    capsys.readouterr()
-    rc = main(["estimate", str(src), "--out", str(out), *flags])
-    got = capsys.readouterr()
-    return rc, got.out.strip().splitlines(), got.err.strip().splitlines()
 
 
 @pytest.fixture(scope="module")
@@ -80,12 +75,10 @@ def test_a_missing_program_is_refused(lab, tmp_path, capsys):
     out = tmp_path / "e.csv"
     nowhere = tmp_path / "no-build"
     for precision, exe in C_EXE.items():
-        rc, so, se = estimate(capsys, lab, out, "--model", "2", "--precision", precision,
-                              "--engine", "c", "--c-bin", str(nowhere))
-        assert rc == 2 and so == []
-        assert se == [f"nte-ref: error: --engine c: {nowhere / exe} is missing (make build "
-                      f"builds it; --c-bin DIR points at another build)"]
-        assert not out.exists()
+        assert refused(capsys, lab, out, "--model", "2", "--precision", precision, "--engine",
+                       "c", "--c-bin", str(nowhere)) == [
+            f"nte-ref: error: --engine c: {nowhere / exe} is missing (make build builds it; "
+            f"--c-bin DIR points at another build)"]
 
 
 # -- the flag handling, on a stand-in program ---------------------------------------------------
@@ -166,8 +159,6 @@ def test_other_flags_the_program_lacks_are_refused(tmp_path, capsys, flags, mess
     src = tmp_path / "in.csv"
     src.write_text("t_s,depth_mm,force_n\n0,0,0\n0.01,0.1,0.01\n")
     bin_dir = stand_in(tmp_path / "bin", BASE_FLAGS)
-    out = tmp_path / "e.csv"
-    rc, so, se = estimate(capsys, src, out, "--model", "2", *flags, "--engine", "c",
-                          "--c-bin", str(bin_dir))
-    assert rc == 2 and so == [] and se == [message]
-    assert not out.exists() and not (bin_dir / "record.json").exists()
+    assert refused(capsys, src, tmp_path / "e.csv", "--model", "2", *flags, "--engine", "c",
+                   "--c-bin", str(bin_dir)) == [message]
+    assert not (bin_dir / "record.json").exists()

@@ -13,6 +13,8 @@ import pytest
 from reference_py.params import PARAM_NAMES, PRESETS
 from reference_py.tools.cli import main
 
+from estimate_run import estimate, refused
+
 PAPER = dict(zip(PARAM_NAMES, PRESETS["paper-10mms"].params.as_list()))
 
 
@@ -23,13 +25,6 @@ def sim(tmp_path_factory) -> Path:
     assert main(["simulate", "--preset", "paper-10mms", "--depth", "15", "--dwell", "0.3",
                  "--rate", "50", "--out", str(out)]) == 0
     return out
-
-
-def estimate(capsys, src: Path, out: Path, *flags: str) -> tuple[int, list[str], list[str]]:
-    capsys.readouterr()
-    rc = main(["estimate", str(src), "--out", str(out), *flags])
-    got = capsys.readouterr()
-    return rc, got.out.strip().splitlines(), got.err.strip().splitlines()
 
 
 def config(path: Path, model: int = 2, **extra: object) -> Path:
@@ -77,14 +72,8 @@ def test_noise_sets_the_measurement_noise_and_the_verdict(sim, tmp_path, capsys)
     ("2mN", "argument --noise: not a number: '2mN'"),
 ])
 def test_noise_refusals(sim, tmp_path, capsys, value, message):
-    out = tmp_path / "e.csv"
-    capsys.readouterr()
-    with pytest.raises(SystemExit) as e:
-        main(["estimate", str(sim), "--model", "2", "--noise", value, "--out", str(out)])
-    assert e.value.code == 2
-    assert capsys.readouterr().err.strip().splitlines() == [
+    assert refused(capsys, sim, tmp_path / "e.csv", "--model", "2", "--noise", value) == [
         f"nte-ref estimate: error: {message} (see nte-ref estimate --help)"]
-    assert not out.exists()
 
 
 # -- --start ----------------------------------------------------------------------------------
@@ -152,15 +141,5 @@ def test_start_sets_the_fixed_values_and_model3_strengths(sim, tmp_path, capsys)
      "strength of Model III (not of Model II)"),
 ])
 def test_start_refusals(sim, tmp_path, capsys, flags, message):
-    out = tmp_path / "e.csv"
-    argv = ["estimate", str(sim), "--out", str(out), *flags]
-    if "--model" not in flags:
-        argv += ["--model", "2"]
-    capsys.readouterr()
-    try:
-        rc = main(argv)
-    except SystemExit as e:
-        rc = e.code  # type: ignore[assignment]
-    assert rc == 2
-    assert capsys.readouterr().err.strip().splitlines() == [message]
-    assert not out.exists()
+    model = [] if "--model" in flags else ["--model", "2"]
+    assert refused(capsys, sim, tmp_path / "e.csv", *model, *flags) == [message]

@@ -21,15 +21,19 @@ from reference_py.params import PARAM_NAMES, PRESETS
 from reference_py.tools.cli import main
 from reference_py.tools.verdict import rest_noise, verdict
 
+from estimate_run import estimate
+
 NOT_IN_TISSUE = (1 << 0) | (1 << 1) | (1 << 5) | (1 << 13)
 GATED = 1 << 2
 
 
-def run_estimate(capsys, src: Path, out: Path, *flags: str) -> tuple[int, list[str], list[str]]:
-    capsys.readouterr()
-    rc = main(["estimate", str(src), "--out", str(out), *flags])
-    got = capsys.readouterr()
-    return rc, got.out.strip().splitlines(), got.err.strip().splitlines()
+def judged(capsys, src: Path, out: Path, *flags: str) -> list[str]:
+    """The stdout lines of an estimate that runs without a warning, its verdict checked
+    against the numpy recomputation."""
+    rc, so, se = estimate(capsys, src, out, *flags)
+    assert rc == 0 and se == [], se
+    assert so[-1] == expected_line(src, out)
+    return so
 
 
 def expected_line(src: Path, est: Path, noise_n: float | None = None) -> str:
@@ -80,11 +84,8 @@ def test_the_phantom_model3_near_the_bound_model2_far_off(lab, tmp_path, capsys)
     61.7x.  Model III is just past the bound of 5, so the line says it does not fit."""
     lines = {}
     for model in (3, 2):
-        out = tmp_path / f"m{model}.csv"
-        rc, so, se = run_estimate(capsys, lab, out, "--model", str(model))
-        assert rc == 0 and se == []
-        assert so[-1] == expected_line(lab, out)
-        lines[model] = so[-1]
+        lines[model] = judged(capsys, lab, tmp_path / f"m{model}.csv", "--model",
+                              str(model))[-1]
     assert "(9.46 mN, measured in the first 104 samples at rest)" in lines[3]
     k3, k2 = factor(lines[3]), factor(lines[2])
     assert k3 == pytest.approx(5.3, abs=0.3)
@@ -115,11 +116,8 @@ def fits(tmp_path_factory) -> Path:
 
 
 def test_a_record_the_model_follows(fits, tmp_path, capsys):
-    out = tmp_path / "e.csv"
-    rc, so, se = run_estimate(capsys, fits, out, "--model", "2", "--preset",
-                              "needleB-tissueB-10mms")
-    assert rc == 0 and se == []
-    assert so[-1] == expected_line(fits, out)
+    so = judged(capsys, fits, tmp_path / "e.csv", "--model", "2", "--preset",
+                "needleB-tissueB-10mms")
     assert so[-1].endswith("; the model follows this file")
     assert factor(so[-1]) == pytest.approx(1.3, abs=0.3)          # measured: 1.3
     # the header says whose estimates they are, each parameter with its filter (Table I)
@@ -134,8 +132,8 @@ def test_a_record_the_model_follows(fits, tmp_path, capsys):
 
 def test_the_robust_estimator_appends_its_refinement(fits, tmp_path, capsys):
     out = tmp_path / "e.csv"
-    rc, so, _ = run_estimate(capsys, fits, out, "--model", "2", "--preset",
-                             "needleB-tissueB-10mms", "--estimator", "robust")
+    rc, so, _ = estimate(capsys, fits, out, "--model", "2", "--preset",
+                         "needleB-tissueB-10mms", "--estimator", "robust")
     assert rc == 0
     e = np.genfromtxt(out, delimiter=",", names=True)
     conv = "converged" if int(e["status"][-1]) & (1 << 10) else "not converged"
@@ -147,8 +145,8 @@ def test_a_start_far_off_is_warned(fits, tmp_path, capsys):
     """Measured: start factors drawn with seed 1 within 100x are 193x the noise off in the
     first 2 s in tissue."""
     out = tmp_path / "e.csv"
-    rc, so, se = run_estimate(capsys, fits, out, "--model", "2", "--init-seed", "1",
-                              "--init-factor", "100")
+    rc, so, se = estimate(capsys, fits, out, "--model", "2", "--init-seed", "1",
+                          "--init-factor", "100")
     assert rc == 0 and so[-1] == expected_line(fits, out)
     e = np.genfromtxt(out, delimiter=",", names=True)
     inside = (e["status"].astype(np.int64) & NOT_IN_TISSUE) == 0
@@ -169,11 +167,8 @@ def test_no_rest_no_noise(tmp_path, capsys):
     sim = tmp_path / "sim.csv"
     assert main(["simulate", "--preset", "needleB-tissueB-10mms", "--depth", "10", "--dwell",
                  "0.2", "--rate", "100", "--out", str(sim)]) == 0
-    out = tmp_path / "e.csv"
-    rc, so, se = run_estimate(capsys, sim, out, "--model", "2", "--preset",
-                              "needleB-tissueB-10mms")
-    assert rc == 0 and se == []
-    assert so[-1] == expected_line(sim, out)
+    so = judged(capsys, sim, tmp_path / "e.csv", "--model", "2", "--preset",
+                "needleB-tissueB-10mms")
     assert so[-1].endswith("; noise unknown (no rest before the stage moves): give --noise N")
 
 
@@ -181,7 +176,7 @@ def test_no_sample_in_tissue(tmp_path, capsys):
     src = tmp_path / "air.csv"
     src.write_text("t_s,depth_mm,force_n\n" + "".join(f"{k * 0.01!r},0,0.001\n"
                                                        for k in range(50)))
-    rc, so, _ = run_estimate(capsys, src, tmp_path / "e.csv", "--model", "2")
+    rc, so, _ = estimate(capsys, src, tmp_path / "e.csv", "--model", "2")
     assert rc == 0
     assert so[-1] == "verdict: no sample in tissue: no verdict"
 
@@ -191,8 +186,8 @@ def test_predict_only(fits, tmp_path, capsys):
     p = PRESETS["needleB-tissueB-10mms"].params
     cfg.write_text(json.dumps({"schema": "nte-estimator-config/1", "model": 2,
                                "params": dict(zip(PARAM_NAMES, p.as_list()))}))
-    rc, so, _ = run_estimate(capsys, fits, tmp_path / "e.csv", "--config", str(cfg),
-                             "--predict-only")
+    rc, so, _ = estimate(capsys, fits, tmp_path / "e.csv", "--config", str(cfg),
+                         "--predict-only")
     assert rc == 0
     assert so[-1] == "verdict: predict-only, the force was not read: no verdict"
 
