@@ -192,7 +192,24 @@ static char* slurp(const char* path, size_t* len)
     return buf;
 }
 
+void nte_columns_standard(nte_columns_t* c)
+{
+    (void)snprintf(c->t, sizeof c->t, "t_s");
+    (void)snprintf(c->depth, sizeof c->depth, "depth_mm");
+    (void)snprintf(c->force, sizeof c->force, "force_n");
+    (void)snprintf(c->velocity, sizeof c->velocity, "velocity_mm_s");
+    c->velocity_required = 0;
+}
+
 int nte_trial_read(const char* path, nte_trial_t* tr, char* err, const size_t es)
+{
+    nte_columns_t c;
+    nte_columns_standard(&c);
+    return nte_trial_read_columns(path, &c, tr, err, es);
+}
+
+int nte_trial_read_columns(const char* path, const nte_columns_t* cols, nte_trial_t* tr,
+                           char* err, const size_t es)
 {
     memset(tr, 0, sizeof *tr);
     size_t len = 0U;
@@ -261,14 +278,17 @@ int nte_trial_read(const char* path, nte_trial_t* tr, char* err, const size_t es
                 if ((w > 0) && ((size_t)w < (sizeof hbuf - o))) {
                     o += (size_t)w;
                 }
-                if (strcmp(header[c], "t_s") == 0) { ti = (int)c; }
-                if (strcmp(header[c], "depth_mm") == 0) { li = (int)c; }
-                if (strcmp(header[c], "force_n") == 0) { fi = (int)c; }
-                if (strcmp(header[c], "velocity_mm_s") == 0) { vi = (int)c; }
+                if (strcmp(header[c], cols->t) == 0) { ti = (int)c; }
+                if (strcmp(header[c], cols->depth) == 0) { li = (int)c; }
+                if (strcmp(header[c], cols->force) == 0) { fi = (int)c; }
+                if ((cols->velocity[0] != '\0') && (strcmp(header[c], cols->velocity) == 0)) {
+                    vi = (int)c;
+                }
             }
-            const char* req[3] = {"t_s", "depth_mm", "force_n"};
-            const int idx[3] = {ti, li, fi};
-            for (size_t r = 0U; (r < 3U) && (rc == 0); r++) {
+            const char* req[4] = {cols->t, cols->depth, cols->force, cols->velocity};
+            const int idx[4] = {ti, li, fi, vi};
+            const size_t n_req = (cols->velocity_required != 0) ? 4U : 3U;
+            for (size_t r = 0U; (r < n_req) && (rc == 0); r++) {
                 if (idx[r] < 0) {
                     fail(err, es, "%s:%zu: column '%s': missing from the header (have: %s)", path,
                          lineno, req[r], hbuf);
@@ -278,8 +298,8 @@ int nte_trial_read(const char* path, nte_trial_t* tr, char* err, const size_t es
             for (size_t a = 0U; (a < nc) && (rc == 0); a++) {
                 for (size_t b = a + 1U; (b < nc) && (rc == 0); b++) {
                     if (strcmp(header[a], header[b]) == 0) {
-                        fail(err, es, "%s:%zu: duplicate column name in the header", path,
-                             lineno);
+                        fail(err, es, "%s:%zu: column '%s': duplicate column name in the header",
+                             path, lineno, header[a]);
                         rc = -1;
                     }
                 }
@@ -321,8 +341,8 @@ int nte_trial_read(const char* path, nte_trial_t* tr, char* err, const size_t es
             char b[40];
             nte_py_repr(t, a, sizeof a);
             nte_py_repr(prev_t, b, sizeof b);
-            fail(err, es, "%s:%zu: column 't_s': time %s does not increase (previous %s)", path,
-                 lineno, a, b);
+            fail(err, es, "%s:%zu: column '%s': time %s does not increase (previous %s)", path,
+                 lineno, cols->t, a, b);
             rc = -1;
             break;
         }

@@ -19,6 +19,20 @@ typedef struct nte_trial_t {
     int velocity_given;
 } nte_trial_t;
 
+/** Which of the file's columns hold the time, depth, force and velocity (csvio.ColumnMap;
+ *  column_map.h parses --columns into one). */
+#define NTE_COLUMN_NAME_MAX 256U
+typedef struct nte_columns_t {
+    char t[NTE_COLUMN_NAME_MAX];
+    char depth[NTE_COLUMN_NAME_MAX];
+    char force[NTE_COLUMN_NAME_MAX];
+    char velocity[NTE_COLUMN_NAME_MAX]; /**< read when the file has it; "": never read */
+    int velocity_required;              /**< 1: refused when the file lacks it */
+} nte_columns_t;
+
+/** The standard names: t_s, depth_mm, force_n, and velocity_mm_s when the file has it. */
+void nte_columns_standard(nte_columns_t* columns);
+
 /** How a file's columns are converted to N, s and mm (csvio.Units): the factor of each unit
  *  (nte_units.h), the sign conventions (depth grows into the tissue, force is positive while
  *  inserting) and whether the result is checked (units_check.h). */
@@ -32,16 +46,15 @@ typedef struct nte_units_t {
     int force_sign;      /**< +1 or -1 */
     int depth_sign;
     int check;           /**< 0: --no-units-check */
-    /** the file's names of the time, depth, force and velocity columns (the standard names,
-     *  t_s, depth_mm, force_n, velocity_mm_s, unless mapped) */
-    const char* t_column;
-    const char* depth_column;
-    const char* force_column;
-    const char* velocity_column;
+    nte_columns_t columns; /**< which columns are read (the messages name them so) */
 } nte_units_t;
 
-/** Read `path`.  On error returns -1 and writes "FILE:LINE: ..." (no newline) to err. */
+/** Read `path`'s standard columns.  On error returns -1 and writes "FILE:LINE: ..." (no
+ *  newline) to err. */
 int nte_trial_read(const char* path, nte_trial_t* trial, char* err, size_t err_size);
+/** The same, reading the columns `columns` names (the messages name them so). */
+int nte_trial_read_columns(const char* path, const nte_columns_t* columns, nte_trial_t* trial,
+                           char* err, size_t err_size);
 void nte_trial_free(nte_trial_t* trial);
 /** Convert the columns from the file's units and signs to N, s, mm (csvio.read_trial with
  *  units): time by its factor, depth and force by factor and sign, a given velocity by depth

@@ -10,12 +10,15 @@
  *           [--contact on|off] [--surface MM] [--config FILE.json] [--predict-only]
  *           [--start NAME=VALUE,...] [--noise N] [--export-config FILE.json]
  *           [--force-unit N|mN] [--time-unit s|ms|us] [--depth-unit mm|m]
- *           [--force-sign +1|-1] [--depth-sign +1|-1] [--no-units-check] --out EST.csv
+ *           [--force-sign +1|-1] [--depth-sign +1|-1] [--no-units-check]
+ *           [--columns t=NAME,depth=NAME,force=NAME[,velocity=NAME]] --out EST.csv
  *
  * The input is converted from its units and signs to N, s and mm and, unless
  * --no-units-check, refused when implausible (units_check.h: a file in ms, m or mN, a negated
  * depth or force, a force a thousand times the range, most samples out of range), with the
- * reference's message naming the likely unit and the option that converts it.
+ * reference's message naming the likely unit and the option that converts it.  --columns
+ * reads a logger's file under its own column names (column_map.h; with --time-unit us for
+ * time stamps in microseconds).
  *
  * --start sets the starting (nominal) value of parameters by name over --preset's or
  * --config's (start_flag.h); --noise N (newtons) sets the measurement noise variance
@@ -26,6 +29,7 @@
  * -h/--help lists every flag and its default.  Exit status 0 on success, 2 on bad input: one
  * line on stderr ("FILE:LINE: column 'NAME': reason" or "argument --flag: why").
  */
+#include "column_map.h"
 #include "config_file.h"
 #include "export_select.h"
 #include "csv_in.h"
@@ -88,6 +92,7 @@ typedef struct args_t {
     int given_tau_slow;
     int given_relax_branches;
     nte_units_t units; /* the input's units and signs (--force-unit ... --no-units-check) */
+    const char* columns; /* --columns MAP (parsed when the file is read), NULL: standard */
     double noise;      /* --noise N: the sensor's noise sd, N; NaN: not given */
     nte_start_flag_t start; /* --start NAME=VALUE,...: starting values over preset/config */
 } args_t;
@@ -133,7 +138,7 @@ static void help(void)
            "       [--start NAME=VALUE,...] [--noise N]\n"
            "       [--export-config FILE.json] [--force-unit %s] [--time-unit %s]\n"
            "       [--depth-unit %s] [--force-sign +1|-1] [--depth-sign +1|-1]\n"
-           "       [--no-units-check] --out EST.csv\n"
+           "       [--no-units-check] [--columns MAP] --out EST.csv\n"
            "\n"
            "Run the estimator (C library, " PRECISION ") over a CSV of t_s, depth_mm, force_n\n"
            "(velocity_mm_s optional, else central differences of depth) and write one row per\n"
@@ -200,6 +205,12 @@ static void help(void)
            "                         (default: 1)\n"
            "  --depth-sign +1|-1     -1: the depth column grows out of the tissue (default: 1)\n"
            "  --no-units-check       do not refuse implausible units or signs (default: check)\n"
+           "  --columns MAP          the file's own column names, as t=NAME,depth=NAME,\n"
+           "                         force=NAME[,velocity=NAME]: a logger's CSV read as it is\n"
+           "                         (e.g. t=time_us,depth=pz,force=fz with --time-unit us);\n"
+           "                         the velocity is computed from the depth unless the map\n"
+           "                         names it (default: t_s, depth_mm, force_n and\n"
+           "                         velocity_mm_s if present)\n"
            "  --out EST.csv          the estimates to write (no default)\n"
            "  -h, --help             this help\n"
            "\n"
@@ -272,7 +283,7 @@ static int unit_flag(const char* name, const char* val, nte_units_t* u, char* ms
 
 static int parse_args(int argc, char** argv, args_t* a)
 {
-    char msg[256];
+    char msg[4096];
     a->csv = NULL;
     a->out = NULL;
     a->preset = NTE_PRESET_DEFAULT;
@@ -309,10 +320,8 @@ static int parse_args(int argc, char** argv, args_t* a)
     a->units.force_sign = 1;
     a->units.depth_sign = 1;
     a->units.check = 1;
-    a->units.t_column = "t_s";
-    a->units.depth_column = "depth_mm";
-    a->units.force_column = "force_n";
-    a->units.velocity_column = "velocity_mm_s";
+    nte_columns_standard(&a->units.columns);
+    a->columns = NULL;
     a->noise = (double)NAN;
     (void)memset(&a->start, 0, sizeof a->start);
     for (int i = 1; i < argc; i++) {
@@ -503,11 +512,13 @@ static int parse_args(int argc, char** argv, args_t* a)
                 return usage(msg);
             }
         } else if (strcmp(name, "--start") == 0) {
-            char why[200];
+            char why[3072];
             if (nte_start_flag_parse(val, &a->start, why, sizeof why) != 0) {
                 (void)snprintf(msg, sizeof msg, "argument --start: %s", why);
                 return usage(msg);
             }
+        } else if (strcmp(name, "--columns") == 0) {
+            a->columns = val;
         } else if (strcmp(name, "--out") == 0) {
             a->out = val;
         } else {
@@ -919,8 +930,12 @@ int main(int argc, char** argv)
     } else {
         nte_config_default(&cfg, a.model, sch);
     }
+    if ((a.columns != NULL) &&
+        (nte_column_map_parse(a.columns, &a.units.columns, msg, sizeof msg) != 0)) {
+        return bad(msg);
+    }
     nte_trial_t tr;
-    if (nte_trial_read(a.csv, &tr, msg, sizeof msg) != 0) {
+    if (nte_trial_read_columns(a.csv, &a.units.columns, &tr, msg, sizeof msg) != 0) {
         return bad(msg);
     }
     nte_trial_convert(&tr, &a.units);

@@ -16,6 +16,12 @@ typedef struct nte_unit_t {
 #define NTE_DEPTH_UNITS { { "mm", 0x1.0000000000000p+0 }, { "m", 0x1.f400000000000p+9 } }
 #define NTE_TIME_UNIT_WORDS { "", "milliseconds", "microseconds" } /* a time step's hint */
 
+/* --columns KEY=NAME: each key and the standard column it stands for */
+#define NTE_COLUMN_KEY_COUNT 4
+#define NTE_COLUMN_KEYS { { "t", "t_s" }, { "depth", "depth_mm" }, { "force", "force_n" }, { "velocity", "velocity_mm_s" } }
+#define NTE_COLUMN_KEY_REQUIRED_COUNT 3
+#define NTE_COLUMN_KEYS_REQUIRED { "t", "depth", "force" }
+
 #define NTE_UNITS_MIN_STROKE_MM (0x1.0000000000000p+0)
 #define NTE_UNITS_MAX_REJECTED_SHARE (0x1.0000000000000p-1)
 #define NTE_UNITS_MAX_FORCE_OUT_SHARE (0x1.999999999999ap-5)

@@ -1,55 +1,13 @@
 /* --start NAME=VALUE[,...]; mirrors reference_py/tools/cli.py start_values. */
 #include "start_flag.h"
 
+#include "name_value.h"
 #include "nte_constants.h"
 
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-
-#define ITEM_MAX 256
-
-/* Python's str.strip() of s[0..n) (ASCII whitespace), into buf. */
-static void stripped(const char* s, size_t n, char* buf, size_t cap)
-{
-    while ((n > 0U) && (strchr(" \t\r\n\v\f", s[0]) != NULL)) {
-        s++;
-        n--;
-    }
-    while ((n > 0U) && (strchr(" \t\r\n\v\f", s[n - 1U]) != NULL)) {
-        n--;
-    }
-    (void)snprintf(buf, cap, "%.*s", (int)n, s);
-}
-
-/* Python's repr() of an ASCII string: single quotes unless it holds one and no double. */
-static void py_repr(const char* s, char* buf, size_t cap)
-{
-    const char q = ((strchr(s, '\'') != NULL) && (strchr(s, '"') == NULL)) ? '"' : '\'';
-    size_t o = 0U;
-    buf[o++] = q;
-    for (; (*s != '\0') && ((o + 5U) < cap); s++) {
-        const unsigned char c = (unsigned char)*s;
-        if ((c == (unsigned char)q) || (c == '\\')) {
-            buf[o++] = '\\';
-            buf[o++] = (char)c;
-        } else if ((c < 0x20U) || (c == 0x7fU)) {
-            const char* esc = (c == '\n') ? "\\n" : ((c == '\r') ? "\\r" : ((c == '\t') ? "\\t" : NULL));
-            if (esc != NULL) {
-                (void)memcpy(&buf[o], esc, 2U);
-                o += 2U;
-            } else {
-                (void)snprintf(&buf[o], cap - o, "\\x%02x", (unsigned)c);
-                o += 4U;
-            }
-        } else {
-            buf[o++] = (char)c;
-        }
-    }
-    buf[o++] = q;
-    buf[o] = '\0';
-}
 
 /* float(text) as Python takes it, NaN when it is no number (no hexadecimal). */
 static double number(const char* text)
@@ -73,23 +31,18 @@ static int find(const char* name)
 }
 
 /* One item NAME=VALUE: its checks in start_values's order. */
-static int parse_item(const char* item, size_t n, nte_start_flag_t* out, char* msg, size_t cap)
+static int parse_item(const nte_nv_t* it, nte_start_flag_t* out, char* msg, size_t cap)
 {
-    char whole[ITEM_MAX];
-    char name[ITEM_MAX];
-    char value[ITEM_MAX];
-    char shown[(2U * ITEM_MAX) + 8U];
-    const char* eq = memchr(item, '=', n);
-    stripped(item, (eq != NULL) ? (size_t)(eq - item) : n, name, sizeof name);
-    if ((eq == NULL) || (name[0] == '\0')) {
-        stripped(item, n, whole, sizeof whole);
-        py_repr(whole, shown, sizeof shown);
+    char shown[(2U * NTE_NV_TEXT) + 8U];
+    const char* name = it->name;
+    const char* value = it->value;
+    if ((it->has_eq == 0) || (name[0] == '\0')) {
+        nte_py_repr_text(it->item, shown, sizeof shown);
         (void)snprintf(msg, cap, "%s is not NAME=VALUE", shown);
         return -1;
     }
-    stripped(eq + 1, n - (size_t)(eq + 1 - item), value, sizeof value);
     const int j = find(name);
-    py_repr(name, shown, sizeof shown);
+    nte_py_repr_text(name, shown, sizeof shown);
     if (j < 0) {
         size_t o = (size_t)snprintf(msg, cap, "unknown parameter %s (valid: ", shown);
         for (int k = 0; (k < NTE_PARAM_COUNT) && (o < cap); k++) {
@@ -135,17 +88,13 @@ static int parse_item(const char* item, size_t n, nte_start_flag_t* out, char* m
 
 int nte_start_flag_parse(const char* text, nte_start_flag_t* out, char* msg, size_t cap)
 {
+    static nte_nv_t items[NTE_NV_MAX];
+    const size_t n = nte_nv_split(text, items, NTE_NV_MAX);
     (void)memset(out, 0, sizeof *out);
-    const char* item = text;
-    for (;;) {
-        const char* comma = strchr(item, ',');
-        const size_t n = (comma != NULL) ? (size_t)(comma - item) : strlen(item);
-        if (parse_item(item, n, out, msg, cap) != 0) {
+    for (size_t i = 0U; i < n; i++) {
+        if (parse_item(&items[i], out, msg, cap) != 0) {
             return -1;
         }
-        if (comma == NULL) {
-            return 0;
-        }
-        item = comma + 1;
     }
+    return 0;
 }

@@ -77,7 +77,7 @@ static int check_time(const char* path, const nte_trial_t* tr, const nte_units_t
         char hint[128];
         time_hint(dt, u->time, lim->dt_max_s, hint, sizeof hint);
         (void)snprintf(err, es, "%s: column '%s': median time step %.4g s (longer than the %g "
-                       "s gap limit): %s", path, u->t_column, dt, lim->dt_max_s, hint);
+                       "s gap limit): %s", path, u->columns.t, dt, lim->dt_max_s, hint);
         return -1;
     }
     return 0;
@@ -99,7 +99,7 @@ static int check_depth(const char* path, const nte_trial_t* tr, const nte_units_
     const double stroke = hi - lo;
     if ((0.0 < stroke) && (stroke < NTE_UNITS_MIN_STROKE_MM)) {
         (void)snprintf(err, es, "%s: column '%s': the depth spans only %.4g mm (less than "
-                       "%g mm): %s", path, u->depth_column, stroke, NTE_UNITS_MIN_STROKE_MM,
+                       "%g mm): %s", path, u->columns.depth, stroke, NTE_UNITS_MIN_STROKE_MM,
                        (strcmp(u->depth, "mm") == 0)
                            ? "probably metres: convert with --depth-unit m" : "no insertion");
         return -1;
@@ -108,7 +108,7 @@ static int check_depth(const char* path, const nte_trial_t* tr, const nte_units_
     if (ns > NTE_UNITS_NEGATIVE_DEPTH_SHARE) {
         (void)snprintf(err, es, "%s: column '%s': %.0f %% of the depths are negative (down to "
                        "%.4g mm): probably measured the other way: convert with --depth-sign -1",
-                       path, u->depth_column, 100.0 * ns, lo);
+                       path, u->columns.depth, 100.0 * ns, lo);
         return -1;
     }
     return 0;
@@ -143,7 +143,7 @@ static int check_force(const char* path, const nte_trial_t* tr, const nte_units_
     if (os > NTE_UNITS_MAX_FORCE_OUT_SHARE) {
         const int mn = (strcmp(u->force, "N") == 0) && ((peak * force_unit("mN")) <= fmax);
         (void)snprintf(err, es, "%s: column '%s': %.0f %% of the forces exceed the configured "
-                       "range \xc2\xb1%g N (up to %.4g): %s", path, u->force_column, 100.0 * os,
+                       "range \xc2\xb1%g N (up to %.4g): %s", path, u->columns.force, 100.0 * os,
                        fmax, peak, mn ? "probably millinewtons: convert with --force-unit mN"
                                 : "not a force in N");
         return -1;
@@ -151,7 +151,7 @@ static int check_force(const char* path, const nte_trial_t* tr, const nte_units_
     if (peak > (NTE_UNITS_FORCE_IMPLAUSIBLE_FACTOR * fmax)) {
         (void)snprintf(err, es, "%s:%zu: column '%s': %.4g N is not a plausible force (the "
                        "configured range is \xc2\xb1%g N)", path, tr->line[kpeak],
-                       u->force_column, tr->force_n[kpeak], fmax);
+                       u->columns.force, tr->force_n[kpeak], fmax);
         return -1;
     }
     size_t m = 0U;
@@ -166,7 +166,7 @@ static int check_force(const char* path, const nte_trial_t* tr, const nte_units_
     if ((m >= NTE_UNITS_INSERTING_MIN_SAMPLES) && (median(v, m) < 0.0)) {
         (void)snprintf(err, es, "%s: column '%s': the force is negative in %.0f %% of the "
                        "samples taken while inserting: probably the sensor's opposite sign: "
-                       "convert with --force-sign -1", path, u->force_column,
+                       "convert with --force-sign -1", path, u->columns.force,
                        100.0 * share(negative, m));
         return -1;
     }

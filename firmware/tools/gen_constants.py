@@ -211,6 +211,14 @@ def units_header() -> str:
     words = ", ".join(f'"{TIME_UNIT_WORDS.get(n, "")}"' for n in csvio.TIME_UNITS)
     out.append(f"#define NTE_TIME_UNIT_WORDS {{ {words} }} /* a time step's hint */")
     out.append("")
+    out.append("/* --columns KEY=NAME: each key and the standard column it stands for */")
+    out.append(f"#define NTE_COLUMN_KEY_COUNT {len(csvio.COLUMN_KEYS)}")
+    cells = ", ".join(f'{{ "{k}", "{v}" }}' for k, v in csvio.COLUMN_KEYS.items())
+    out.append(f"#define NTE_COLUMN_KEYS {{ {cells} }}")
+    out.append(f"#define NTE_COLUMN_KEY_REQUIRED_COUNT {len(csvio.COLUMN_KEYS_REQUIRED)}")
+    cells = ", ".join(f'"{k}"' for k in csvio.COLUMN_KEYS_REQUIRED)
+    out.append(f"#define NTE_COLUMN_KEYS_REQUIRED {{ {cells} }}")
+    out.append("")
     for name in ("MIN_STROKE_MM", "MAX_REJECTED_SHARE", "MAX_FORCE_OUT_SHARE"):
         out.append(f"#define NTE_UNITS_{name} ({hex64(getattr(csvio, name))})")
     for name, v in CHECK_INLINE.items():

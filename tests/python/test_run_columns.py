@@ -1,0 +1,134 @@
+"""nte-run reads a logger's CSV as it is: --columns t=NAME,depth=NAME,force=NAME[,velocity=NAME]
+with --time-unit us (issue 23), as `nte-ref estimate` does (csvio.ColumnMap).
+
+The logger's file (test_column_map.write_rig: time in integer microseconds, six force/torque
+channels fx..tz, the stage's axes px, py, pz) estimates through the map to the same bytes as
+the same samples in the standard t_s, depth_mm, force_n form, and the same bytes as the
+reference's (float64 against nte-run-double).  A malformed map, a mapped column the file
+lacks and microseconds read as seconds are refused by both programs with the same message,
+naming the file's own column; a velocity column is read only when the map names it.
+
+Requires build/host/bin/nte-run{,-double} (``make build``).
+"""
+from __future__ import annotations
+
+import csv
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from c_twin import ROOT
+from run_records import NEEDS_C, PROGS, body, c_run, reference
+from test_column_map import BAD_MAPS, RIG_HEADER, RIG_MAP, write_rig, write_standard
+
+pytestmark = NEEDS_C
+
+US = ["--columns", RIG_MAP, "--time-unit", "us"]
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory) -> dict[str, Path]:
+    d = tmp_path_factory.mktemp("columns")
+    sim = d / "sim.csv"
+    subprocess.run([sys.executable, "-m", "reference_py", "simulate", "--preset",
+                    "needleB-tissueB-10mms", "--depth", "20", "--dwell", "0.5", "--seed", "4",
+                    "--rate", "50", "--out", str(sim)], check=True, capture_output=True,
+                   cwd=ROOT)
+    rows = [(float(r["t_s"]), float(r["depth_mm"]), float(r["force_n"]))
+            for r in csv.DictReader(open(sim))]
+    return {"rig": write_rig(d / "rig.csv", rows), "rig_v": write_rig(d / "rig_v.csv", rows,
+                                                                      vel=True),
+            "std": write_standard(d / "std.csv", rows), "sim": sim}
+
+
+def test_a_logger_file_runs_as_it_is(files, tmp_path):
+    for prog in PROGS:
+        std, rig = tmp_path / f"{prog}-std.csv", tmp_path / f"{prog}-rig.csv"
+        assert c_run(prog, files["std"], std, "--model", "2").returncode == 0
+        r = c_run(prog, files["rig"], rig, "--model", "2", *US)
+        assert r.returncode == 0, r.stderr
+        assert rig.read_bytes() == std.read_bytes(), prog
+        assert r.stdout.splitlines()[-1].startswith("verdict: ")
+    # spaces around keys and names, any order
+    again = tmp_path / "again.csv"
+    assert c_run("nte-run-double", files["rig"], again, "--model", "2", "--columns",
+                 " force = fz , depth=pz,t=time_us", "--time-unit", "us").returncode == 0
+    assert again.read_bytes() == (tmp_path / "nte-run-double-std.csv").read_bytes()
+
+
+def test_a_logger_file_gives_the_references_bytes(files, tmp_path):
+    flags = ["--model", "3", *US, "--start", "sigma1=3", "--noise", "0.002"]
+    py, c = tmp_path / "py.csv", tmp_path / "c.csv"
+    r = reference(files["rig"], py, "--precision", "float64", *flags)
+    assert r.returncode == 0, r.stderr
+    d = c_run("nte-run-double", files["rig"], c, *flags)
+    assert d.returncode == 0, d.stderr
+    assert c.read_bytes() == py.read_bytes()
+    assert d.stdout.splitlines()[-1] == r.stdout.splitlines()[-1]
+
+
+def test_velocity_only_when_the_map_names_it(files, tmp_path):
+    """rig_v has a velocity column vz of zeros: without velocity= it is not read (central
+    differences, the same as the file without it), with velocity=vz it is."""
+    plain, mapped, no_vz = (tmp_path / n for n in ("plain.csv", "mapped.csv", "no_vz.csv"))
+    assert c_run("nte-run-double", files["rig_v"], plain, "--model", "2", *US).returncode == 0
+    assert c_run("nte-run-double", files["rig"], no_vz, "--model", "2", *US).returncode == 0
+    assert plain.read_bytes() == no_vz.read_bytes()
+    py = tmp_path / "py.csv"
+    flags = ["--model", "2", "--columns", RIG_MAP + ",velocity=vz", "--time-unit", "us",
+             "--no-units-check"]
+    assert c_run("nte-run-double", files["rig_v"], mapped, *flags).returncode == 0
+    assert reference(files["rig_v"], py, "--precision", "float64", *flags).returncode == 0
+    assert mapped.read_bytes() == py.read_bytes() != plain.read_bytes()
+
+
+def _refused_alike(csv_path: Path, tmp_path: Path, *flags: str) -> str:
+    out = tmp_path / "e.csv"
+    r = reference(csv_path, out, "--model", "2", *flags)
+    assert r.returncode == 2, r.stderr
+    want = body(r.stderr, "nte-ref")
+    for prog in PROGS:
+        c = c_run(prog, csv_path, out, "--model", "2", *flags)
+        assert c.returncode == 2, (prog, c.stderr)
+        assert body(c.stderr, prog) == want, prog
+        assert c.stdout == "" and not out.exists()
+    return want
+
+
+@pytest.mark.parametrize("text,why", BAD_MAPS, ids=[w.split(" (")[0] for _, w in BAD_MAPS])
+def test_a_malformed_map_is_refused_alike(files, tmp_path, text, why):
+    want = _refused_alike(files["rig"], tmp_path, "--columns", text, "--time-unit", "us")
+    assert want == f"--columns {text}: {why}"
+
+
+@pytest.mark.parametrize("text,missing", [("t=time_us,depth=pz,force=f_z", "f_z"),
+                                          (RIG_MAP + ",velocity=vz", "vz")])
+def test_a_mapped_column_the_file_lacks_is_named_alike(files, tmp_path, text, missing):
+    want = _refused_alike(files["rig"], tmp_path, "--columns", text, "--time-unit", "us")
+    assert want == (f"{files['rig']}:1: column '{missing}': missing from the header (have: "
+                    f"{RIG_HEADER.replace(',', ', ')})")
+
+
+def test_microseconds_read_as_seconds_name_the_column(files, tmp_path):
+    want = _refused_alike(files["rig"], tmp_path, "--columns", RIG_MAP)
+    assert "column 'time_us'" in want and "probably microseconds: convert with --time-unit us" \
+        in want
+
+
+def test_the_mapped_time_and_duplicates_are_named_alike(tmp_path):
+    rig = tmp_path / "rig.csv"
+    rig.write_text("time_us,pz,fz\n0,0,0\n10000,0.1,0\n10000,0.2,0\n")
+    want = _refused_alike(rig, tmp_path, "--columns", RIG_MAP, "--time-unit", "us")
+    assert want == f"{rig}:4: column 'time_us': time 10000.0 does not increase (previous 10000.0)"
+    dup = tmp_path / "dup.csv"
+    dup.write_text("time_us,pz,fz,fz\n0,0,0,0\n")
+    want = _refused_alike(dup, tmp_path, "--columns", RIG_MAP, "--time-unit", "us")
+    assert want == f"{dup}:1: column 'fz': duplicate column name in the header"
+
+
+def test_help_names_the_map():
+    for exe in PROGS.values():
+        r = subprocess.run([str(exe), "--help"], capture_output=True, text=True)
+        assert "--columns MAP" in r.stdout and "t=time_us,depth=pz,force=fz" in r.stdout
