@@ -406,12 +406,12 @@ def render_md(rep: dict[str, Any], figures: list[str]) -> str:
                   f"{_fmt(e['share_of_explained_gap'])}"]
         L += ["", "Parameters" + (" (final model, as exported):" if "magnitude" in e else ":")]
         L += [f"- {p} = {_fmt(v)}" for p, v in e["parameters"].items()]
-        L += ["", "| candidate | delta BIC | held-out gain |", "|---|---|---|"]
-        for c in e.get("candidates", []):
-            L.append(f"| {c['name']} | {_fmt(c.get('delta_bic'))} | {_fmt(c.get('heldout_gain'))} |")
-        L.append("")
+        L += _candidate_table(e.get("candidates", []))
     if not rep["effects"]:
         L += ["No candidate is significant: `none` (the base model explains the data).", ""]
+    if rep["final_round"]:
+        L += ["### The last round's candidates", ""]
+        L += _candidate_table(rep["final_round"])
     L += ["## 5. Gap before and after each added effect (RMSE / MAE, N)", ""]
     models = rep["gap_models"]
     L += ["| phase | " + " | ".join(models) + " |", "|---" * (len(models) + 1) + "|"]
@@ -427,6 +427,15 @@ def render_md(rep: dict[str, Any], figures: list[str]) -> str:
     L += ["", "## Figures", ""] + [f"![{Path(f).stem}]({f})" for f in figures]
     L += ["", f"Run time: {rep['runtime_s']:.2f} s", ""]
     return "\n".join(L)
+
+
+def _candidate_table(candidates: list[dict[str, object]]) -> list[str]:
+    """One round's candidates: score, held-out gain and, for a refused one, why."""
+    L = ["| candidate | delta BIC | held-out gain | refused because |", "|---|---|---|---|"]
+    for c in candidates:
+        L.append(f"| {c['name']} | {_fmt(c.get('delta_bic'))} | {_fmt(c.get('heldout_gain'))} | "
+                 f"{c.get('rejected', '')} |")
+    return L + [""]
 
 
 CONFIG_SCHEMA = "nte-estimator-config/1"

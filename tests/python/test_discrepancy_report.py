@@ -229,3 +229,20 @@ def test_no_flags_said_plainly(phantom):
     rep = dict(phantom["rep"], flags=[])
     assert "No fitted value is at a bound or has a standard error above it." in \
         render_md(rep, [])
+
+
+def test_every_refused_candidate_says_why(phantom):
+    """Each round's candidate table has a last column with the reason of a refusal, the last
+    round's candidates included (why nothing more was named)."""
+    refused = {"name": "sensor_drift", "delta_bic": 12.5, "heldout_gain": -0.25,
+               "rejected": "does not improve its own phases"}
+    rep = dict(phantom["rep"], final_round=[*phantom["rep"]["final_round"], refused])
+    md = render_md(rep, [])
+    rounds = [e.get("candidates", []) for e in rep["effects"]] + [rep["final_round"]]
+    heads = [f"### Effect {k + 1}:" for k in range(len(rep["effects"]))]
+    for head, cands in zip(heads + ["### The last round's candidates"], rounds):
+        table = _table(_section(md, head))
+        assert table[0] == ["candidate", "delta BIC", "held-out gain", "refused because"], head
+        assert [row[3] for row in table[1:]] == [c.get("rejected", "") for c in cands], head
+    assert _table(_section(md, "### The last round's candidates"))[-1] == [
+        "sensor_drift", "12.5", "-0.25", "does not improve its own phases"]
