@@ -25,6 +25,14 @@ static double median(double* v, const size_t n)
     return ((n % 2U) != 0U) ? v[h] : ((v[h - 1U] + v[h]) / 2.0);
 }
 
+/* A sample taken while inserting (the force's sign is judged on those): a force, the stage
+ * moving in, the depth beyond 0. */
+static int is_inserting(const nte_trial_t* tr, const size_t k)
+{
+    return isfinite(tr->force_n[k]) && (tr->velocity_mm_s[k] > NTE_UNITS_INSERTING_SPEED_MM_S) &&
+           (tr->depth_mm[k] > 0.0);
+}
+
 /* np.mean of a boolean array: the share of true. */
 static double share(const size_t count, const size_t n)
 {
@@ -154,20 +162,42 @@ static int check_force(const char* path, const nte_trial_t* tr, const nte_units_
                        u->columns.force, tr->force_n[kpeak], fmax);
         return -1;
     }
+    /* judged on the force less its tare (the median of the first forces), where it departs
+     * from the tare: a record starts in the air, and a negative tare over a long air gap is no
+     * sign */
     size_t m = 0U;
+    for (size_t k = 0U; (k < tr->n) && (m < NTE_UNITS_TARE_SAMPLES); k++) {
+        if (isfinite(tr->force_n[k])) {
+            v[m++] = tr->force_n[k];
+        }
+    }
+    const double tare = (m > 0U) ? median(v, m) : 0.0;
+    size_t inserting = 0U;
+    double top = 0.0;
+    for (size_t k = 0U; k < tr->n; k++) {
+        if (is_inserting(tr, k)) {
+            inserting++;
+            const double dev = fabs(tr->force_n[k] - tare);
+            top = (dev > top) ? dev : top;
+        }
+    }
+    if (inserting < NTE_UNITS_INSERTING_MIN_SAMPLES) {
+        return 0;
+    }
+    m = 0U;
     size_t negative = 0U;
     for (size_t k = 0U; k < tr->n; k++) {
-        if (isfinite(tr->force_n[k]) && (tr->velocity_mm_s[k] > NTE_UNITS_INSERTING_SPEED_MM_S) &&
-            (tr->depth_mm[k] > 0.0)) {
-            v[m++] = tr->force_n[k];
-            negative += (tr->force_n[k] < 0.0) ? 1U : 0U;
+        const double rel = tr->force_n[k] - tare;
+        if (is_inserting(tr, k) && (fabs(rel) > (NTE_UNITS_SIGN_DEPART_SHARE * top))) {
+            v[m++] = rel;
+            negative += (rel < 0.0) ? 1U : 0U;
         }
     }
     if ((m >= NTE_UNITS_INSERTING_MIN_SAMPLES) && (median(v, m) < 0.0)) {
-        (void)snprintf(err, es, "%s: column '%s': the force is negative in %.0f %% of the "
-                       "samples taken while inserting: probably the sensor's opposite sign: "
-                       "convert with --force-sign -1", path, u->columns.force,
-                       100.0 * share(negative, m));
+        (void)snprintf(err, es, "%s: column '%s': the force less its tare (%.4g N) is negative "
+                       "in %.0f %% of the samples taken while inserting: probably the sensor's "
+                       "opposite sign: convert with --force-sign -1", path, u->columns.force,
+                       tare, 100.0 * share(negative, m));
         return -1;
     }
     return 0;

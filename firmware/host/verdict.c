@@ -59,6 +59,9 @@ size_t nte_verdict_rest_noise(const double* depth_mm, const double* force_n, siz
     for (size_t k = 0U; k < m; k++) {
         dev += (force_n[k] - mean) * (force_n[k] - mean);
     }
+    if (!(dev > 0.0)) {
+        return 0U; /* a noise-free rest measures no noise (verdict.py rest_noise) */
+    }
     *sd_n = sqrt(dev / (double)(m - 1U));
     return m;
 }

@@ -219,8 +219,10 @@ def units_header() -> str:
     cells = ", ".join(f'"{k}"' for k in csvio.COLUMN_KEYS_REQUIRED)
     out.append(f"#define NTE_COLUMN_KEYS_REQUIRED {{ {cells} }}")
     out.append("")
-    for name in ("MIN_STROKE_MM", "MAX_REJECTED_SHARE", "MAX_FORCE_OUT_SHARE"):
+    for name in ("MIN_STROKE_MM", "MAX_REJECTED_SHARE", "MAX_FORCE_OUT_SHARE",
+                 "SIGN_DEPART_SHARE"):
         out.append(f"#define NTE_UNITS_{name} ({hex64(getattr(csvio, name))})")
+    out.append(f"#define NTE_UNITS_TARE_SAMPLES {int(csvio.TARE_SAMPLES)}U")
     for name, v in CHECK_INLINE.items():
         out.append(f"#define NTE_UNITS_{name} " +
                    (f"{v}U" if isinstance(v, int) else f"({hex64(v)})"))

@@ -279,6 +279,12 @@ MIN_STROKE_MM = 1.0
 MAX_REJECTED_SHARE = 0.5
 #: Above this share of forces beyond the range, the force column's unit is questioned.
 MAX_FORCE_OUT_SHARE = 0.05
+#: The force's sign is judged less its tare, the median of the first TARE_SAMPLES forces (a
+#: record as measured starts in the air) ...
+TARE_SAMPLES = 20
+#: ... on the samples taken while inserting where it departs from the tare by more than this
+#: share of its largest departure there (the air gap's samples sit at the tare, either sign)
+SIGN_DEPART_SHARE = 0.1
 
 
 def _pct(x: float) -> str:
@@ -346,12 +352,18 @@ def check_units(tr: "Trial", units: Units = Units(), limits: Limits = Limits()) 
                              f"plausible force (the configured range is ±{fmax:g} N)")
         inserting = present & (tr.velocity_mm_s > 0.5) & (d > 0.0)
         if np.count_nonzero(inserting) >= 10:
-            fi = f[inserting]
-            if float(np.median(fi)) < 0.0:
-                raise UnitsError(f"{name}: column '{cf}': the force is negative in "
-                                 f"{_pct(float(np.mean(fi < 0.0)))} of the samples taken while "
-                                 f"inserting: probably the sensor's opposite sign: convert "
-                                 f"with --force-sign -1")
+            # judged on the force less its tare, where it departs from the tare: a record
+            # starts in the air, and a negative tare over a long air gap is no sign
+            tare = float(np.median(f[present][:TARE_SAMPLES]))
+            rel = np.where(present, f - tare, 0.0)
+            top = float(np.max(np.abs(rel[inserting])))
+            judged = inserting & (np.abs(rel) > SIGN_DEPART_SHARE * top)
+            fi = rel[judged]
+            if len(fi) >= 10 and float(np.median(fi)) < 0.0:
+                raise UnitsError(f"{name}: column '{cf}': the force less its tare ({tare:.4g} "
+                                 f"N) is negative in {_pct(float(np.mean(fi < 0.0)))} of the "
+                                 f"samples taken while inserting: probably the sensor's "
+                                 f"opposite sign: convert with --force-sign -1")
     bad = ((d < limits.depth_min_mm) | (d > limits.depth_max_mm)
            | (np.abs(tr.velocity_mm_s) > limits.speed_max_mm_s)
            | (present & (np.abs(np.where(present, f, 0.0)) > fmax)))

@@ -11,7 +11,8 @@ character)::
   share of them with GATED, in % (``%.1f``);
 * the noise S (mN, ``%.3g``): ``--noise N`` (SRC ``given by --noise``), else the sample standard
   deviation (n - 1) of the force over the leading samples while |depth - depth[0]| <= 0.01 mm,
-  when there are at least 20 of them (SRC ``measured in the first {n} samples at rest``);
+  when there are at least 20 of them and they are not all equal (SRC ``measured in the first
+  {n} samples at rest``);
 * K = R / S (``%.1f``); C: K <= 5: ``the model follows this file``, else ``the model does not fit
   this file ({K}x the noise): see nte-discrepancy``.
 
@@ -87,6 +88,8 @@ def rest_noise(depth_mm: Array, force_n: Array) -> Noise | None:
     dev = 0.0
     for v in force_n[:n]:
         dev += (float(v) - mean) * (float(v) - mean)
+    if not dev > 0.0:
+        return None             # a noise-free rest (a simulated record) measures no noise
     return Noise(math.sqrt(dev / (n - 1)), f"measured in the first {n} samples at rest")
 
 

@@ -48,8 +48,9 @@ CASES = [
      "column 'depth_mm': 95 % of the depths are negative (down to -20 mm): probably measured "
      "the other way: convert with --depth-sign -1"),
     ("force inverted", lambda t, d, f: (t, d, -f), ["--force-sign", "-1"],
-     "column 'force_n': the force is negative in 98 % of the samples taken while inserting: "
-     "probably the sensor's opposite sign: convert with --force-sign -1"),
+     "column 'force_n': the force less its tare (-0.004931 N) is negative in 99 % of the "
+     "samples taken while inserting: probably the sensor's opposite sign: convert with "
+     "--force-sign -1"),
 ]
 
 

@@ -269,3 +269,15 @@ def test_robust_suffix_and_predict_only_and_no_tissue_forms():
         "verdict: predict-only, the force was not read: no verdict"
     st[:] = 1 << 5
     assert verdict(t, d, f, inn, st).line == "verdict: no sample in tissue: no verdict"
+
+
+def test_a_noise_free_rest_measures_no_noise():
+    """A simulated record without noise rests at exactly one force: no noise to judge by
+    (not a division by zero), so the verdict asks for --noise."""
+    from reference_py.tools.verdict import rest_noise, verdict
+    depth = np.concatenate([np.zeros(30), np.linspace(0.1, 5.0, 50)])
+    force = np.concatenate([np.full(30, 0.25), np.linspace(0.3, 2.0, 50)])
+    assert rest_noise(depth, force) is None
+    line = verdict(np.arange(80) * 0.01, depth, force, np.full(80, 0.01),
+                   np.zeros(80, dtype=np.uint32)).line
+    assert line.endswith("noise unknown (no rest before the stage moves): give --noise N"), line
