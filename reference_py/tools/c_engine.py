@@ -29,6 +29,13 @@ import subprocess
 import sys
 import tempfile
 from pathlib import Path
+from typing import TYPE_CHECKING, Callable
+
+if TYPE_CHECKING:
+    from .csvio import Trial
+
+#: the reference's reader of an estimate's input: the flags -> the trial it estimates from
+ReadInput = Callable[[argparse.Namespace], "Trial"]
 
 #: where the host programs are built (make build), and which one runs which precision
 C_BIN = Path(__file__).resolve().parents[2] / "build" / "host" / "bin"
@@ -78,14 +85,11 @@ def given_flags(a: argparse.Namespace, actions: list[argparse.Action]
     return out
 
 
-def converted_input(a: argparse.Namespace, folder: Path) -> Path:
-    """The input as the reference reads it (mapped, converted, checked), written to ``folder``
-    under the file's own name in t_s, depth_mm, force_n[, velocity_mm_s] with %.17g."""
-    from .cli import _estimate_setup, read_estimate_input
-    from .estimate import make_config
-    fc, preset, strengths, overrides = _estimate_setup(a)
-    cfg = make_config(preset, a.model, a.profile, a.schedule, overrides)
-    tr, _ = read_estimate_input(a, cfg)
+def converted_input(a: argparse.Namespace, folder: Path, read_input: ReadInput) -> Path:
+    """The input as the reference reads it (``read_input(a)``: mapped, converted, checked),
+    written to ``folder`` under the file's own name in t_s, depth_mm, force_n[, velocity_mm_s]
+    with %.17g."""
+    tr = read_input(a)
     cols = [tr.t_s, tr.depth_mm, tr.force_n] + ([tr.velocity_mm_s] if tr.velocity_given else [])
     head = "t_s,depth_mm,force_n" + (",velocity_mm_s" if tr.velocity_given else "")
     path = folder / Path(a.csv).name
@@ -96,8 +100,11 @@ def converted_input(a: argparse.Namespace, folder: Path) -> Path:
     return path
 
 
-def run_c_estimate(a: argparse.Namespace, actions: list[argparse.Action]) -> int:
-    """Run the estimate ``a`` asks for through the host program (the module's docstring)."""
+def run_c_estimate(a: argparse.Namespace, actions: list[argparse.Action],
+                   read_input: ReadInput) -> int:
+    """Run the estimate ``a`` asks for through the host program (the module's docstring);
+    ``read_input`` is the reference's reader of that input (the CLI's: this module imports no
+    CLI module), used when the program lacks one of the input flags given."""
     given = given_flags(a, actions)
     exe = program(a)
     known = program_flags(exe)
@@ -114,7 +121,7 @@ def run_c_estimate(a: argparse.Namespace, actions: list[argparse.Action]) -> int
         src = str(a.csv)
         args = [tok for _, toks in given for tok in toks]
         if convert:
-            src = str(converted_input(a, Path(tmp)))
+            src = str(converted_input(a, Path(tmp), read_input))
             args = [tok for flag, toks in given if flag not in INPUT_FLAGS for tok in toks]
             if a.no_units_check and "--no-units-check" in known:
                 args.append("--no-units-check")

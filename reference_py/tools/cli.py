@@ -468,12 +468,20 @@ def read_estimate_input(a: argparse.Namespace, cfg: "EstimatorConfig"
     return read_trial(a.csv, units=units_from(a), limits=limits), contact
 
 
+def _estimate_trial(a: argparse.Namespace) -> "Trial":
+    """The insertion ``nte-ref estimate a`` would estimate from, as its reader reads it."""
+    from .estimate import make_config
+    fc, preset, strengths, overrides = _estimate_setup(a)
+    cfg = make_config(preset, a.model, a.profile, a.schedule, overrides)
+    return read_estimate_input(a, cfg)[0]
+
+
 def _estimate(a: argparse.Namespace) -> int:
     from .estimate import estimate_csv_lines, make_config, run_estimate
 
     if a.engine == "c":
         from .c_engine import run_c_estimate
-        return run_c_estimate(a, subcommand("estimate")._actions)
+        return run_c_estimate(a, subcommand("estimate")._actions, _estimate_trial)
     fc, preset, strengths, overrides = _estimate_setup(a)
     with Outputs() as outs:
         out = outs.add(a.out, "--out")
