@@ -204,6 +204,7 @@ void nte_columns_standard(nte_columns_t* c)
 int nte_trial_read(const char* path, nte_trial_t* tr, char* err, const size_t es)
 {
     nte_columns_t c;
+    (void)memset(&c, 0, sizeof c);
     nte_columns_standard(&c);
     return nte_trial_read_columns(path, &c, tr, err, es);
 }

@@ -54,7 +54,7 @@ void nte_py_repr_text(const char* s, char* buf, size_t cap)
             buf[o++] = (char)c;
         } else if ((c == '\n') || (c == '\r') || (c == '\t')) {
             buf[o++] = '\\';
-            buf[o++] = (c == '\n') ? 'n' : ((c == '\r') ? 'r' : 't');
+            buf[o++] = (char)((c == '\n') ? 'n' : ((c == '\r') ? 'r' : 't'));
         } else if ((c < 0x20U) || (c == 0x7fU)) {
             (void)snprintf(&buf[o], cap - o, "\\x%02x", (unsigned)c);
             o += 4U;
