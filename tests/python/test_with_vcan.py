@@ -6,7 +6,8 @@ failing command's status and output come back; a command that overruns its timeo
 process group inside the kernel, which serves the next command.  One-shot runs: QEMU with
 Debian's kernel boots and runs python-can inside (forced, so this path runs on every machine);
 each vehicle that cannot start gives its one-line reason and the next one is tried; none
-starting gives 125 with every reason.  Stand-in kernels, emulators and `ip` (shell scripts written by the tests) make a vehicle fail
+starting gives 125 with every reason.  The loop a served kernel runs starts no process while
+idle (under TCG each one costs a host core milliseconds).  Stand-in kernels, emulators and `ip` (shell scripts written by the tests) make a vehicle fail
 on purpose.
 Needs (Debian): iproute2 can-utils and user-mode-linux kmod or qemu-system-x86 linux-image-amd64
 busybox-static cpio (make test installs them).
@@ -155,3 +156,51 @@ def test_bad_mode_and_missing_channel(tmp_path: Path) -> None:
     r, _ = run(["true"], tmp_path, dict(os.environ, WITH_VCAN_CHANNEL=str(tmp_path / "none")))
     assert r.returncode == 125
     assert "no kernel is served there" in r.stderr
+
+
+def test_an_idle_served_loop_starts_no_process(tmp_path: Path) -> None:
+    # The loop a served kernel runs (here natively: the same script) looks at its queue with
+    # bash builtins only.  Under QEMU's TCG every process started costs milliseconds of a host
+    # core; a loop of ls/sort/head/sleep kept an idle guest at more than a whole core.  Every
+    # program it could call is a stand-in that logs its name first: while idle the log stands
+    # still, a queued job is still run, and `stop` ends the loop.
+    shims, log, chan = tmp_path / "shims", tmp_path / "calls.log", tmp_path / "chan"
+    shims.mkdir()
+    for name in ("ls", "sort", "head", "sleep", "cat", "date", "mv", "timeout", "mkdir",
+                 "mktemp", "mkfifo", "rm", "dirname", "find", "stat", "inotifywait"):
+        real = subprocess.run(["bash", "-c", f"command -v {name}"], capture_output=True,
+                              text=True).stdout.strip()
+        body = f'echo {name} >>"{log}"\n' + (f'exec {real} "$@"' if real else "exit 127")
+        _stand_in(shims, name, body)
+    env = dict(os.environ, PATH=f"{shims}:{os.environ['PATH']}", TMPDIR=str(tmp_path))
+    chan.mkdir()
+    loop = subprocess.Popen([str(WITH_VCAN), "--serve-loop", str(chan)], env=env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            start_new_session=True)
+    try:
+        deadline = time.monotonic() + 30
+        while "mkfifo" not in (log.read_text() if log.exists() else ""):
+            assert time.monotonic() < deadline and loop.poll() is None, loop.stderr
+            time.sleep(0.05)
+        time.sleep(0.5)
+        calls_before = log.read_text().split()
+        time.sleep(2.0)  # 5 or more looks at the queue
+        assert log.read_text().split() == calls_before
+        job = tmp_path / "job"
+        job.mkdir()
+        _stand_in(job, "cmd.sh", "echo served; exit 3")
+        (job / "limit_s").write_text("30\n")
+        (chan / "queue").mkdir(exist_ok=True)
+        job.rename(chan / "queue" / "0001")
+        status = chan / "run" / "0001" / "status"
+        while not status.exists():
+            assert time.monotonic() < deadline + 30, "the queued job was not run"
+            time.sleep(0.05)
+        assert status.read_text() == "3\n"
+        assert (chan / "run" / "0001" / "stdout").read_text() == "served\n"
+        (chan / "stop").touch()
+        assert loop.wait(timeout=10) == 0
+    finally:
+        if loop.poll() is None:
+            os.killpg(loop.pid, 9)
+            loop.wait()
