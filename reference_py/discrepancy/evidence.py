@@ -6,8 +6,11 @@ signatures below are measured on the force itself, in the window where the effec
 local signature stays visible however large the misfit elsewhere:
 
 - ``ruptures``: force drops larger than ``max(RUPTURE_MIN_FRAC * peak, RUPTURE_NOISE * noise)``
-  within ``RUPTURE_WINDOW_S`` during the first insertion (measured insertions: > 0.15 N within
-  0.1 s, 0-5 per insertion).  Their depths switch the multi-layer base model.
+  within ``RUPTURE_WINDOW_S`` (at that rate across a gap in the record), or within
+  ``RUPTURE_TEAR_MM`` of travel after a climb of as much over as much travel, during the first
+  insertion at speed, up to the point where the stage starts to slow into its stop (measured
+  insertions: > 0.15 N within 0.1 s, 0-5 per insertion).  Their depths switch the multi-layer
+  base model.
 - ``dwell``: per dwell, the force (air drift removed) fitted by a constant, a line, one and two
   exponentials (time constants on a log grid in [0.05, 30] s).  Reported: relative decay, time
   constants, amplitude / noise and the chi-square gain of the exponential over the line.
@@ -30,12 +33,27 @@ RUPTURE_MIN_FRAC = 0.06
 #: ... and at least this many noise standard deviations (of one sample: the largest of ~10
 #: differences of 3-sample means over thousands of samples reaches ~4 sigma on noise alone) ...
 RUPTURE_NOISE = 8.0
-#: ... within this time (s)
+#: ... within this time (s), ...
 RUPTURE_WINDOW_S = 0.1
-#: ... while the stage moves at least this fraction of its median insertion speed
+#: ... or within this travel (mm) at the trial's cruise speed, if the force climbed by at least
+#: RUPTURE_CLIMB thresholds over the same travel before it: a tear that runs on while the needle
+#: advances takes longer on a slow stage (measured: 0.8 N over 0.5 s at 1 mm/s, of which a 0.1 s
+#: window sees 0.33 N), and a membrane tents before it tears.  Without the climb, a window in
+#: travel takes a tissue whose force rolls over and slowly declines for a tear.
+RUPTURE_TEAR_MM = 0.6
+RUPTURE_CLIMB = 0.5
+#: the force is averaged over this time (at least 3 samples) before drops are looked for, so a
+#: fast logger's noise does not pass for a drop
+RUPTURE_SMOOTH_S = 0.03
+#: ... while the stage moves at least this fraction of its median insertion speed ...
 RUPTURE_CRUISE = 0.7
-#: ... and not in the last millimetre before the stop
-RUPTURE_END_MM = 1.0
+#: ... and has not yet begun to slow into its stop: the last sample at this fraction of the
+#: median speed ends the insertion's cruise (a friction that follows the speed falls with it as
+#: the stage slows: no rupture; a tear just before the stop, still at speed, is one)
+RUPTURE_STEADY = 0.97
+#: a drop is over when the force has risen this fraction of the threshold above its lowest point
+#: or has set no new low for a window (the next layer loading, or the noise)
+RUPTURE_END_RISE = 0.5
 #: four or more drops evenly spaced in time (interval spread below this fraction of the mean
 #: interval) are periodic: a motion or stick-slip line, not layers (random layer depths spread
 #: more: 0.25 seen on a 4-layer trial)
@@ -59,42 +77,66 @@ def ruptures(p: Prepared) -> list[dict[str, float]]:
     ins = np.nonzero((l[:end] > 0) & (s[:end] > 0))[0]       # advancing (a dwell is no rupture)
     if len(ins) < 8:
         return []
-    # at cruise speed only: the force of a model whose friction follows sign(v) also falls when
-    # the stage slows into a stop, which is not a rupture
-    cruise = (p.v_mm_s[ins] >= RUPTURE_CRUISE * float(np.median(p.v_mm_s[ins]))) & \
-        (l[ins] < float(np.max(l[ins])) - RUPTURE_END_MM)
-    f = smooth(p.force_n[ins], 3)
+    v_cruise = float(np.median(p.v_mm_s[ins]))
+    cruise = p.v_mm_s[ins] >= RUPTURE_CRUISE * v_cruise
+    cruise[int(np.nonzero(p.v_mm_s[ins] >= RUPTURE_STEADY * v_cruise)[0][-1]) + 1:] = False
+    window = RUPTURE_WINDOW_S
+    tear = max(window, RUPTURE_TEAR_MM / max(v_cruise, 1e-6))
     t = p.t_s[ins]
+    dt = float(np.median(np.diff(t)))
+    # averaged within each unbroken run of samples: across a gap in the record (or a pause of
+    # the stage) the average would mix forces of another moment and make a drop of its own
+    width = max(3, int(round(RUPTURE_SMOOTH_S / max(dt, 1e-9))))
+    breaks = np.flatnonzero((np.diff(ins) != 1) | (np.diff(t) > 3.0 * dt)) + 1
+    f = np.concatenate([smooth(p.force_n[run], width) for run in np.split(ins, breaks)])
     peak = float(np.max(f))
     thr = max(RUPTURE_MIN_FRAC * abs(peak), RUPTURE_NOISE * p.noise_n)
     out: list[dict[str, float]] = []
-    j0 = 0
+    j0 = j1 = 0
     k = 0
     n = len(f)
+    since = 0                                 # a top is never looked for inside the last drop
     while k < n:
-        while t[j0] < t[k] - RUPTURE_WINDOW_S - 1e-9:
+        while t[j0] < t[k] - window - 1e-9:
             j0 += 1
-        j0k = min(j0, max(k - 2, 0))          # at least two samples back over gaps
-        win = f[j0k:k + 1]
-        jm = j0k + int(np.argmax(win))
-        if f[jm] - f[k] > thr and cruise[k] and cruise[jm]:
-            # the event: follow the fall to its bottom, record its top
-            kk = k
-            while kk + 1 < n and f[kk + 1] <= f[kk]:
+        while t[j1] < t[k] - tear - 1e-9:
+            j1 += 1
+        j0k = max(min(j0, k - 2), since)      # at least two samples back over gaps
+        jm = j0k + int(np.argmax(f[j0k:k + 1]))
+        # across a gap in the record longer than the window, the force must have fallen at the
+        # threshold's rate at least (a slow decline hidden in a gap is no rupture)
+        sudden = f[jm] - f[k] > thr * max(1.0, (t[k] - t[jm]) / window)
+        span = window
+        if not sudden and tear > window:
+            j1k = max(min(j1, k - 2), since)
+            jt = j1k + int(np.argmax(f[j1k:k + 1]))
+            if f[jt] - f[k] > thr * max(1.0, (t[k] - t[jt]) / tear):
+                before = np.flatnonzero((t >= t[jt] - tear) & (np.arange(n) <= jt))
+                before = before[before >= since]
+                if len(before) and f[jt] - float(np.min(f[before])) >= RUPTURE_CLIMB * thr:
+                    sudden, jm, span = True, jt, tear
+        if sudden and cruise[k] and cruise[jm]:
+            # the event: follow the fall, through the noise, to its lowest point
+            low = kk = k
+            while kk + 1 < n and t[kk + 1] - t[low] <= span and \
+                    f[kk + 1] <= f[low] + RUPTURE_END_RISE * thr:
                 kk += 1
+                if f[kk] < f[low]:
+                    low = kk
             depth = float(l[ins[jm]])
-            drop = float(f[jm] - f[kk])
-            if f[kk] <= 0.0:
+            drop = float(f[jm] - f[low])
+            since = low
+            if f[low] <= 0.0:
                 # a tissue that tore still holds the tip (cutting, friction): a fall to or below
                 # zero is the needle pulled back by a moving tissue, not a rupture
-                k = kk + 1
+                k = low + 1
                 continue
             if out and depth - out[-1]["depth_mm"] < RUPTURE_MERGE_MM:
-                out[-1]["drop_n"] = max(out[-1]["drop_n"], float(out[-1]["peak_n"] - f[kk]))
+                out[-1]["drop_n"] = max(out[-1]["drop_n"], float(out[-1]["peak_n"] - f[low]))
             else:
                 out.append({"depth_mm": depth, "t_s": float(t[jm]), "drop_n": drop,
                             "peak_n": float(f[jm])})
-            k = kk + 1
+            k = low + 1
             continue
         k += 1
     if len(out) >= 4:

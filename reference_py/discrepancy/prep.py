@@ -199,8 +199,10 @@ def prepare(tr: Trial, force_sign: float = 0.0, depth_sign: float = 0.0) -> Prep
     f = tr.force_n - tare
     l = np.maximum(tr.depth_mm - surface, 0.0)
     s = direction(v) * (l > 0)
-    if not (s < 0).any():
-        raise TooShort("no retraction inside the tissue")
+    # a record may end in a hold (relaxation tests, hold-only protocols): it has no reversal,
+    # retraction or exit, and the effects that live there have no evidence in it
+    if not (s > 0).any():
+        raise TooShort("the needle never advances inside the tissue")
     punct = find_puncture(l, s, f, sigma)
     ph = label_phases(l, s, punct)
     if np.count_nonzero(l > 0) < 20:

@@ -238,11 +238,13 @@ def verdict(res: Result) -> dict[str, Any]:
     return {"unexplained": bool(res.unexplained), "threshold_x_noise": UNEXPLAINED_X,
             "window_s": UNEXPLAINED_WINDOW_S, "where": res.unexplained[:10],
             "text": ("unexplained: structure above {:.0f}x the noise remains (largest: {} phase "
-                     "of {}, {:.1f}-{:.1f} s, depth {:.1f}-{:.1f} mm, {:.0f}x the noise)".format(
+                     "of {}, {:.1f}-{:.1f} s, depth {:.1f}-{:.1f} mm, {:.0f}x the noise; it looks "
+                     "like {})".format(
                          UNEXPLAINED_X, res.unexplained[0]["phase"], res.unexplained[0]["trial"],
                          res.unexplained[0]["t_from_s"], res.unexplained[0]["t_to_s"],
                          res.unexplained[0]["depth_from_mm"], res.unexplained[0]["depth_to_mm"],
-                         res.unexplained[0]["over_noise"]) if res.unexplained else
+                         res.unexplained[0]["over_noise"], res.unexplained[0]["description"])
+                     if res.unexplained else
                      f"explained: no structure above {UNEXPLAINED_X:.0f}x the noise remains")}
 
 
@@ -357,6 +359,15 @@ def render_md(rep: dict[str, Any], figures: list[str]) -> str:
     L = ["# Discrepancy report", "", f"Inputs: {', '.join(rep['inputs'])}", "",
          f"**Named effects (in order of discovery): {', '.join(rep['named'])}**", "",
          f"**Verdict: {rep['verdict']['text']}**", ""]
+    described = [w for w in rep["verdict"]["where"] if "looks_like" in w]
+    if described:
+        L += ["Where the residual stays above the threshold (largest first):", "",
+              "| trial | phase | time (s) | depth (mm) | x noise | looks like |",
+              "|---|---|---|---|---|---|"]
+        L += [f"| {w['trial']} | {w['phase']} | {w['t_from_s']:.1f}-{w['t_to_s']:.1f} | "
+              f"{w['depth_from_mm']:.1f}-{w['depth_to_mm']:.1f} | {w['over_noise']:.0f} | "
+              f"{w['description']} |" for w in described[:5]]
+        L += [""]
     val = rep["validation"]
     if "shrink" in val:
         L += [f"Held-out validation ({val['scheme']}): RMSE base {_fmt(val['rmse_base_n'])} N, "

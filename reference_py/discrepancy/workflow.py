@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import evidence as evmod
+from . import shape as shmod
 from .effects import (EFFECT_NL, EFFECT_PHASES, NONE, VOCABULARY, StateCache, TrialGrid, design,
                       find_dwells, nl_defaults, nl_specs, to_paramset)
 from ..fmath import Array
@@ -32,6 +33,8 @@ BIC_MIN = 10.0
 #: the residual smoothed over UNEXPLAINED_WINDOW_S, against the noise standard deviation)
 UNEXPLAINED_X = 3.0
 UNEXPLAINED_WINDOW_S = 0.5
+#: the largest this many stretches are described by their shape (drop, slope change, ...)
+UNEXPLAINED_SHAPES = 10
 #: an effect must lower the error in its own phases by at least this fraction to be named
 OWN_PHASE_MIN_GAIN = 0.05
 #: base-model starting points (p, g0, alpha) from the paper's presets
@@ -344,8 +347,10 @@ def _relabel(label: str, i: int) -> str:
 
 def _unexplained(preps: list[Prepared], pred: list[Array]) -> list[dict[str, float | str]]:
     """Stretches where the final residual, smoothed over UNEXPLAINED_WINDOW_S, stays above
-    UNEXPLAINED_X noise standard deviations: phase, time and depth span, size."""
+    UNEXPLAINED_X noise standard deviations: phase, time and depth span, size, and for the
+    largest ones what the residual looks like there (shape.classify: drop, slope change, ...)."""
     out: list[dict[str, float | str]] = []
+    spans: list[tuple[Prepared, Array, int, int]] = []
     for p, pr in zip(preps, pred):
         r = p.force_n + p.tare_n - pr
         dt = float(np.median(np.diff(p.t_s)))
@@ -366,7 +371,19 @@ def _unexplained(preps: list[Prepared], pred: list[Array]) -> list[dict[str, flo
                         "peak_n": float(np.max(np.abs(rs[a:b]))),
                         "rms_n": float(np.sqrt(np.mean(r[a:b] ** 2))),
                         "over_noise": float(np.max(np.abs(rs[a:b])) / p.noise_n)})
-    out.sort(key=lambda d: -float(d["over_noise"]))
+            # the smoothing spreads a step over a window: look from a window before to a window
+            # after, where the level on either side shows
+            spans.append((p, r, max(a - w, 0), min(b + w, len(r))))
+    order = sorted(range(len(out)), key=lambda i: -float(out[i]["over_noise"]))
+    out = [out[i] for i in order]
+    for d, i in zip(out[:UNEXPLAINED_SHAPES], order):
+        p, r, a, b = spans[i]
+        sh = shmod.classify(p.t_s[a:b], r[a:b])
+        k = min(int(np.searchsorted(p.t_s, float(sh["at_s"]))), len(p.t_s) - 1)
+        d.update({"looks_like": str(sh["shape"]), "at_s": float(sh["at_s"]),
+                  "at_depth_mm": float(p.stage_mm[k] - p.surface_mm),
+                  "size_n": float(sh["size_n"]), "frequency_hz": float(sh["frequency_hz"])})
+        d["description"] = shmod.describe(sh, float(d["at_depth_mm"]))
     return out
 
 

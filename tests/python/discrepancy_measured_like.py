@@ -10,7 +10,10 @@ millimetres to turn over).  The whole tissue force passes through a generalised 
 friction): relaxation is a property of the tissue, present while moving and visible in the dwell;
 a membrane's tenting stress is released at its rupture.  The stage meets the tissue 4-16 mm after it starts; 25 mm stroke at
 1-3 mm/s (LSPB), 5.26 s dwell, retraction; 76-100 Hz with gaps; noise 8-50 mN; tare offset.
-Out-of-vocabulary option: stick-slip (a sawtooth on the force while moving).
+Out-of-vocabulary option: stick-slip (a sawtooth on the force while moving).  Options for the
+rupture detector: a tear that releases over a travel (``release_mm``) instead of at once, and
+the deepest rupture this far before the stop (``stop_rupture_mm``), and smaller
+membranes (``rupture_scale`` on their rupture forces).
 """
 from __future__ import annotations
 
@@ -48,7 +51,9 @@ def _lspb(t: np.ndarray, t0: float, dist: float, speed: float, acc: float
 
 def make_trial(seed: int, n_layers: int | None = None, relaxation: bool = True,
                presliding: bool = True, noise: float | None = None, speed: float | None = None,
-               stick_slip: bool = False, rate_hz: float | None = None
+               stick_slip: bool = False, rate_hz: float | None = None,
+               release_mm: float = 0.0, stop_rupture_mm: float | None = None,
+               rupture_scale: float = 1.0
                ) -> tuple[Trial, np.ndarray, float, int]:
     rng = np.random.default_rng(seed)
     rate = rate_hz or rng.uniform(76.0, 100.0)
@@ -78,8 +83,11 @@ def make_trial(seed: int, n_layers: int | None = None, relaxation: bool = True,
         rd = np.sort(rng.uniform(1.5, max(depth_max - 2.0, 2.0), nl))
         if nl == 0 or (np.all(np.diff(rd) > 1.5) and rd[0] > 1.5):
             break
+    if stop_rupture_mm is not None and nl:  # after the draw: the seed's other draws stay
+        rd[-1] = depth_max - stop_rupture_mm
     peak_force = rng.uniform(2.3, 6.2)
     rupt_f = np.sort(rng.uniform(0.5, 1.0, nl))[::-1] * peak_force if nl else np.array([])
+    rupt_f = rupt_f * rupture_scale
     gam = rng.uniform(1.3, 2.5, nl)
     cut = rng.uniform(0.15, 0.4) * peak_force
     mu = rng.uniform(0.07, 0.15, nl + 1)        # N/mm per band (band 0 before the first rupture)
@@ -110,10 +118,15 @@ def make_trial(seed: int, n_layers: int | None = None, relaxation: bool = True,
             u = (l[k] - edges[j]) / (rd[j] - edges[j])
             if u > 0:
                 f_mem[k] = rupt_f[j] * min(u, 1.0) ** gam[j]
+        # a tear that runs on while the needle advances: the last pierced membrane lets go
+        # over release_mm of travel instead of at once
+        if release_mm > 0 and j > 0 and v[k] >= 0 and deepest - rd[j - 1] < release_mm:
+            f_mem[k] += rupt_f[j - 1] * (1.0 - (deepest - rd[j - 1]) / release_mm)
         # cutting once through the first layer, while the tip sits at the deepest point reached
         # (advancing or resting: the tissue keeps holding the cut)
         if nl and deepest > rd[0]:
-            f += cut * max(w, 0.0)
+            grip = min((deepest - rd[0]) / release_mm, 1.0) if release_mm > 0 else 1.0
+            f += cut * grip * max(w, 0.0)
         # shaft friction per band
         band = np.clip(l[k] - edges[:-1], 0.0, np.diff(edges))
         f += float(mu @ band) * w

@@ -21,6 +21,28 @@ def test_ruptures_counted_per_trial(seed: int) -> None:
     assert rupture_count(ev) == [n_layers]
 
 
+@pytest.mark.parametrize("kind, form, at_least", [
+    # the deepest membrane tears 0.6 mm before the stop, at speed (the old rule skipped the last
+    # millimetre: 0 of 16)
+    ("at the stop", {"stop_rupture_mm": 0.6}, 16),
+    # a 500 Hz logger: the force is averaged over 30 ms, not 3 samples (3 samples: 14 of 16,
+    # noise taken for drops)
+    ("500 Hz", {"rate_hz": 500.0}, 16),
+    # no rupture at 1 mm/s, where a decline of the force has longest to pass for a drop
+    ("no layer, slow", {"n_layers": 0, "speed": 1.0}, 16),
+    # a tear that runs on over half a millimetre at 1 mm/s: 0.5 s per drop, of which a 0.1 s
+    # window sees a part (0.1 s alone: 8 of 16; a window in travel without the climb before it
+    # took the slow decline of a blind-generator tissue for a tear)
+    ("slow tear", {"speed": 1.0, "release_mm": 0.5, "rupture_scale": 0.5}, 15),
+])
+def test_ruptures_on_the_trials_own_scale(kind: str, form: dict, at_least: int) -> None:
+    exact = 0
+    for seed in range(1100, 1116):
+        tr, _, _, n_layers = make_trial(seed, **form)
+        exact += rupture_count(collect([prepare(tr)])) == [n_layers]
+    assert exact >= at_least, f"{kind}: {exact}/16 trials with every rupture counted"
+
+
 @pytest.fixture(scope="module")
 def relaxing() -> tuple:
     case = make_case(4, trials=3)

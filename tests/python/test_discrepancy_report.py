@@ -246,3 +246,22 @@ def test_every_refused_candidate_says_why(phantom):
         assert [row[3] for row in table[1:]] == [c.get("rejected", "") for c in cands], head
     assert _table(_section(md, "### The last round's candidates"))[-1] == [
         "sensor_drift", "12.5", "-0.25", "does not improve its own phases"]
+
+
+def test_unexplained_stretches_say_what_they_look_like(phantom):
+    # this record set leaves structure (the verdict is "unexplained"): the largest stretches are
+    # described, the verdict line quotes the first, report.md tables them from report.json
+    v = phantom["rep"]["verdict"]
+    assert v["unexplained"] is True
+    described = [w for w in v["where"] if "looks_like" in w]
+    assert described and described[0] == v["where"][0]
+    assert {w["looks_like"] for w in described} <= {"drop", "rise", "slope change", "oscillation",
+                                                     "trend", "no simple shape"}
+    assert v["text"].endswith(f"it looks like {described[0]['description']})")
+    sec = _section(phantom["md"], "Where the residual stays above the threshold")
+    block = sec[1:sec.index("", 1)]                     # the table, up to its blank line
+    header, *rows = _table(block)
+    assert header[-1] == "looks like"
+    assert len(rows) == min(len(described), 5)
+    for row, w in zip(rows, described):
+        assert row[0] == w["trial"] and row[1] == w["phase"] and row[5] == w["description"]
