@@ -38,6 +38,25 @@ drained() {
     stop "$pid"
 }
 
+# rx_filters: how many receive filters the kernel holds on vcan0 (/proc/net/can/rcvlist_fil)
+rx_filters() {
+    local n; n=$(grep -c '^ *vcan0 ' /proc/net/can/rcvlist_fil 2>/dev/null)
+    echo "${n:-0}"
+}
+# listening BEFORE PID: wait until a receive filter more than BEFORE is on vcan0, i.e. the
+# candump PID has bound its socket -- no sleep guesses it (under TCG on a loaded host a process
+# takes seconds to start); fails after 60 s or when PID is gone
+listening() {
+    local before="$1" pid="$2" _
+    for _ in $(seq 1 1200); do
+        (( $(rx_filters) > before )) && return 0
+        kill -0 "$pid" 2>/dev/null || break
+        sleep 0.05
+    done
+    echo "candump ($pid) never bound its socket on vcan0" >&2
+    return 1
+}
+
 # start_node TAG [ARGS...]: the node on vcan0 with the paper preset; $node_pid; fails if it does
 # not say it is ready within 60 s (a kernel under TCG starts processes slowly)
 start_node() {
@@ -64,10 +83,11 @@ case_full_rate() {
     start_node full --record "$OUT/full.sent.log" || return 1
     rm -rf "$OUT/session"; mkdir -p "$OUT/session"
     local count; count=$(grep -c . "$OUT/full_in.log")   # every frame of it is an input id
+    local before; before=$(rx_filters)
     (cd "$OUT/session" && exec candump -l -n "$count" -r 16000000 "vcan0,$FRAME_DEPTH:7FC" \
         2>/dev/null) &
     local rec=$!; started "$rec"
-    sleep 0.3
+    listening "$before" "$rec" || return 1
     play "$OUT/full_in.log" || return 1
     drained "$rec" 300 >/dev/null
     stop "$node_pid" >"$OUT/full.exit"

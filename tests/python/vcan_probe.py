@@ -2,7 +2,7 @@
 
     python tests/python/vcan_probe.py OUT.json [N_ROUND_TRIPS]
 
-1. candump -L vcan0 captures three frames sent by cansend;
+1. candump -L vcan0 captures three frames sent by cansend (between two marker frames);
 2. python-can's socketcan interface: a message sent on one Bus arrives on another;
 3. a 200 Hz round trip: a python-can echo process (started here, stopped by its PID) answers
    every frame 0x100 with 0x101; the send -> answer times are recorded.
@@ -10,6 +10,8 @@
 from __future__ import annotations
 
 import json
+import os
+import select
 import statistics
 import subprocess
 import sys
@@ -29,22 +31,55 @@ while True:
 """
 
 
+MARK_START, MARK_END = "7E0#01", "7E0#02"
+
+
+def lines_until(proc: subprocess.Popen, ending: str, poke, limit_s: float = 120.0) -> list[str]:
+    """Lines of proc's stdout up to and including the first that ends with `ending`; `poke()` is
+    called before each wait of 0.2 s (to send a marker again).  Raises after limit_s."""
+    assert proc.stdout is not None
+    fd = proc.stdout.fileno()
+    buf, lines = b"", []
+    deadline = time.monotonic() + limit_s
+    while time.monotonic() < deadline:
+        poke()
+        ready, _, _ = select.select([fd], [], [], 0.2)
+        if not ready:
+            continue
+        chunk = os.read(fd, 65536)
+        if not chunk:
+            break
+        buf += chunk
+        *done, buf = buf.split(b"\n")
+        for raw in done:
+            lines.append(raw.decode())
+            if lines[-1].endswith(ending):
+                return lines
+    raise RuntimeError(f"candump did not show {ending!r} within {limit_s:.0f} s: {lines}")
+
+
 def main() -> int:
     out_path = sys.argv[1]
     n = int(sys.argv[2]) if len(sys.argv) > 2 else 400
     res: dict = {}
 
-    # 1. candump / cansend
-    dump = subprocess.Popen(["candump", "-L", "vcan0"], stdout=subprocess.PIPE, text=True)
+    # 1. candump / cansend.  No sleep decides when candump listens or has printed everything
+    # (under QEMU's TCG on a loaded host half a second was not enough): a marker frame is sent
+    # until candump shows it, the three frames follow, then an end marker, read back before
+    # candump is stopped.  candump's output is line-buffered by stdbuf (a pipe would hold it).
+    dump = subprocess.Popen(["stdbuf", "-oL", "candump", "-L", "vcan0"], stdout=subprocess.PIPE)
+    lines: list[str] = []
     try:
-        time.sleep(0.5)
+        lines_until(dump, f"vcan0 {MARK_START}", lambda: subprocess.run(
+            ["cansend", "vcan0", MARK_START], check=True))
         for frame in ("123#DEADBEEF", "5A1#0102", "7FF#0011223344556677"):
             subprocess.run(["cansend", "vcan0", frame], check=True)
-        time.sleep(0.5)
+        subprocess.run(["cansend", "vcan0", MARK_END], check=True)
+        lines = lines_until(dump, f"vcan0 {MARK_END}", lambda: None)
     finally:
         dump.terminate()  # by PID: this Popen's own process
-        stdout, _ = dump.communicate(timeout=10)
-    res["candump"] = stdout.splitlines()
+        dump.communicate(timeout=10)
+    res["candump"] = [ln for ln in lines if not ln.endswith((MARK_START, MARK_END))]
 
     # 2. python-can round trip between two sockets
     with can.Bus(interface="socketcan", channel="vcan0") as a, \
