@@ -42,15 +42,15 @@ RUPTURE_WINDOW_S = 0.1
 #: travel takes a tissue whose force rolls over and slowly declines for a tear.
 RUPTURE_TEAR_MM = 0.6
 RUPTURE_CLIMB = 0.5
-#: the force is averaged over this time (at least 3 samples) before drops are looked for, so a
-#: fast logger's noise does not pass for a drop
-RUPTURE_SMOOTH_S = 0.03
 #: ... while the stage moves at least this fraction of its median insertion speed ...
 RUPTURE_CRUISE = 0.7
 #: ... and has not yet begun to slow into its stop: the last sample at this fraction of the
 #: median speed ends the insertion's cruise (a friction that follows the speed falls with it as
 #: the stage slows: no rupture; a tear just before the stop, still at speed, is one)
 RUPTURE_STEADY = 0.97
+#: the force is averaged over this time (at least 3 samples) before drops are looked for, so a
+#: fast logger's noise does not pass for a drop
+RUPTURE_SMOOTH_S = 0.03
 #: a drop is over when the force has risen this fraction of the threshold above its lowest point
 #: or has set no new low for a window (the next layer loading, or the noise)
 RUPTURE_END_RISE = 0.5
@@ -105,17 +105,18 @@ def ruptures(p: Prepared) -> list[dict[str, float]]:
         jm = j0k + int(np.argmax(f[j0k:k + 1]))
         # across a gap in the record longer than the window, the force must have fallen at the
         # threshold's rate at least (a slow decline hidden in a gap is no rupture)
-        sudden = f[jm] - f[k] > thr * max(1.0, (t[k] - t[jm]) / window)
+        found = f[jm] - f[k] > thr * max(1.0, (t[k] - t[jm]) / window)
         span = window
-        if not sudden and tear > window:
+        if not found and tear > window:
+            # a tear that ran on: the drop over the travel window, after a climb as long
             j1k = max(min(j1, k - 2), since)
             jt = j1k + int(np.argmax(f[j1k:k + 1]))
             if f[jt] - f[k] > thr * max(1.0, (t[k] - t[jt]) / tear):
                 before = np.flatnonzero((t >= t[jt] - tear) & (np.arange(n) <= jt))
                 before = before[before >= since]
                 if len(before) and f[jt] - float(np.min(f[before])) >= RUPTURE_CLIMB * thr:
-                    sudden, jm, span = True, jt, tear
-        if sudden and cruise[k] and cruise[jm]:
+                    found, jm, span = True, jt, tear
+        if found and cruise[k] and cruise[jm]:
             # the event: follow the fall, through the noise, to its lowest point
             low = kk = k
             while kk + 1 < n and t[kk + 1] - t[low] <= span and \
