@@ -13,7 +13,8 @@ a membrane's tenting stress is released at its rupture.  The stage meets the tis
 Out-of-vocabulary option: stick-slip (a sawtooth on the force while moving).  Options for the
 rupture detector: a tear that releases over a travel (``release_mm``) instead of at once, and
 the deepest rupture this far before the stop (``stop_rupture_mm``), and smaller
-membranes (``rupture_scale`` on their rupture forces).
+membranes (``rupture_scale`` on their rupture forces).  Option for the dwell evidence: the stage
+backs off ``unload_mm`` as the dwell starts, so the relaxing force recovers (rises) after it.
 """
 from __future__ import annotations
 
@@ -53,7 +54,7 @@ def make_trial(seed: int, n_layers: int | None = None, relaxation: bool = True,
                presliding: bool = True, noise: float | None = None, speed: float | None = None,
                stick_slip: bool = False, rate_hz: float | None = None,
                release_mm: float = 0.0, stop_rupture_mm: float | None = None,
-               rupture_scale: float = 1.0
+               rupture_scale: float = 1.0, unload_mm: float = 0.0
                ) -> tuple[Trial, np.ndarray, float, int]:
     rng = np.random.default_rng(seed)
     rate = rate_hz or rng.uniform(76.0, 100.0)
@@ -75,6 +76,9 @@ def make_trial(seed: int, n_layers: int | None = None, relaxation: bool = True,
     x1, v1, t_end1 = _lspb(tt, t_pre, stroke, speed, acc)
     x2, v2, _ = _lspb(tt, t_end1 + dwell, -stroke, speed, acc)
     x, v = x1 + x2, v1 + v2
+    if unload_mm > 0:   # the stage backs off a little as the dwell starts: a sudden unloading
+        x3, v3, _ = _lspb(tt, t_end1, -unload_mm, speed, acc)
+        x, v = x + x3, v + v3
     l = np.maximum(x - surface, 0.0)
     depth_max = stroke - surface
     nl = int(rng.choice([1, 1, 2, 2, 2, 3, 3, 3, 4])) if n_layers is None else n_layers
