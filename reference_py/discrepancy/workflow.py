@@ -383,6 +383,8 @@ def _unexplained(preps: list[Prepared], pred: list[Array]) -> list[dict[str, flo
         d.update({"looks_like": str(sh["shape"]), "at_s": float(sh["at_s"]),
                   "at_depth_mm": float(p.stage_mm[k] - p.surface_mm),
                   "size_n": float(sh["size_n"]), "frequency_hz": float(sh["frequency_hz"])})
+        if "until_s" in sh:                   # a drop or rise that comes back
+            d["until_s"] = float(sh["until_s"])
         d["description"] = shmod.describe(sh, float(d["at_depth_mm"]))
     return out
 

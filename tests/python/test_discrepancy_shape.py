@@ -87,3 +87,5 @@ def test_the_verdict_says_the_largest_stretch_is_a_drop_and_where() -> None:
     assert abs(float(w["at_s"]) - float(p.t_s[k_tear])) < 0.3
     assert abs(float(w["at_depth_mm"]) - float(l[k_tear])) < 0.5
     assert str(w["description"]).startswith("a drop of")
+    # the miss lasts while the needle advances: the data come back to the model at the stop
+    assert float(w["until_s"]) > float(w["at_s"])
