@@ -96,26 +96,29 @@ def ruptures(p: Prepared) -> list[dict[str, float]]:
     k = 0
     n = len(f)
     since = 0                                 # a top is never looked for inside the last drop
+
+    def top_and_drop(first: int, span: float) -> tuple[int, bool]:
+        """The highest force from `first` (at least two samples back over gaps, never inside
+        the last drop) to k, and whether the force fell from it by the threshold at its rate
+        over `span` (across a gap in the record longer than the span, a slow decline hidden in
+        the gap is no rupture)."""
+        lo = max(min(first, k - 2), since)
+        top = lo + int(np.argmax(f[lo:k + 1]))
+        return top, bool(f[top] - f[k] > thr * max(1.0, (t[k] - t[top]) / span))
+
     while k < n:
         while t[j0] < t[k] - window - 1e-9:
             j0 += 1
         while t[j1] < t[k] - tear - 1e-9:
             j1 += 1
-        j0k = max(min(j0, k - 2), since)      # at least two samples back over gaps
-        jm = j0k + int(np.argmax(f[j0k:k + 1]))
-        # across a gap in the record longer than the window, the force must have fallen at the
-        # threshold's rate at least (a slow decline hidden in a gap is no rupture)
-        found = f[jm] - f[k] > thr * max(1.0, (t[k] - t[jm]) / window)
+        jm, found = top_and_drop(j0, window)
         span = window
         if not found and tear > window:
             # a tear that ran on: the drop over the travel window, after a climb as long
-            j1k = max(min(j1, k - 2), since)
-            jt = j1k + int(np.argmax(f[j1k:k + 1]))
-            if f[jt] - f[k] > thr * max(1.0, (t[k] - t[jt]) / tear):
-                before = np.flatnonzero((t >= t[jt] - tear) & (np.arange(n) <= jt))
-                before = before[before >= since]
-                if len(before) and f[jt] - float(np.min(f[before])) >= RUPTURE_CLIMB * thr:
-                    found, jm, span = True, jt, tear
+            jt, fell = top_and_drop(j1, tear)
+            climb_from = max(int(np.searchsorted(t, t[jt] - tear)), since)
+            if fell and f[jt] - float(np.min(f[climb_from:jt + 1])) >= RUPTURE_CLIMB * thr:
+                found, jm, span = True, jt, tear
         if found and cruise[k] and cruise[jm]:
             # the event: follow the fall, through the noise, to its lowest point
             low = kk = k
