@@ -187,6 +187,8 @@ class NodeMirror:
         sds = [F32(0.0)] * 9
         for k, name in enumerate(self.identified):
             j = ALL_NAMES.index(name)
+            if j >= len(vals):
+                continue   # Model III's delta: not in the Params frame yet (nte_node.c alike)
             vals[j] = F32(self.par_vals[k]) if self.stepped else F32(0.0)
             sds[j] = F32(self.par_sd[k]) if self.stepped else F32(0.0)
         return vals, sds

@@ -30,8 +30,8 @@ from .ekf import Matrix, joseph_update, positive_definite, predict_covariance
 from .fmath import Array, Real
 from .model import (DepthTerms, Theta, ScaledParams, clamp_depth, depth_terms, exact_sign, output,
                     output_du, output_dz, smooth_sign, steady_state_z)
-from .params import (ALL_NAMES, FILTER_SUBSETS, IDX, MODEL_PARAMS, PARAM_NAMES, RELAX_NAMES,
-                     RELAX_NOMINAL)
+from .params import (ALL_NAMES, DIR_NAMES, FILTER_SUBSETS, IDX, MODEL_PARAMS, PARAM_NAMES,
+                     RELAX_NAMES, RELAX_NOMINAL)
 from .rk3 import Rk3Result, rk3_step
 
 # Status bits of one sample (the C library uses the same values)
@@ -81,20 +81,28 @@ def relax_count(cfg: EstimatorConfig) -> int:
     return cfg.relax_branches if (cfg.model == 3 and cfg.relaxation) else 0
 
 
+def identifies_delta(cfg: EstimatorConfig) -> bool:
+    """Model III identifies its turn-over length delta whenever the direction memory is on."""
+    return cfg.model == 3 and cfg.direction_memory
+
+
 def identified_names(cfg: EstimatorConfig) -> tuple[str, ...]:
-    """The parameters a configuration identifies, in CSV column order (Model III: Model II's
-    and the strengths of the branches in use)."""
+    """The parameters a configuration identifies, in CSV column order (Model III: Model II's,
+    the strengths of the branches in use, and delta with the direction memory on)."""
     if cfg.model != 3:
         return MODEL_PARAMS[cfg.model]
-    return MODEL_PARAMS[3][:len(MODEL_PARAMS[2]) + relax_count(cfg)]
+    return (MODEL_PARAMS[3][:len(MODEL_PARAMS[2]) + relax_count(cfg)] +
+            (DIR_NAMES if identifies_delta(cfg) else ()))
 
 
 def filter_subsets(cfg: EstimatorConfig) -> tuple[tuple[str, ...], ...]:
-    """Table I for a configuration: Model III's filter 1 takes the strengths in use."""
+    """Table I for a configuration: Model III's filter 1 takes the strengths in use, filter 2
+    delta when the direction memory is on."""
     subsets = FILTER_SUBSETS[cfg.model]
     if cfg.model != 3:
         return subsets
-    return (subsets[0][:1 + relax_count(cfg)],) + subsets[1:]
+    second = subsets[1] if identifies_delta(cfg) else subsets[1][:2]
+    return (subsets[0][:1 + relax_count(cfg)], second, subsets[2])
 
 
 def _dynamic(names: tuple[str, ...]) -> tuple[str, ...]:
@@ -116,9 +124,10 @@ class FilterBank:
         self.subsets = filter_subsets(cfg)
         self.m3 = cfg.model == 3
         self.n_relax = relax_count(cfg)
+        # Model III's turn-over length starts at the configured presliding_mm
         nominal = [list(row) + [RELAX_NOMINAL[nm] for nm in RELAX_NAMES[len(row) -
                                                                         len(PARAM_NAMES):]]
-                   for row in nominal]
+                   + [cfg.presliding_mm] for row in nominal]
         if cfg.model == 1:
             # Model I: beta is the fixed normalising constant beta0 of the configuration
             nominal = [row[:IDX["beta"]] + [cfg.beta0] + row[IDX["beta"] + 1:] for row in nominal]
@@ -151,6 +160,11 @@ class FilterBank:
         self.initialised = np.zeros(B, dtype=bool)
         # Model III: the direction state and the relaxation memories (MODEL.md §3b)
         self.sdir = R.full(B, 0.0)
+        # its sensitivity to delta's log-ratio, ds/du_delta, and whether the motion has gone
+        # against it since the surface (delta is learned from turn-overs only)
+        self.sdir_du = R.full(B, 0.0)
+        self.turned = np.zeros(B, dtype=bool)
+        self.delta = self.scaled.nominal[IDX["delta"]] * R.exp(self.u[IDX["delta"]])
         self.mrel = [R.full(B, 0.0) for _ in range(self.n_relax)]
         self.G = [self.scaled.nominal[IDX[nm]] * R.exp(self.u[IDX[nm]])
                   for nm in RELAX_NAMES[:self.n_relax]]
@@ -284,9 +298,10 @@ class FilterBank:
         surface = ~(l > R.c(0.0))
         gap = run & (dt > c.dt_max)
         if self.m3 and cfg.direction_memory:
-            s = self._direction(l, l_prev, surface | first)
+            s, s_du, turned = self._direction(l, l_prev, surface | first)
         else:
             s = smooth_sign(R, v, c.eps)
+            s_du = turned = None
         # Model III: each relaxation branch's decay over this sample (exact for an input held
         # over the sample: stable at every rate)
         self._a_rel = [R.exp(-(dt / c.tau[k])) for k in range(self.n_relax)]
@@ -314,12 +329,16 @@ class FilterBank:
                 active = run & False
             d = depth_terms(R, self.th, l)
             x, P_pred, z_ss = self._predict(i, names, pred, d, gap | surface, surface)
-            innovation, hrow, r_eff, in_range, st = self._measure(names, d, x[0], s, v, y,
-                                                                  active)
+            innovation, hrow, r_eff, in_range, st = self._measure(names, d, x[0], s, s_du, v,
+                                                                  y, active)
             status |= st
+            u_delta = self.u[IDX["delta"]]
             z_i, nis, st = self._update_and_guard(i, names, x, P_pred, hrow, innovation, r_eff,
                                                   active, run, in_range, z_ss)
             status |= st
+            if "delta" in names:
+                # the direction state of this sample follows its update of delta (first order)
+                s = self._direction_update(s, s_du, self.u[IDX["delta"]] - u_delta)
             z_post = np.where(active, z_i, z_post)
             if cfg.predict_only and i == 0:
                 z_post = np.where(run, z_i, z_post)   # the prior, guarded: no update ran
@@ -367,6 +386,9 @@ class FilterBank:
                          for k in range(self.n_relax)]
         if self.m3:
             self.sdir = np.where(run | first, s, self.sdir)
+            if cfg.direction_memory:
+                self.sdir_du = np.where(run | first, s_du, self.sdir_du)
+                self.turned = np.where(run | first, turned, self.turned)
         innov = np.where(run, innovation0, y - force)
         nis = np.where(run, nis0, R.c(0.0))
         params, sds = self.parameter_estimates()
@@ -395,16 +417,21 @@ class FilterBank:
         x = [zp] + [self.u[IDX[nm]] for nm in names]
         return x, P_pred, np.where(np.isfinite(z_ss), z_ss, zero)
 
-    def _measure(self, names: tuple[str, ...], d: DepthTerms, zp: Array, s: Array, v: Array,
-                 y: Array, active: Array) -> tuple[Array, list[Array], Array, Array, Array]:
+    def _measure(self, names: tuple[str, ...], d: DepthTerms, zp: Array, s: Array,
+                 s_du: Array | None, v: Array, y: Array, active: Array
+                 ) -> tuple[Array, list[Array], Array, Array, Array]:
         """The predicted force's innovation, its Jacobian row, the effective R, and whether
-        the prior z and its force are within their physical range (_in_range)."""
+        the prior z and its force are within their physical range (_in_range).  ``s_du``:
+        the direction state's sensitivity ds/du_delta (Model III with the direction memory)."""
         R, c, cfg = self.R, self.c, self.cfg
         zero = R.c(0.0)
         status = np.zeros(self.batch, dtype=np.uint32)
         o = output(self.th, d, zp, s)
         hrow = [output_dz(self.th, d, o)] + [output_du(self.th, d, zp, o, nm)
                                              for nm in _dynamic(names)]
+        if "delta" in names:
+            # the elastic force's s l fr moves with s: dfe/du_delta = l fr ds/du_delta
+            hrow.append((d.l * o.fr) * s_du)
         h = o.h
         if self.n_relax:
             h, hrow = self._relax_output(names, o.h, hrow)
@@ -471,16 +498,37 @@ class FilterBank:
                 row.append(-(g[k] * (mp[k] - M)))
         return fe - M, row
 
-    def _direction(self, l: Array, l_prev: Array, restart: Array) -> Array:
+    def _direction(self, l: Array, l_prev: Array, restart: Array
+                   ) -> tuple[Array, Array, Array]:
         """The direction state after the depth step l - l_prev: ds/dl = (1 - s sign(dl))/delta
-        integrated exactly, s' = sigma + (s - sigma) exp(-|dl|/delta), sigma = sign(dl) (s held
-        when dl = 0); 0 at the surface and at the first sample, like z."""
+        integrated exactly, s' = sigma + (s - sigma) E, E = exp(-|dl|/delta), sigma = sign(dl)
+        (s held when dl = 0); 0 at the surface and at the first sample, like z.
+
+        Also its sensitivity to u_delta (delta = nominal e^u, JACOBIANS.md §8), carried from
+        sample to sample: dE/du = E |dl|/delta, so ds'/du = E ds/du + (s - sigma) E |dl|/delta.
+        The second term (the drive) counts only once the motion has gone against s since the
+        surface (sigma s < 0 at some sample: a turn-over): at the entry the force rises with
+        the tissue's contact, not with a Dahl turn-over, and learning delta there drove it to
+        a tenth of the true length (measured on the phantom).  Returns s', ds'/du, turned."""
         R = self.R
+        zero = R.c(0.0)
         dl = l - l_prev
         sig = exact_sign(R, dl)
-        E = R.exp(-(np.abs(dl) / self.c.delta))
+        adl = np.abs(dl) / self.delta
+        E = R.exp(-adl)
         s = sig + (self.sdir - sig) * E
-        return np.where(restart, R.c(0.0), s)
+        turned = self.turned | ((sig * self.sdir) < zero)
+        s_du = E * self.sdir_du + np.where(turned, ((self.sdir - sig) * E) * adl, zero)
+        return (np.where(restart, zero, s), np.where(restart, zero, s_du),
+                turned & ~restart)
+
+    def _direction_update(self, s: Array, s_du: Array, du: Array) -> Array:
+        """The direction state after its filter changed u_delta by du: s + ds/du du, within
+        [-1, 1] (an exact s never leaves it)."""
+        R = self.R
+        one = R.c(1.0)
+        s = s + s_du * du
+        return np.where(s > one, one, np.where(s < -one, -one, s))
 
     def _in_range(self, d: DepthTerms, z: Array, h: Array) -> Array:
         """The physical range of a predicted force h = sigma0 z l + ... and of z: both |h| and
@@ -525,6 +573,8 @@ class FilterBank:
         for k, nm in enumerate(RELAX_NAMES[:self.n_relax]):
             if nm in names:
                 self.G[k] = self.scaled.nominal[IDX[nm]] * R.exp(self.u[IDX[nm]])
+        if "delta" in names:
+            self.delta = self.scaled.nominal[IDX["delta"]] * R.exp(self.u[IDX["delta"]])
         return newx[0], upd.nis, status
 
     def _guard(self, x: list[Array], P: Matrix, x_prior: list[Array], prior_ok: Array,
@@ -574,6 +624,10 @@ class FilterBank:
         for name in self.identified:
             i, a = self.owner(name)
             sd_u = np.sqrt(self.P[i][a][a])
+            if name == "delta":
+                vals.append(self.delta)
+                sds.append(self.delta * sd_u)
+                continue
             if name in RELAX_NAMES:
                 # g = G / (1 + sum G): dg_k/du_k = g_k (1 - g_k)
                 gk = g[RELAX_NAMES.index(name)]
@@ -626,6 +680,5 @@ class _Constants:
         self.depth_max = R.c(cfg.depth_max_mm)
         self.speed_max = R.c(cfg.speed_max_mm_s)
         self.force_max = R.c(cfg.force_max_n)
-        self.delta = R.c(cfg.presliding_mm)
         self.tau = [R.c(cfg.tau_fast_s), R.c(cfg.tau_slow_s)]
         self.us_per_s = R.c(1.0e6)

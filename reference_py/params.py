@@ -25,7 +25,10 @@ PARAM_NAMES: tuple[str, ...] = ("sigma0", "sigma1", "sigma2", "f1", "f2", "alpha
 #: Maxwell branch takes away once the tissue has relaxed.  Not force-model parameters of the
 #: paper (the presets and simulators know only PARAM_NAMES); the bank indexes them after them.
 RELAX_NAMES: tuple[str, ...] = ("g_fast", "g_slow")
-ALL_NAMES: tuple[str, ...] = PARAM_NAMES + RELAX_NAMES
+#: Model III's turn-over length delta, mm (MODEL.md §3b): identified with the direction memory
+#: on, starting from the configured presliding_mm; indexed after the strengths
+DIR_NAMES: tuple[str, ...] = ("delta",)
+ALL_NAMES: tuple[str, ...] = PARAM_NAMES + RELAX_NAMES + DIR_NAMES
 IDX = {name: i for i, name in enumerate(ALL_NAMES)}
 #: nominal (starting) strengths, fractions of the elastic force; their sum must be < 1
 #: (measured dwells lose 24-49 % in 5 s, a third of it within 0.3 s)
@@ -36,16 +39,19 @@ RELAX_NOMINAL: dict[str, float] = {"g_fast": 0.15, "g_slow": 0.25}
 MODEL_PARAMS: dict[int, tuple[str, ...]] = {
     1: ("sigma0", "sigma1", "sigma2", "f1", "f2", "alpha"),
     2: ("sigma0", "sigma1", "sigma2", "f1", "beta"),
-    3: ("sigma0", "sigma1", "sigma2", "f1", "beta", "g_fast", "g_slow"),
+    3: ("sigma0", "sigma1", "sigma2", "f1", "beta", "g_fast", "g_slow", "delta"),
 }
 
 #: the bank of three filters (paper Table I): the parameter subset each one identifies with z.
-#: Model III is Model II with the relaxation strengths beside sigma0 in filter 1: both scale
-#: the held force in a dwell, where sigma0 z l is all that is left of the friction-free force
+#: Model III is Model II with the relaxation strengths beside sigma0 in filter 1 (both scale
+#: the held force in a dwell, where sigma0 z l is all that is left of the friction-free force)
+#: and the turn-over length beside the friction's f1, sigma1 in filter 2 (it shapes how the
+#: friction term turns over; with the friction filter the turn-over's innovation reaches it
+#: before filter 3's prediction from the updated friction does)
 FILTER_SUBSETS: dict[int, tuple[tuple[str, ...], ...]] = {
     1: (("f2", "sigma0"), ("f1", "sigma1"), ("alpha", "sigma2")),
     2: (("sigma0",), ("f1", "sigma1"), ("beta", "sigma2")),
-    3: (("sigma0", "g_fast", "g_slow"), ("f1", "sigma1"), ("beta", "sigma2")),
+    3: (("sigma0", "g_fast", "g_slow"), ("f1", "sigma1", "delta"), ("beta", "sigma2")),
 }
 
 #: Model I's fixed normalising constant beta0 when no preset supplies one (MODEL.md §2)

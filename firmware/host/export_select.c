@@ -30,7 +30,8 @@ void nte_export_snapshot_values(const nte_export_snapshot_t* s, const double fix
         if (id < 7U) {
             params[id] = (double)s->pe[j].value;
             sd[id] = (double)s->pe[j].sd;
-        } else if (*n_g < 2U) {
+        } else if (((id == (size_t)nte_param_g_fast) || (id == (size_t)nte_param_g_slow)) &&
+                   (*n_g < 2U)) {
             g_name[*n_g] = nte_param_name(s->pe[j].id);
             g[*n_g] = (double)s->pe[j].value;
             g_sd[*n_g] = (double)s->pe[j].sd;

@@ -20,9 +20,13 @@ static double number(const char* text)
     return x;
 }
 
+/* --start names every parameter but Model III's turn-over length, which starts at
+ * --presliding-mm (cli.start_values) */
+#define START_COUNT ((int)nte_param_delta)
+
 static int find(const char* name)
 {
-    for (int j = 0; j < NTE_PARAM_COUNT; j++) {
+    for (int j = 0; j < START_COUNT; j++) {
         if (strcmp(nte_param_name((nte_param_id_t)j), name) == 0) {
             return j;
         }
@@ -45,7 +49,7 @@ static int parse_item(const nte_nv_t* it, nte_start_flag_t* out, char* msg, size
     nte_py_repr_text(name, shown, sizeof shown);
     if (j < 0) {
         size_t o = (size_t)snprintf(msg, cap, "unknown parameter %s (valid: ", shown);
-        for (int k = 0; (k < NTE_PARAM_COUNT) && (o < cap); k++) {
+        for (int k = 0; (k < START_COUNT) && (o < cap); k++) {
             o += (size_t)snprintf(msg + o, cap - o, "%s%s", (k > 0) ? ", " : "",
                                   nte_param_name((nte_param_id_t)k));
         }

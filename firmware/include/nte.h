@@ -21,7 +21,9 @@
  *   m_i <- a_i m_i + (1 - a_i) f_e of the elastic force f_e, a_i = exp(-dt / tau_i), and publish
  *   f = f_e - sum g_i m_i: a held force decays by sum g_i and recovers after an unloading.  The
  *   strengths g_fast, g_slow are identified (as odds, g_i = G_i / (1 + sum G) < 1) by filter 1
- *   with sigma0; the memories are treated as known inputs (JACOBIANS.md §7).  Parameters
+ *   with sigma0; the memories are treated as known inputs (JACOBIANS.md §7).  The turn-over
+ *   length delta (starting at presliding_mm) is identified by filter 2 with f1 and sigma1,
+ *   from the samples after the motion first goes against s (JACOBIANS.md §8).  Parameters
  *   are identified in log form relative to nominal values, theta = nominal exp(u), so every
  *   state stays O(1) in float32.  The derivations of the Jacobians are in
  *   reference_py/JACOBIANS.md; the model reading (sign of the velocity, z reset at the surface)
@@ -83,7 +85,7 @@
  *   Model III's share of these sizes: NTE_STATE_MAX = 4 (three 4 x 4 covariances instead of
  *   3 x 3: +84 / +168 bytes), nine parameters instead of seven in the config and the model
  *   (+48 / +96), its config fields, direction state and two memories (+28 / +40), and the LM
- *   workspace sized for NTE_IDENTIFIED_MAX = 7 (+120 / +240): without the contact front end
+ *   workspace sized for NTE_MODEL_PARAM_COUNT = 7 (+120 / +240): without the contact front end
  *   680 / 1264 bytes for the bank alone and 2808 / 5480 with the default buffer.
  *
  * THREAD SAFETY
@@ -262,17 +264,23 @@ typedef enum nte_param_id_t {
     nte_param_beta = 6,   /**< normalising constant (Model I: fixed beta0) */
     nte_param_g_fast = 7, /**< Model III: strength of the fast relaxation branch, the
                                fraction of the elastic force it takes once relaxed */
-    nte_param_g_slow = 8  /**< Model III: strength of the slow branch (g_fast + g_slow < 1) */
+    nte_param_g_slow = 8, /**< Model III: strength of the slow branch (g_fast + g_slow < 1) */
+    nte_param_delta = 9   /**< Model III: turn-over length of the direction state, mm; starts
+                               at presliding_mm (nominal[nte_param_delta] is not read) */
 } nte_param_id_t;
 
-/** Every parameter: the seven of the force model (Models I, II) and Model III's two
- *  relaxation strengths. */
-#define NTE_PARAM_COUNT 9
+/** Every parameter: the seven of the force model (Models I, II), Model III's two relaxation
+ *  strengths and its turn-over length. */
+#define NTE_PARAM_COUNT 10
 /** Layers the index counts, 0..NTE_LAYER_MAX - 1 (reference_py/layers.py LAYER_MAX). */
 #define NTE_LAYER_MAX 4U
 /** At most this many parameters are identified (Model I: six, Model II: five, Model III:
- *  seven). */
-#define NTE_IDENTIFIED_MAX 7
+ *  eight). */
+#define NTE_IDENTIFIED_MAX 8
+/** The force model's own parameters (sigma0 .. beta): the most the RK3 step differentiates
+ *  and the robust fit (Models I and II) identifies; Model III's strengths and delta act on
+ *  the output only. */
+#define NTE_MODEL_PARAM_COUNT 7
 #define NTE_FILTER_COUNT 3
 /** Largest state of one filter of the bank (z and its parameters): 4 for Model III's filter 1
  *  (z, sigma0, g_fast, g_slow); Models I and II need 3.  Each covariance is
@@ -484,7 +492,9 @@ typedef struct nte_config_t {
     bool relaxation;            /**< [true] relaxation branches take sum g_i m_i off the
                                      elastic force */
     int32_t relax_branches;     /**< [2] 1: the fast branch only; 2: fast and slow, 1..2 */
-    nte_real_t presliding_mm;   /**< [2.5] turn-over length delta of s, mm, > 0, <= 1000 */
+    nte_real_t presliding_mm;   /**< [2.5] starting turn-over length delta of s, mm, > 0,
+                                     <= 1000; with the direction memory on, filter 2
+                                     identifies delta from the turn-overs */
     nte_real_t tau_fast_s;      /**< [0.3] time constant of the fast branch, s, > 0, <= 3600 */
     nte_real_t tau_slow_s;      /**< [3] time constant of the slow branch, s, > 0, <= 3600 */
     /** [preset paper-10mms; g_fast 0.15, g_slow 0.25] Nominal (starting) physical values,
@@ -576,12 +586,12 @@ typedef struct nte_robust_t {
     nte_real_t confidence;
     nte_real_t prev_theta[NTE_PARAM_COUNT]; /**< start (b) of the next refinement */
     /* Levenberg-Marquardt workspace: J^T J and J^T r at the current and the trial point */
-    nte_real_t A[NTE_IDENTIFIED_MAX][NTE_IDENTIFIED_MAX];
-    nte_real_t g[NTE_IDENTIFIED_MAX];
-    nte_real_t A_try[NTE_IDENTIFIED_MAX][NTE_IDENTIFIED_MAX];
-    nte_real_t g_try[NTE_IDENTIFIED_MAX];
-    nte_real_t v[NTE_IDENTIFIED_MAX];     /**< current log-parameters of the fit */
-    nte_real_t v_try[NTE_IDENTIFIED_MAX]; /**< trial point */
+    nte_real_t A[NTE_MODEL_PARAM_COUNT][NTE_MODEL_PARAM_COUNT];
+    nte_real_t g[NTE_MODEL_PARAM_COUNT];
+    nte_real_t A_try[NTE_MODEL_PARAM_COUNT][NTE_MODEL_PARAM_COUNT];
+    nte_real_t g_try[NTE_MODEL_PARAM_COUNT];
+    nte_real_t v[NTE_MODEL_PARAM_COUNT];     /**< current log-parameters of the fit */
+    nte_real_t v_try[NTE_MODEL_PARAM_COUNT]; /**< trial point */
 } nte_robust_t;
 #endif
 
@@ -624,8 +634,12 @@ typedef struct nte_t {
     nte_real_t z;
     /* one covariance per filter, dimension 1 + its parameter count (at most NTE_STATE_MAX) */
     nte_real_t P[NTE_FILTER_COUNT][NTE_STATE_MAX][NTE_STATE_MAX];
-    /* Model III: the direction state s in [-1, 1] and the relaxation memories m_i, N */
+    /* Model III: the direction state s in [-1, 1], its sensitivity ds/du_delta, whether the
+     * motion went against it since the surface (delta is learned from turn-overs only), and
+     * the relaxation memories m_i, N */
     nte_real_t sdir;
+    nte_real_t sdir_du;
+    bool turned;
     nte_real_t mrel[2];
     uint32_t gated_run[NTE_FILTER_COUNT];
     /* time line */

@@ -208,7 +208,8 @@ static void nte_node_all_params(const nte_node_t* self, float value[NTE_FRAMES_P
 {
     nte_param_estimate_t pe[NTE_IDENTIFIED_MAX];
     const nte_config_t* c = &self->cfg.estimator[self->model - 1];
-    /* NTE_FRAMES_PARAM_COUNT == NTE_PARAM_COUNT: the frame's indices are nte_param_id_t */
+    /* the frame's indices are nte_param_id_t 0..NTE_FRAMES_PARAM_COUNT - 1; Model III's
+     * identified turn-over length (nte_param_delta) is not in the DBC yet */
     for (uint32_t j = 0u; j < (uint32_t)NTE_FRAMES_PARAM_COUNT; j++) {
         value[j] = (float)c->nominal[j];
         sd[j] = 0.0f;

@@ -13,7 +13,8 @@
 #include "nte_robust.h"
 
 static const char* const param_names[NTE_PARAM_COUNT] = {
-    "sigma0", "sigma1", "sigma2", "f1", "f2", "alpha", "beta", "g_fast", "g_slow"};
+    "sigma0", "sigma1", "sigma2", "f1", "f2", "alpha", "beta", "g_fast", "g_slow",
+    "delta"};
 
 const char* nte_param_name(const nte_param_id_t id)
 {

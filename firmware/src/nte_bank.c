@@ -11,24 +11,31 @@
 #include "nte_model.h"
 
 /* Table I: the parameters each filter identifies together with z, per model (Model III:
- * Model II with the relaxation strengths in filter 1; bank.py filter_subsets drops those a
- * configuration switches off, as subset_count does). */
-static const uint8_t subset_len[3][NTE_FILTER_COUNT] = {{2U, 2U, 2U}, {1U, 2U, 2U}, {3U, 2U, 2U}};
+ * Model II with the relaxation strengths in filter 1 and the turn-over length in filter 2;
+ * bank.py filter_subsets drops those a configuration switches off, as subset_count does). */
+static const uint8_t subset_len[3][NTE_FILTER_COUNT] = {{2U, 2U, 2U}, {1U, 2U, 2U}, {3U, 3U, 2U}};
 static const uint8_t subsets[3][NTE_FILTER_COUNT][3] = {
     {{nte_param_f2, nte_param_sigma0, 0U}, {nte_param_f1, nte_param_sigma1, 0U},
      {nte_param_alpha, nte_param_sigma2, 0U}},
     {{nte_param_sigma0, 0U, 0U}, {nte_param_f1, nte_param_sigma1, 0U},
      {nte_param_beta, nte_param_sigma2, 0U}},
-    {{nte_param_sigma0, nte_param_g_fast, nte_param_g_slow}, {nte_param_f1, nte_param_sigma1, 0U},
-     {nte_param_beta, nte_param_sigma2, 0U}}};
-/* reference MODEL_PARAMS: the identified parameters in output order */
+    {{nte_param_sigma0, nte_param_g_fast, nte_param_g_slow},
+     {nte_param_f1, nte_param_sigma1, nte_param_delta}, {nte_param_beta, nte_param_sigma2, 0U}}};
+/* reference MODEL_PARAMS: the identified parameters in output order; Model III's by its
+ * relaxation branches in use (0, 1, 2), delta last (bank.identified_names) */
 static const uint8_t identified_len[3] = {6U, 5U, 5U};
-static const uint8_t identified[3][NTE_IDENTIFIED_MAX] = {
+static const uint8_t identified[2][NTE_IDENTIFIED_MAX] = {
     {nte_param_sigma0, nte_param_sigma1, nte_param_sigma2, nte_param_f1, nte_param_f2,
-     nte_param_alpha, 0U},
-    {nte_param_sigma0, nte_param_sigma1, nte_param_sigma2, nte_param_f1, nte_param_beta, 0U, 0U},
+     nte_param_alpha, 0U, 0U},
+    {nte_param_sigma0, nte_param_sigma1, nte_param_sigma2, nte_param_f1, nte_param_beta, 0U, 0U,
+     0U}};
+static const uint8_t identified_m3[3][NTE_IDENTIFIED_MAX] = {
     {nte_param_sigma0, nte_param_sigma1, nte_param_sigma2, nte_param_f1, nte_param_beta,
-     nte_param_g_fast, nte_param_g_slow}};
+     nte_param_delta, 0U, 0U},
+    {nte_param_sigma0, nte_param_sigma1, nte_param_sigma2, nte_param_f1, nte_param_beta,
+     nte_param_g_fast, nte_param_delta, 0U},
+    {nte_param_sigma0, nte_param_sigma1, nte_param_sigma2, nte_param_f1, nte_param_beta,
+     nte_param_g_fast, nte_param_g_slow, nte_param_delta}};
 
 static size_t model_index(const nte_t* self)
 {
@@ -44,11 +51,37 @@ static size_t relax_count(const nte_t* self)
                : 0U;
 }
 
+/* bank.identifies_delta: Model III identifies its turn-over length with the direction
+ * memory on. */
+static bool identifies_delta(const nte_t* self)
+{
+    return (self->cfg.model == 3) && self->cfg.direction_memory;
+}
+
 /* The parameter count of filter i (bank.filter_subsets). */
 static size_t subset_count(const nte_t* self, const size_t i)
 {
     const size_t mi = model_index(self);
-    return ((mi == 2U) && (i == 0U)) ? (1U + relax_count(self)) : (size_t)subset_len[mi][i];
+    if ((mi == 2U) && (i == 0U)) {
+        return 1U + relax_count(self);
+    }
+    if ((mi == 2U) && (i == 1U)) {
+        return identifies_delta(self) ? 3U : 2U;
+    }
+    return (size_t)subset_len[mi][i];
+}
+
+/* The identified parameters in output order (bank.identified_names); returns their count. */
+static size_t identified_ids(const nte_t* self, const uint8_t** ids)
+{
+    const size_t mi = model_index(self);
+    if (mi < 2U) {
+        *ids = identified[mi];
+        return (size_t)identified_len[mi];
+    }
+    const size_t nr = relax_count(self);
+    *ids = identified_m3[nr];
+    return (size_t)identified_len[mi] + nr + (identifies_delta(self) ? 1U : 0U);
 }
 
 /* The leading parameters of ids[0..count) that enter the state equation (bank._dynamic): the
@@ -64,9 +97,7 @@ static size_t dynamic_count(const uint8_t* ids, const size_t count)
 
 size_t nte_bank_identified(const nte_t* self, const uint8_t** ids)
 {
-    const size_t mi = model_index(self);
-    *ids = identified[mi];
-    return (size_t)identified_len[mi] + relax_count(self);
+    return identified_ids(self, ids);
 }
 
 /* bank._p0: the initial covariance of a filter with n states, var(u) = p0_u. */
@@ -117,6 +148,8 @@ static void set_nominal(nte_t* self)
             self->nominal[nte_param_g_slow] = g1 / den;
         }
     }
+    /* Model III's turn-over length starts at the configured presliding_mm */
+    self->nominal[nte_param_delta] = cfg->presliding_mm;
 }
 
 void nte_bank_restart_from(nte_t* self, const nte_real_t theta[NTE_PARAM_COUNT],
@@ -145,6 +178,8 @@ void nte_bank_start(nte_t* self)
     nte_model_theta(&self->th, self->nominal, self->ex_nominal, self->kappa, self->u);
     self->z = NTE_C(0.0);
     self->sdir = NTE_C(0.0);
+    self->sdir_du = NTE_C(0.0);
+    self->turned = false;
     self->mrel[0] = NTE_C(0.0);
     self->mrel[1] = NTE_C(0.0);
     for (size_t i = 0U; i < NTE_FILTER_COUNT; i++) {
@@ -231,6 +266,8 @@ typedef struct step_ctx_t {
     nte_real_t v;
     nte_real_t y;
     nte_real_t s;
+    nte_real_t s_du;    /* Model III: ds/du_delta (bank._direction) */
+    bool turned;        /* ... and whether the motion went against s since the surface */
     nte_real_t z_prev;
     nte_real_t a_rel[2]; /* Model III: each relaxation branch's decay over the sample */
     bool surface;
@@ -268,7 +305,7 @@ static nte_real_t relax_terms(const nte_t* self, const step_ctx_t* c, const size
 static void model3_exps(const nte_t* self, const bool dir, const size_t nr, const nte_real_t dl,
                         const nte_real_t dt, nte_real_t e[3])
 {
-    const nte_real_t den[3] = {self->cfg.presliding_mm, self->cfg.tau_fast_s,
+    const nte_real_t den[3] = {self->th.v[nte_param_delta], self->cfg.tau_fast_s,
                                self->cfg.tau_slow_s};
     for (size_t i = 0U; i < 3U; i++) {
         e[i] = NTE_C(0.0);
@@ -279,13 +316,28 @@ static void model3_exps(const nte_t* self, const bool dir, const size_t nr, cons
 }
 
 /* bank._direction: the direction state after the depth step dl, ds/dl = (1 - s sign(dl)) /
- * delta integrated exactly: s' = sigma + (s - sigma) exp(-|dl| / delta), sigma = sign(dl)
- * (s held when dl = 0); E = exp(-|dl| / delta). */
-static nte_real_t direction(const nte_t* self, const nte_real_t dl, const nte_real_t E)
+ * delta integrated exactly: s' = sigma + (s - sigma) E, E = exp(-|dl| / delta), sigma =
+ * sign(dl) (s held when dl = 0); its sensitivity to u_delta (delta = nominal e^u, so dE/du =
+ * E |dl| / delta; JACOBIANS.md §8): ds'/du = E ds/du + (s - sigma) E |dl| / delta, whose
+ * second term counts once the motion has gone against s since the surface (the entry's rise
+ * is the tissue's contact, not a turn-over). */
+static void direction(const nte_t* self, const nte_real_t dl, const nte_real_t E,
+                      step_ctx_t* c)
 {
     const nte_real_t sig =
         (dl > NTE_C(0.0)) ? NTE_C(1.0) : ((dl < NTE_C(0.0)) ? NTE_C(-1.0) : NTE_C(0.0));
-    return sig + ((self->sdir - sig) * E);
+    const nte_real_t adl = nte_abs(dl) / self->th.v[nte_param_delta];
+    c->s = sig + ((self->sdir - sig) * E);
+    c->turned = self->turned || ((sig * self->sdir) < NTE_C(0.0));
+    c->s_du = (E * self->sdir_du) + (c->turned ? (((self->sdir - sig) * E) * adl) : NTE_C(0.0));
+}
+
+/* bank._direction_update: s after filter 2 changed u_delta by du, s + ds/du du within
+ * [-1, 1]. */
+static nte_real_t direction_update(const step_ctx_t* c, const nte_real_t du)
+{
+    const nte_real_t s = c->s + (c->s_du * du);
+    return (s > NTE_C(1.0)) ? NTE_C(1.0) : ((s < NTE_C(-1.0)) ? NTE_C(-1.0) : s);
 }
 
 typedef struct filter_out_t {
@@ -352,6 +404,12 @@ static uint32_t measure(const nte_t* self, const step_ctx_t* c, const nte_depth_
     for (size_t a = 0U; a < nd; a++) {
         w->h[a + 1U] = nte_model_output_du(&self->th, d, w->x[0], &o, w->names[a]);
     }
+    /* the elastic rows end after delta's: dfe/du_delta = l fr ds/du_delta */
+    size_t ne = nd;
+    if ((ne < na) && (w->names[ne] == (uint8_t)nte_param_delta)) {
+        w->h[ne + 1U] = (d->l * o.fr) * c->s_du;
+        ne++;
+    }
     nte_real_t h = o.h;
     const size_t nr = relax_count(self);
     if (nr > 0U) {
@@ -366,10 +424,10 @@ static uint32_t measure(const nte_t* self, const step_ctx_t* c, const nte_depth_
             lost = lost + (g[1] * (NTE_C(1.0) - c->a_rel[1]));
         }
         const nte_real_t keep = NTE_C(1.0) - lost;
-        for (size_t a = 0U; a <= nd; a++) {
+        for (size_t a = 0U; a <= ne; a++) {
             w->h[a] = w->h[a] * keep;
         }
-        for (size_t a = nd; a < na; a++) {
+        for (size_t a = ne; a < na; a++) {
             const size_t k = (size_t)w->names[a] - (size_t)nte_param_g_fast;
             w->h[a + 1U] = -(g[k] * (mp[k] - M));
         }
@@ -503,7 +561,9 @@ void nte_bank_advance(nte_t* self, const bool first, const nte_real_t dt, const 
     nte_real_t e3[3];
     model3_exps(self, dir, nr, dl, dt, e3);
     if (m3 && self->cfg.direction_memory) {
-        c.s = dir ? direction(self, dl, e3[0]) : NTE_C(0.0);
+        if (dir) {
+            direction(self, dl, e3[0], &c);
+        }
     } else {
         c.s = nte_model_smooth_sign(v, self->cfg.eps_mm_s);
     }
@@ -525,16 +585,22 @@ void nte_bank_advance(nte_t* self, const bool first, const nte_real_t dt, const 
         }
         nte_rk3_result_t shared;
         (void)memset(&shared, 0, sizeof shared);
-        const size_t mi = model_index(self);
         if (c.rotate) {
             /* one prediction, with every identified parameter's sensitivity, serves all three */
+            const uint8_t* ids = NULL;
+            const size_t n_ids = identified_ids(self, &ids);
             nte_model_rk3(&shared, &self->th, c.z_prev, c.l_prev, c.l, dt, self->cfg.substeps,
-                          identified[mi], dynamic_count(identified[mi], identified_len[mi]));
+                          ids, dynamic_count(ids, n_ids));
         }
         nte_real_t z_post = c.z_prev;
         for (size_t i = 0U; i < NTE_FILTER_COUNT; i++) {
             filter_out_t fo;
+            const nte_real_t u_delta = self->u[nte_param_delta];
             status |= run_filter(self, &c, i, &shared, &fo);
+            if ((i == 1U) && identifies_delta(self)) {
+                /* the direction state of this sample follows filter 2's update of delta */
+                c.s = direction_update(&c, self->u[nte_param_delta] - u_delta);
+            }
             if (fo.active || (self->cfg.predict_only && (i == 0U))) {
                 z_post = fo.z_post;
                 if (c.rotate || (i == 0U)) {
@@ -584,6 +650,8 @@ void nte_bank_advance(nte_t* self, const bool first, const nte_real_t dt, const 
     }
     if (m3) {
         self->sdir = c.s;
+        self->sdir_du = c.s_du;
+        self->turned = c.turned;
     }
     out->force_hat_n = force;
     out->z = self->z;
@@ -596,13 +664,14 @@ size_t nte_bank_params(const nte_t* self, nte_param_estimate_t* out, const size_
 {
     const size_t mi = model_index(self);
     const size_t nr = relax_count(self);
-    const size_t count = (size_t)identified_len[mi] + nr;
+    const uint8_t* ids = NULL;
+    const size_t count = identified_ids(self, &ids);
     nte_real_t g[2] = {NTE_C(0.0), NTE_C(0.0)};
     if (nr > 0U) {
         relax_fractions(self, nr, g);
     }
     for (size_t j = 0U; (j < count) && (j < capacity) && (out != NULL); j++) {
-        const uint8_t id = identified[mi][j];
+        const uint8_t id = ids[j];
         out[j].id = (nte_param_id_t)id;
         out[j].value = NTE_C(0.0);
         out[j].sd = NTE_C(0.0);
@@ -618,7 +687,7 @@ size_t nte_bank_params(const nte_t* self, nte_param_estimate_t* out, const size_
 #else
                     const nte_real_t sd_u = sqrtf(self->P[i][a + 1U][a + 1U]);
 #endif
-                    if (id >= (uint8_t)nte_param_g_fast) {
+                    if ((id == (uint8_t)nte_param_g_fast) || (id == (uint8_t)nte_param_g_slow)) {
                         /* g = G / (1 + sum G): dg_k/du_k = g_k (1 - g_k) */
                         const nte_real_t gk = g[id - (uint8_t)nte_param_g_fast];
                         out[j].value = gk;

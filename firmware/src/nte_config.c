@@ -51,6 +51,8 @@ static void set_common(nte_config_t* cfg, const int32_t model, const nte_schedul
     cfg->nominal[nte_param_beta] = NTE_K_NOMINAL_BETA;
     cfg->nominal[nte_param_g_fast] = NTE_K_NOMINAL_G_FAST;
     cfg->nominal[nte_param_g_slow] = NTE_K_NOMINAL_G_SLOW;
+    /* not read: Model III's turn-over length starts at presliding_mm (nte_bank set_nominal) */
+    cfg->nominal[nte_param_delta] = NTE_K_DEF_PRESLIDING_MM;
     cfg->f1_excess = NTE_K_NOMINAL_F1_EXCESS;
     cfg->estimator = nte_estimator_bank;
     cfg->robust.buffer_len = 96;

@@ -165,8 +165,8 @@ void nte_model_rk3(nte_rk3_result_t* res, const nte_theta_t* th, nte_real_t z,
     const nte_real_t bound = NTE_K_EXP_STEP_BOUND;
     const nte_real_t dl = l_b - l_a;
     nte_real_t s_z = NTE_C(1.0);
-    /* one sensitivity per requested parameter (at most NTE_IDENTIFIED_MAX) */
-    nte_real_t s_u[NTE_IDENTIFIED_MAX] = {NTE_C(0.0)};
+    /* one sensitivity per requested parameter (at most NTE_MODEL_PARAM_COUNT) */
+    nte_real_t s_u[NTE_MODEL_PARAM_COUNT] = {NTE_C(0.0)};
     /* the end of one sub-step is the start of the next: its depth terms are computed once */
     nte_depth_terms_t d1;
     nte_model_depth_terms(&d1, th, nte_model_clamp_depth(l_a + (dl * (NTE_C(0.0) / n))));
@@ -192,7 +192,7 @@ void nte_model_rk3(nte_rk3_result_t* res, const nte_theta_t* th, nte_real_t z,
             const nte_real_t dz0 = z - zq;
             const nte_real_t one_e = NTE_C(1.0) - E;
             s_z = E * s_z;
-            for (size_t p = 0U; (p < count) && (p < (size_t)NTE_IDENTIFIED_MAX); p++) {
+            for (size_t p = 0U; (p < count) && (p < (size_t)NTE_MODEL_PARAM_COUNT); p++) {
                 nte_real_t lam_u = NTE_C(0.0);
                 nte_real_t zq_u = NTE_C(0.0);
                 if (nte_model_decay_du(th, &dm, ids[p], &lam_u, &zq_u)) {
@@ -217,7 +217,7 @@ void nte_model_rk3(nte_rk3_result_t* res, const nte_theta_t* th, nte_real_t z,
         const nte_real_t a3 = fz1 * ((s_z - (h * a1)) + (twoh * a2));
         s_z = s_z + (h6 * ((a1 + (four * a2)) + a3));
 
-        for (size_t p = 0U; (p < count) && (p < (size_t)NTE_IDENTIFIED_MAX); p++) {
+        for (size_t p = 0U; (p < count) && (p < (size_t)NTE_MODEL_PARAM_COUNT); p++) {
             const nte_real_t s = s_u[p];
             bool present = false;
             nte_real_t q1 = fz0 * s;
@@ -241,7 +241,7 @@ void nte_model_rk3(nte_rk3_result_t* res, const nte_theta_t* th, nte_real_t z,
     }
     res->z = z;
     res->dz_dz0 = s_z;
-    for (size_t p = 0U; (p < count) && (p < (size_t)NTE_IDENTIFIED_MAX); p++) {
+    for (size_t p = 0U; (p < count) && (p < (size_t)NTE_MODEL_PARAM_COUNT); p++) {
         res->dz_du[ids[p]] = s_u[p];
     }
 }

@@ -26,7 +26,7 @@ typedef struct nte_output_terms_t {
     nte_real_t h;  /**< the force, N */
 } nte_output_terms_t;
 
-/** Sensitivities wanted from one RK3 step: up to NTE_IDENTIFIED_MAX parameter indices. */
+/** Sensitivities wanted from one RK3 step: up to NTE_MODEL_PARAM_COUNT parameter indices. */
 typedef struct nte_rk3_result_t {
     nte_real_t z;
     nte_real_t dz_dz0;

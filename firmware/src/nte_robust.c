@@ -21,8 +21,8 @@ bool nte_robust_ldlt_solve(const size_t n, nte_robust_mat_t M, const nte_real_t*
                            nte_real_t* x)
 {
     nte_robust_mat_t L;
-    nte_real_t D[NTE_IDENTIFIED_MAX];
-    nte_real_t y[NTE_IDENTIFIED_MAX];
+    nte_real_t D[NTE_MODEL_PARAM_COUNT];
+    nte_real_t y[NTE_MODEL_PARAM_COUNT];
     bool ok = true;
     for (size_t j = 0U; j < n; j++) {
         nte_real_t acc = M[j][j];
@@ -152,8 +152,8 @@ static nte_real_t simulate(const nte_t* self, const nte_real_t nominal[NTE_PARAM
     nte_theta_t th;
     nte_model_theta(&th, nominal, ex_nominal, self->kappa, u);
     nte_real_t z = NTE_C(0.0);
-    nte_real_t sz[NTE_IDENTIFIED_MAX];
-    nte_real_t jrow[NTE_IDENTIFIED_MAX];
+    nte_real_t sz[NTE_MODEL_PARAM_COUNT];
+    nte_real_t jrow[NTE_MODEL_PARAM_COUNT];
     nte_real_t cost = NTE_C(0.0);
     for (size_t a = 0U; a < n; a++) {
         sz[a] = NTE_C(0.0);
@@ -236,7 +236,7 @@ static nte_real_t lm(nte_t* self, const nte_real_t theta0[NTE_PARAM_COUNT],
                 M[a][b] = rb->A[a][b] + ((a == b) ? (lam * rb->A[a][a]) : NTE_C(0.0));
             }
         }
-        nte_real_t delta[NTE_IDENTIFIED_MAX];
+        nte_real_t delta[NTE_MODEL_PARAM_COUNT];
         const bool ok = nte_robust_ldlt_solve(n, M, rb->g, delta);
         for (size_t a = 0U; a < n; a++) {
             /* np.clip = minimum(maximum(x, -umax), umax); NaN passes through */

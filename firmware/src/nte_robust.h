@@ -10,10 +10,10 @@
 #if NTE_ROBUST_BUFFER_LEN > 0
 
 /** Row stride of the matrices ldlt_solve takes. */
-typedef nte_real_t nte_robust_mat_t[NTE_IDENTIFIED_MAX][NTE_IDENTIFIED_MAX];
+typedef nte_real_t nte_robust_mat_t[NTE_MODEL_PARAM_COUNT][NTE_MODEL_PARAM_COUNT];
 
 /**
- * robust.py ldlt_solve: M x = b for symmetric positive definite M (n <= NTE_IDENTIFIED_MAX)
+ * robust.py ldlt_solve: M x = b for symmetric positive definite M (n <= NTE_MODEL_PARAM_COUNT)
  * by M = L D L^T, reading M's lower triangle only.  Returns false when a pivot was not
  * positive (a non-positive pivot is replaced by 1 to carry on, as the reference does); x is
  * then all zeros.  M is read only (not const: C99 array qualifiers).

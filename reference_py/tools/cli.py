@@ -112,20 +112,22 @@ def sensor_noise(text: str) -> float:
 
 def start_values(text: str) -> dict[str, float]:
     """An argparse type: ``NAME=VALUE[,NAME=VALUE...]``, starting (nominal) values of the
-    parameters by name (params.ALL_NAMES), each finite and in the range a configuration file
+    parameters by name (params.PARAM_NAMES and RELAX_NAMES: Model III's delta starts at
+    --presliding-mm), each finite and in the range a configuration file
     allows it (estconfig.py: the physical ones positive but f2, |x| <= 1000; the strengths in
     (0, 1)).  Combinations (g(0) = f1 + f2 > 0, strengths summing below 1) are the bank's to
     refuse, with its own message."""
-    from ..params import ALL_NAMES, RELAX_NAMES
+    from ..params import PARAM_NAMES, RELAX_NAMES
     from .estconfig import PARAM_MAX, POSITIVE_PARAMS
+    names = PARAM_NAMES + RELAX_NAMES
     out: dict[str, float] = {}
     for item in text.split(","):
         name, eq, value = (part.strip() for part in item.partition("="))
         if not eq or not name:
             raise argparse.ArgumentTypeError(f"{item.strip()!r} is not NAME=VALUE")
-        if name not in ALL_NAMES:
+        if name not in names:
             raise argparse.ArgumentTypeError(f"unknown parameter {name!r} (valid: "
-                                             f"{', '.join(ALL_NAMES)})")
+                                             f"{', '.join(names)})")
         if name in out:
             raise argparse.ArgumentTypeError(f"{name!r} given twice")
         try:

@@ -15,9 +15,11 @@
    records of discrepancy_measured_like.py (another force law and sampling; seeds 11-21), each
    identified as generated and predicted on the same record's truth under a fresh noise draw
    (the same condition, another trial), RMSE to the truth less its tare over the peak.
-4. The one-step innovation RMS over the sensor noise per phase (insertion, dwell, retraction),
-   files as recorded, Model II's default beside Model III's (contact front end on), median and
-   90th percentile over records: the phantom presets and `lab` on seeds 301-310, and the
+4. The one-step innovation RMS over the sensor noise per phase (insertion, dwell, retraction)
+   and the reversal's peak (the largest |innovation| / noise within 1 s after the retraction
+   starts), files as recorded, Model II's default beside Model III's (contact front end on),
+   median and 90th percentile over records (`config_loop_figures.py --phases PRESET...` prints
+   this part alone): the phantom presets and `lab` on seeds 301-310, and the
    measured-like generator on seeds 31-50.  Model III's gate (config.GATE_REOPEN_AFTER) was
    chosen on skin-on-muscle seeds 101-102 and compared on seeds 201-210 and measured-like
    seeds 11-30; these seeds were not looked at.
@@ -124,16 +126,28 @@ FIGURE_MEASURED_LIKE = range(31, 51)
 MODEL_ARGS = {2: ("--model", "2"), 3: ("--model", "3", "--contact", "on")}
 
 
+#: the reversal's figure: the largest |one-step innovation| over the noise within this long
+#: after each retraction starts (issue 21: "no spike above 5x noise at a reversal")
+REVERSAL_WINDOW_S = 1.0
+
+
 def phase_rms_by_model(d: Path, record: Path, phase: np.ndarray, noise: float
                        ) -> dict[int, list[float]]:
     """Each model's one-step innovation RMS over the noise in every phase of PHASES (``phase``:
-    each sample's phase name, plotting.phase_of)."""
+    each sample's phase name, plotting.phase_of), then the reversal's largest |innovation| over
+    the noise (REVERSAL_WINDOW_S after each start of a retraction, the largest over cycles)."""
     out = {}
     for model in (2, 3):
         run(str(record), *MODEL_ARGS[model], "--out", str(d / "ph.csv"))
         innovation = column(d / "ph.csv", "innovation_n")
+        t = column(d / "ph.csv", "t_s")
         out[model] = [float(np.sqrt(np.mean(innovation[phase == name] ** 2))) / noise
                       for name in PHASES]
+        back = phase == "retraction"
+        starts = t[1:][back[1:] & ~back[:-1]]
+        out[model].append(max((float(np.max(np.abs(innovation[(t >= t0) &
+                                                               (t < t0 + REVERSAL_WINDOW_S)])))
+                               for t0 in starts), default=0.0) / noise)
     return out
 
 
@@ -141,7 +155,7 @@ def print_phase_rows(label: str, rows: dict[int, list[list[float]]]) -> None:
     for model in (2, 3):
         a = np.asarray(rows[model])
         cells = ", ".join(f"{n} {np.median(a[:, k]):.1f} ({np.percentile(a[:, k], 90):.1f})"
-                          for k, n in enumerate(PHASES))
+                          for k, n in enumerate(PHASES + ("reversal peak",)))
         print(f"   {label:15s} Model {'I' * model:3s}: {cells}")
 
 
@@ -183,6 +197,10 @@ def main(presets: list[str]) -> None:
         raise SystemExit(f"{C} missing: make build")
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp)
+        if presets[:1] == ["--phases"]:
+            # part 4 alone
+            innovation_by_phase(d, presets[1:] or ["skin-on-muscle"])
+            return
         preset = presets[0]
         tune = [str(phantom(d, preset, s)) for s in TUNING]
         subprocess.run([str(VENV / "nte-discrepancy"), *tune, "--out", str(d / "disc"),

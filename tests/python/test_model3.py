@@ -1,5 +1,6 @@
 """Model III (reference_py/MODEL.md §3b): its new partial derivatives against central finite
-differences (JACOBIANS.md §7), the exactness of the direction state's per-sample update, the
+differences (JACOBIANS.md §7, §8: the turn-over length's carried sensitivity too), the
+exactness of the direction state's per-sample update, the
 relaxation memory in both directions (decay in a hold, overshoot and recovery at an unloading),
 the configuration's switches, and Models I and II untouched by the new fields.
 """
@@ -30,20 +31,26 @@ def _bank(batch: int, **kw) -> FilterBank:
 
 def _points(rng: np.random.Generator):
     """Random states over insertion, dwell and retraction: z, the nine log-ratios, depth, the
-    direction state, both memories and both decays (a = exp(-dt/tau) in (0, 1))."""
+    direction state and its sensitivity to u_delta, both memories and both decays (a =
+    exp(-dt/tau) in (0, 1))."""
     B = N_POINTS
     z = rng.uniform(0.0, 0.4, B)
-    u = rng.normal(0.0, 0.4, (9, B))
+    u = rng.normal(0.0, 0.4, (10, B))
     l = rng.uniform(0.05, 80.0, B)
     s = rng.uniform(-1.0, 1.0, B)
+    q = rng.normal(0.0, 0.5, B)
     m = rng.normal(0.0, 0.3, (2, B))
     a = rng.uniform(0.01, 0.999, (2, B))
-    return z, u, l, s, m, a
+    return z, u, l, (s, q), m, a
 
 
-def _h_and_row(bank: FilterBank, z, u, l, s, m, a):
-    """The predicted force and its Jacobian row over (z, u of every Model III parameter)."""
+def _h_and_row(bank: FilterBank, z, u, l, sq, m, a):
+    """The predicted force and its Jacobian row over (z, u of every Model III parameter).  The
+    direction state moves with u_delta by its sensitivity q (first order: what the filter's
+    linearisation assumes), s = s0 + q (u_delta - u0_delta)."""
     R = F64
+    s0, q = sq
+    s = s0 + q * (u[9] - U0_DELTA)
     bank.u = [R.arr(x) for x in u]
     bank.th = bank.scaled.theta(bank.u)
     bank.G = [bank.scaled.nominal[7 + k] * R.exp(bank.u[7 + k]) for k in range(2)]
@@ -54,12 +61,20 @@ def _h_and_row(bank: FilterBank, z, u, l, s, m, a):
     o = output(bank.th, d, zz, R.arr(s))
     dyn = [nm for nm in NAMES3 if nm in PARAM_NAMES]
     row = [output_dz(bank.th, d, o)] + [output_du(bank.th, d, zz, o, nm) for nm in dyn]
-    return bank._relax_output(NAMES3, o.h, row)
+    row.append((d.l * o.fr) * R.arr(q))      # bank._measure's delta row
+    h, row = bank._relax_output(NAMES3, o.h, row)
+    # the order of the row: z, the dynamic parameters, delta, then the strengths
+    return h, row[:1 + len(dyn)] + row[2 + len(dyn):] + [row[1 + len(dyn)]]
+
+
+U0_DELTA = 0.0
 
 
 def test_output_partials_against_finite_differences():
     rng = np.random.default_rng(11)
     z, u, l, s, m, a = _points(rng)
+    global U0_DELTA
+    U0_DELTA = u[9].copy()
     bank = _bank(N_POINTS)
     _, row = _h_and_row(bank, z, u, l, s, m, a)
     coords = ["z"] + list(NAMES3)
@@ -89,11 +104,11 @@ def test_direction_update_is_exact():
     restart = np.zeros(3, dtype=bool)
     bank.sdir = R.arr([0.3, -0.7, 1.0])
     dl = np.array([0.8, 0.4, -0.6])
-    one = bank._direction(R.arr(dl), R.arr([0.0, 0.0, 0.0]), restart)
+    one = bank._direction(R.arr(dl), R.arr([0.0, 0.0, 0.0]), restart)[0]
     bank.sdir = R.arr([0.3, -0.7, 1.0])
-    half = bank._direction(R.arr(dl / 2), R.arr([0.0] * 3), restart)
+    half = bank._direction(R.arr(dl / 2), R.arr([0.0] * 3), restart)[0]
     bank.sdir = half
-    two = bank._direction(R.arr(dl), R.arr(dl / 2), restart)
+    two = bank._direction(R.arr(dl), R.arr(dl / 2), restart)[0]
     assert np.allclose(one, two, rtol=0, atol=1e-15)
     for s0, d in ((0.3, 0.8), (-0.7, 0.4), (1.0, -0.6)):
         s, n = s0, 20000
@@ -107,17 +122,62 @@ def test_direction_update_is_exact():
             k4 = f(s + h * k3)
             s += h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
         bank.sdir = R.arr([s0] * 3)
-        exact = bank._direction(R.arr([d] * 3), R.arr([0.0] * 3), restart)[0]
+        exact = bank._direction(R.arr([d] * 3), R.arr([0.0] * 3), restart)[0][0]
         assert abs(exact - s) < 1e-12
     bank.sdir = R.arr([0.42] * 3)
-    held = bank._direction(R.arr([5.0] * 3), R.arr([5.0] * 3), restart)
+    held = bank._direction(R.arr([5.0] * 3), R.arr([5.0] * 3), restart)[0]
     assert np.all(held == 0.42)
     bank.sdir = R.arr([1.0] * 3)
-    cross = bank._direction(R.arr([1.5 * np.log(2.0) + 1e-9] * 3), R.arr([0.0] * 3), restart)
+    cross = bank._direction(R.arr([1.5 * np.log(2.0) + 1e-9] * 3), R.arr([0.0] * 3),
+                            restart)[0]
     assert np.all(cross > 0.0)   # moving in: stays 1
     bank.sdir = R.arr([1.0] * 3)
-    back = bank._direction(R.arr([0.0] * 3), R.arr([1.5 * np.log(2.0) * 1.001] * 3), restart)
+    back = bank._direction(R.arr([0.0] * 3), R.arr([1.5 * np.log(2.0) * 1.001] * 3),
+                           restart)[0]
     assert np.all(back < 0.0)    # turned over within delta ln 2
+
+
+def _direction_run(bank: FilterBank, depth: np.ndarray, u_delta: float):
+    """The direction state and its carried sensitivity over a depth record, delta = nominal
+    e^u_delta (bank._direction sample by sample, no filter)."""
+    R = F64
+    bank.delta = bank.scaled.nominal[9] * R.exp(R.arr([u_delta]))
+    bank.sdir, bank.sdir_du = R.arr([0.0]), R.arr([0.0])
+    bank.turned = np.zeros(1, dtype=bool)
+    out = []
+    for k in range(1, len(depth)):
+        s, q, turned = bank._direction(R.arr(depth[k:k + 1]), R.arr(depth[k - 1:k]),
+                                       np.zeros(1, dtype=bool))
+        bank.sdir, bank.sdir_du, bank.turned = s, q, turned
+        out.append((float(s[0]), float(q[0]), bool(turned[0])))
+    return np.array(out)
+
+
+def test_turnover_length_sensitivity_against_finite_differences():
+    """ds/du_delta carried from sample to sample (JACOBIANS.md §8) equals a central finite
+    difference of the whole record's direction state in u_delta once the motion has turned
+    (25 mm in at 2 mm/s, a dwell, 12 mm back, 4 mm in again, 100 Hz): before the first
+    reversal it is held at 0 by design (the entry is no turn-over), after it the entry's share
+    has faded by e^(-25/delta)."""
+    bank = _bank(1, presliding_mm=2.0)
+    depth = np.concatenate([np.arange(0.0, 25.0, 0.02), np.full(300, 25.0),
+                            np.arange(25.0, 13.0, -0.02), np.arange(13.0, 17.0, 0.02)])
+    run = _direction_run(bank, depth, 0.0)
+    step = 1e-5
+    fd = (_direction_run(bank, depth, step)[:, 0] - _direction_run(bank, depth, -step)[:, 0]) / (
+        2 * step)
+    turned = run[:, 2] > 0.5
+    first = int(np.argmax(turned))
+    assert 1249 <= first <= 1551                       # the first sample moving out
+    assert np.all(run[:first, 1] == 0.0)
+    err = np.abs(run[turned, 1] - fd[turned])
+    assert np.max(fd[turned]) > 0.5                    # a real sensitivity, not ~0
+    # what is left is the entry's share the carried sensitivity drops by design: at the end of
+    # the entry s = 1 - e^(-l/delta), ds/du = -(l/delta) e^(-l/delta) = 4.7e-5 at 25 mm, and
+    # it only fades (times E) afterwards
+    entry = (25.0 / 2.0) * np.exp(-25.0 / 2.0)
+    assert np.max(err) <= 1.01 * entry + 1e-8, float(np.max(err))
+    assert np.all(np.diff(err) <= 1e-9)              # fading, never growing
 
 
 def test_relaxation_memory_both_directions():
@@ -165,11 +225,16 @@ def test_switches_select_the_identified_parameters():
     cfg = default_config(3)
     assert identified_names(cfg) == NAMES3
     assert filter_subsets(cfg)[0] == ("sigma0",) + RELAX_NAMES
+    assert filter_subsets(cfg)[1] == ("f1", "sigma1", "delta")
+    nodir = replace(cfg, direction_memory=False)
+    assert "delta" not in identified_names(nodir) and filter_subsets(nodir)[1] == ("f1",
+                                                                                   "sigma1")
     one = replace(cfg, relax_branches=1)
-    assert identified_names(one)[-1] == "g_fast" and filter_subsets(one)[0] == ("sigma0",
-                                                                                 "g_fast")
+    assert identified_names(one)[-2:] == ("g_fast", "delta")
+    assert filter_subsets(one)[0] == ("sigma0", "g_fast")
     off = replace(cfg, relaxation=False)
-    assert identified_names(off) == MODEL_PARAMS[2] and filter_subsets(off)[0] == ("sigma0",)
+    assert identified_names(off) == MODEL_PARAMS[2] + ("delta",)
+    assert filter_subsets(off)[0] == ("sigma0",)
     for bad in (dict(relax_branches=3), dict(presliding_mm=0.0), dict(tau_fast_s=-1.0),
                 dict(tau_slow_s=4000.0), dict(presliding_mm=float("nan"))):
         with pytest.raises(ValueError):

@@ -49,7 +49,7 @@ def render() -> str:
         "#include <stdint.h>",
         f"#define NTE_SCENARIO_LEN {len(rows)}",
         "typedef struct nte_scenario_row_t {",
-        "    int64_t t_us;",
+        "    uint32_t t_us; /* a 32-bit time keeps the row at 16 B (24 with int64 padding) */",
         "    uint32_t depth_bits;",
         "    uint32_t velocity_bits;",
         "    uint32_t force_bits;",
@@ -59,6 +59,8 @@ def render() -> str:
     for row in rows:
         t, depth, vel, force, _truth = (float(c) for c in row.split(","))
         t_us = math.floor(t * 1e6 + 0.5)
+        if not 0 <= t_us < 2 ** 32:
+            raise SystemExit(f"t_us {t_us} does not fit the row's 32 bits")
         lines.append(f"    {{{t_us}, 0x{f32_bits(depth):08X}U, 0x{f32_bits(vel):08X}U, "
                      f"0x{f32_bits(force):08X}U}},")
     lines += ["};", "#endif /* NTE_SCENARIO_H */", ""]

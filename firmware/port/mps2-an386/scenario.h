@@ -6,7 +6,7 @@
 #include <stdint.h>
 #define NTE_SCENARIO_LEN 421
 typedef struct nte_scenario_row_t {
-    int64_t t_us;
+    uint32_t t_us; /* a 32-bit time keeps the row at 16 B (24 with int64 padding) */
     uint32_t depth_bits;
     uint32_t velocity_bits;
     uint32_t force_bits;

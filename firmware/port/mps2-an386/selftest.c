@@ -113,7 +113,7 @@ static int one_run(uint32_t run, const run_spec_t* spec, nte_selftest_emit_t emi
         nte_sample_t s;
         nte_output_t out;
         nte_param_estimate_t par[NTE_IDENTIFIED_MAX];
-        s.t_us = nte_scenario[k].t_us;
+        s.t_us = (int64_t)nte_scenario[k].t_us;
         s.depth_mm = real_of_bits(nte_scenario[k].depth_bits);
         s.velocity_mm_s = real_of_bits(nte_scenario[k].velocity_bits);
         s.force_n = real_of_bits(nte_scenario[k].force_bits);
