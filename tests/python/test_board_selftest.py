@@ -521,7 +521,7 @@ MEASURED_WORST_HI = {
     "Model II robust, normal sample": 17_860,
     "Model II robust, refinement": 6_592_911,
     # Model III (direction memory with its identified turn-over length, two relaxation
-    # branches): 1.52 x Model II's bank, all (1.33 before filter 2 carried delta: 4 x 4)
+    # branches): 1.503 x Model II's bank, all (1.33 before filter 2 carried delta: 4 x 4)
     "Model III bank, all": 23_794,
 }
 CYCLE_TOLERANCE = 1.05
