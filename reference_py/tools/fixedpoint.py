@@ -128,9 +128,10 @@ class RecordingBank(FilterBank):
                 p[f"P{i + 1} predicted [{labels[a]},{labels[b]}]"] = P_pred[a][b]
         return x, P_pred, z_ss
 
-    def _measure(self, names: tuple[str, ...], d: DepthTerms, zp: Array, s: Array, v: Array,
-                 y: Array, active: Array) -> tuple[Array, list[Array], Array, Array, Array]:
-        res = super()._measure(names, d, zp, s, v, y, active)
+    def _measure(self, names: tuple[str, ...], d: DepthTerms, zp: Array, s: Array,
+                 s_du: Array | None, v: Array, y: Array, active: Array
+                 ) -> tuple[Array, list[Array], Array, Array, Array]:
+        res = super()._measure(names, d, zp, s, s_du, v, y, active)
         o = output(self.th, d, zp, s)
         p = self._pending
         p["z prior"] = zp
