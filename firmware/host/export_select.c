@@ -55,6 +55,16 @@ int nte_export_choose(const nte_config_t* run_cfg, const nte_trial_t* tr,
                       const double fixed[7], int model, double surface_mm, double tare_n,
                       nte_t* scratch, nte_export_choice_t* out)
 {
+    /* Model III's turn-over length as identified by the end of the record (it is learned from
+     * the turn-overs only): every replay and the fit run with it, and it is exported */
+    nte_config_t replay_cfg = *run_cfg;
+    const nte_export_snapshot_t* last = &snaps[NTE_EXPORT_CANDIDATES - 1U];
+    for (size_t j = 0U; (j < last->np) && (j < NTE_IDENTIFIED_MAX); j++) {
+        if (last->pe[j].id == nte_param_delta) {
+            replay_cfg.presliding_mm = last->pe[j].value;
+        }
+    }
+    out->presliding_mm = (double)replay_cfg.presliding_mm;
     out->candidate = NTE_EXPORT_CANDIDATES - 1U;
     out->rmse_n = (double)NAN;
     out->final_rmse_n = (double)NAN;
@@ -62,7 +72,7 @@ int nte_export_choose(const nte_config_t* run_cfg, const nte_trial_t* tr,
     out->fit_rmse_n = (double)NAN;
     out->fit_passes = 0U;
     keep_snapshot(&snaps[out->candidate], fixed, model, out);
-    if (run_cfg->contact.enabled && !isfinite(surface_mm)) {
+    if (replay_cfg.contact.enabled && !isfinite(surface_mm)) {
         return 0; /* no surface: a reader could not predict from this file either */
     }
     double* res = malloc((tr->n > 0U ? tr->n : 1U) * sizeof(double));
@@ -80,7 +90,7 @@ int nte_export_choose(const nte_config_t* run_cfg, const nte_trial_t* tr,
         for (size_t j = 0U; j < row_len; j++) {
             row[c][j] = (j < 7U) ? v.params[j] : v.g[j - 7U];
         }
-        if (nte_export_replay(run_cfg, tr, row[c], row_len, surface_mm, tare_n, scratch, res,
+        if (nte_export_replay(&replay_cfg, tr, row[c], row_len, surface_mm, tare_n, scratch, res,
                               &rep) != 0) {
             free(res);
             return -1;
@@ -120,7 +130,7 @@ int nte_export_choose(const nte_config_t* run_cfg, const nte_trial_t* tr,
         fitted[j] = true;
     }
     nte_export_fit_t fit;
-    if (nte_export_refine(run_cfg, tr, row[best], row_len, fitted, surface_mm, tare_n, scratch,
+    if (nte_export_refine(&replay_cfg, tr, row[best], row_len, fitted, surface_mm, tare_n, scratch,
                           &fit) != 0) {
         return -1;
     }

@@ -45,6 +45,8 @@ typedef struct nte_export_choice_t {
     double g_sd[2];
     double fit_rmse_n;    /**< RMSE of the fitted values' replay, N (NaN: not fitted) */
     unsigned fit_passes;  /**< the fit's replays */
+    double presliding_mm; /**< Model III's turn-over length replayed and exported, mm: the
+                               last snapshot's identified delta, else the run's */
 } nte_export_choice_t;
 
 /** Sample index of snapshot j (0-based, j < NTE_EXPORT_CANDIDATES) in a record of n samples:
@@ -62,7 +64,8 @@ void nte_export_snapshot_values(const nte_export_snapshot_t* s, const double fix
 
 /**
  * Replay every snapshot from depth alone over `tr` with the run's configuration `run_cfg`
- * turned into a reader's (export_replay.h), choose the best and fit its identified values to
+ * (Model III: its presliding_mm replaced by the last snapshot's identified delta, exported as
+ * out->presliding_mm) turned into a reader's (export_replay.h), choose the best and fit its identified values to
  * the record (export_refine.h); `out` holds the values to export.  `scratch` is an estimator
  * the replays run in.  With the front end on and no surface found nothing is replayed: the
  * last snapshot is exported as it is and rmse_n is NaN.  Returns 0, or -1 when a replay's

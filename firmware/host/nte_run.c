@@ -756,7 +756,7 @@ static int export_config(const args_t* a, const out_t* out, const nte_export_sna
     e.r_n2 = r_n2;
     e.samples = samples;
     e.direction_memory = cfg->direction_memory ? 1 : 0;
-    e.presliding_mm = a->presliding_mm;
+    e.presliding_mm = choice->presliding_mm;
     e.relaxation = cfg->relaxation ? 1 : 0;
     e.relax_branches = a->relax_branches;
     e.tau_fast_s = a->tau_fast_s;

@@ -132,7 +132,7 @@ def export_config(run: EstimateRun, choice: "ReplayChoice") -> dict[str, object]
                    "fit_passes": choice.fit_passes}}
     if run.model == 3:
         out["model3"] = {
-            "direction_memory": cfg.direction_memory, "presliding_mm": cfg.presliding_mm,
+            "direction_memory": cfg.direction_memory, "presliding_mm": choice.presliding_mm,
             "relaxation": cfg.relaxation, "relax_branches": cfg.relax_branches,
             "tau_fast_s": cfg.tau_fast_s, "tau_slow_s": cfg.tau_slow_s,
             "strengths": choice.strengths, "strengths_sd": choice.strengths_sd}

@@ -11,6 +11,9 @@ of the exported file would (export_replay.py: the same nominal values, Model III
 known surface, the force ignored), takes the snapshot with the smallest RMSE against the
 measured force less the tare, and fits its identified values to the record by the same replay
 (export_refine.py).  The replay's figures go into the file's ``replay`` block and onto stdout.
+Model III's turn-over length is exported as the bank identified it by the end of the record
+(it learns δ from the turn-overs only, so earlier snapshots still hold the configured start):
+every replay and the fit run with it, and it is the file's ``presliding_mm``.
 
 The C twin is firmware/host/export_select.c: the same candidates, the same replays (C ≡
 reference at 0 ULP), the same double sums in sample order, the first smallest RMSE wins, the
@@ -48,6 +51,7 @@ class ReplayChoice:
     strengths_sd: dict[str, float]
     fit_rmse_n: float = math.nan  # RMSE of the fitted values' replay (export_refine.py), N
     fit_passes: int = 0           # the fit's replays
+    presliding_mm: float = math.nan  # Model III's turn-over length replayed and exported, mm
 
 
 def candidate_samples(n: int) -> list[int]:
@@ -75,6 +79,9 @@ def choose_export(run, cfg: EstimatorConfig, preset: Preset, trial: Trial) -> Re
     """Replay every candidate snapshot of ``run`` from depth alone, keep the best and fit it
     to the record (export_refine.py)."""
     n = len(run.t_s)
+    if "delta" in run.names:
+        # the turn-over length identified by the end of the record (module docstring)
+        cfg = replace(cfg, presliding_mm=float(run.params[n - 1][run.names.index("delta")]))
     samples = candidate_samples(n)
     snaps = [snapshot(run.names, run.params[k], run.params_sd[k], preset, cfg) for k in samples]
     surface, tare = math.nan, 0.0
@@ -82,7 +89,8 @@ def choose_export(run, cfg: EstimatorConfig, preset: Preset, trial: Trial) -> Re
         surface, tare = float(run.contact[0][-1]), float(run.contact[1][-1])
     if run.contact is not None and not math.isfinite(surface):
         # no surface found: a reader could not predict from this file either (it needs one)
-        return _choice(len(samples) - 1, samples, snaps, run, math.nan, math.nan, math.nan)
+        return _choice(len(samples) - 1, samples, snaps, run, math.nan, math.nan, math.nan,
+                       cfg)
     # every row in the order a reader builds its nominal values: the seven, then the strengths
     rows = [_row(p, st) for p, _, st, _ in snaps]
     rep = replay(cfg, run.precision, trial, rows, surface, tare)
@@ -93,7 +101,7 @@ def choose_export(run, cfg: EstimatorConfig, preset: Preset, trial: Trial) -> Re
     for c in range(1, len(rows)):
         if rmse[c] < rmse[best]:
             best = c
-    ch = _choice(best, samples, snaps, run, rmse[best], rmse[-1], rep.peak_n)
+    ch = _choice(best, samples, snaps, run, rmse[best], rmse[-1], rep.peak_n, cfg)
     if not counted:
         return ch
     fit = refine(cfg, run.precision, trial, rows[best], run.names, surface, tare)
@@ -112,10 +120,11 @@ def _row(params: list[float], strengths: dict[str, float]) -> list[float]:
 
 
 def _choice(c: int, samples: list[int], snaps: list, run, rmse: float, final_rmse: float,
-            peak: float) -> ReplayChoice:
+            peak: float, cfg: EstimatorConfig) -> ReplayChoice:
     params, params_sd, strengths, strengths_sd = snaps[c]
     return ReplayChoice(samples[c], float(run.t_s[samples[c]]), rmse, final_rmse, peak, params,
-                        params_sd, strengths, strengths_sd)
+                        params_sd, strengths, strengths_sd,
+                        presliding_mm=float(cfg.presliding_mm))
 
 
 def exported_rmse(ch: ReplayChoice) -> float:

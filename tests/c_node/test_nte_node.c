@@ -1126,9 +1126,10 @@ static void test_model3_params_contact(void** state)
                           q(f, 0.0001f)};
         assert_int_equal(nte_step(&ref, &s, &ro[i]), nte_err_ok);
         const size_t n = nte_get_params(&ref, pe, NTE_IDENTIFIED_MAX);
-        assert_int_equal(n, 7u); /* Model II's five, g_fast, g_slow */
+        assert_int_equal(n, 8u); /* Model II's five, g_fast, g_slow, delta */
         assert_int_equal(pe[5].id, nte_param_g_fast);
         assert_int_equal(pe[6].id, nte_param_g_slow);
+        assert_int_equal(pe[7].id, nte_param_delta);
         g_val[i][0] = (float)pe[5].value;
         g_val[i][1] = (float)pe[6].value;
     }
