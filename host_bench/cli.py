@@ -285,7 +285,7 @@ def plot(files: Sequence[Path], db: NteDatabase, mirror: NodeMirror,
     fig.tight_layout()
     fig.savefig(str(files[0]), dpi=110, format="png")
     plt.close(fig)
-    n_par = 9 if any(jj >= 7 for _, jj, _, _ in par) else 7    # Model III: g_fast, g_slow
+    n_par = 10 if any(jj >= 7 for _, jj, _, _ in par) else 7   # Model III: g's and delta
     fig, axs = plt.subplots((n_par + 1) // 2, 2, figsize=(10, 9 if n_par == 7 else 11),
                             sharex=True)
     for j, ax in enumerate(axs.flat[:n_par]):

@@ -37,8 +37,10 @@ TICK_WRAP = 1 << 16  #: SensorTime wraps after this many ticks (6.5536 s)
 STD_LOG10_ZERO = -32.768  #: Params *StdLog10 value that means "std = 0 (fixed)"
 STD_LOG10_MIN = -32.767
 STD_LOG10_MAX = 32.767
-#: Params multiplexer indices 0..6 (every model) and 7..8 (Model III's relaxation strengths)
-PARAM_NAMES = ("sigma0", "sigma1", "sigma2", "f1", "f2", "alpha", "beta", "g_fast", "g_slow")
+#: Params multiplexer indices 0..6 (every model) and 7..9 (Model III's relaxation strengths and
+#: turn-over length)
+PARAM_NAMES = ("sigma0", "sigma1", "sigma2", "f1", "f2", "alpha", "beta", "g_fast", "g_slow",
+               "delta")
 #: Params signal names by parameter index
 PARAM_SIGNALS = (
     ("Sigma0", "Sigma0StdLog10"),
@@ -50,6 +52,7 @@ PARAM_SIGNALS = (
     ("Beta", "BetaStdLog10"),
     ("GFast", "GFastStdLog10"),
     ("GSlow", "GSlowStdLog10"),
+    ("Delta", "DeltaStdLog10"),
 )
 
 

@@ -13,7 +13,7 @@ Predict-only (nte_node.h PREDICT-ONLY) as the node: Command.ForceSource 2/1, for
 flagged SensorFault, and a lost force sensor bridged by steps on the depth stream; Adapting 0
 while the model alone publishes.
 Model III (``model=3`` or a Command with ModelSel 3) runs with the contact front end on, as the
-node does: Params cycle 0..8 (7 g_fast, 8 g_slow), InTissue is the front end's contact state,
+node does: Params cycle 0..9 (7 g_fast, 8 g_slow, 9 delta), InTissue is the front end's contact state,
 and the Contact frames (``contacts``) follow the node's rule (nte_node.h, MODEL III).
 """
 from __future__ import annotations
@@ -31,7 +31,7 @@ from reference_py.tools.estimate import make_config
 from reference_py.fmath import real_for
 from reference_py.params import ALL_NAMES, PRESETS, RELAX_NOMINAL
 
-from .dbc import FRAME_LENGTH, NteDatabase
+from .dbc import FRAME_LENGTH, PARAM_SIGNALS, NteDatabase
 
 F32 = np.float32
 TICK_US = 100
@@ -101,8 +101,8 @@ class ContactOut:
 
 
 def param_count(model: int) -> int:
-    """Params multiplexer indices cycled by a model: 0..6, Model III 0..8."""
-    return 9 if model == 3 else 7
+    """Params multiplexer indices cycled by a model: 0..6, Model III 0..9."""
+    return 10 if model == 3 else 7
 
 
 @dataclass
@@ -176,19 +176,19 @@ class NodeMirror:
         self._fixed_params()
 
     def _fixed_params(self) -> None:
+        # Model III's turn-over length starts at presliding_mm (nte_node.c alike)
         vals = [F32(v) for v in self.nominal] + [F32(RELAX_NOMINAL[n]) for n in ("g_fast",
-                                                                                  "g_slow")]
+                                                                                  "g_slow")] + [
+            F32(self.cfg.presliding_mm)]
         if self.model == 1:
             vals[6] = F32(self.cfg.beta0)
         self.fixed_vals = vals
 
     def _all_params(self) -> tuple[list[np.float32], list[np.float32]]:
         vals = list(self.fixed_vals)
-        sds = [F32(0.0)] * 9
+        sds = [F32(0.0)] * len(vals)
         for k, name in enumerate(self.identified):
             j = ALL_NAMES.index(name)
-            if j >= len(vals):
-                continue   # Model III's delta: not in the Params frame yet (nte_node.c alike)
             vals[j] = F32(self.par_vals[k]) if self.stepped else F32(0.0)
             sds[j] = F32(self.par_sd[k]) if self.stepped else F32(0.0)
         return vals, sds
@@ -580,9 +580,7 @@ def node_outputs(db: NteDatabase, messages: Iterable) -> tuple[list[EstimateOut]
                                    int(raw["Saturated"]), int(raw["Fault"]), int(raw["Stale"])))
         else:
             j = int(raw["ParamIndex"])
-            vname = ("Sigma0", "Sigma1", "Sigma2", "F1", "F2", "Alpha", "Beta", "GFast",
-                     "GSlow")[j]
-            sname = vname + "StdLog10"
+            vname, sname = PARAM_SIGNALS[j]
             par.append(ParamOut(j, F32(raw[vname]), int(raw[sname])))
     return est, par, bad[0]
 

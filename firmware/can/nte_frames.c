@@ -395,7 +395,8 @@ static void nte_frames_param_set(struct nte_can_params_t* m, uint8_t index, floa
     case NTE_FRAMES_PARAM_ALPHA: m->alpha = value; m->alpha_std_log10 = std_raw; break;
     case NTE_FRAMES_PARAM_BETA: m->beta = value; m->beta_std_log10 = std_raw; break;
     case NTE_FRAMES_PARAM_G_FAST: m->g_fast = value; m->g_fast_std_log10 = std_raw; break;
-    default: m->g_slow = value; m->g_slow_std_log10 = std_raw; break;
+    case NTE_FRAMES_PARAM_G_SLOW: m->g_slow = value; m->g_slow_std_log10 = std_raw; break;
+    default: m->delta = value; m->delta_std_log10 = std_raw; break;
     }
 }
 
@@ -411,7 +412,8 @@ static void nte_frames_param_get(const struct nte_can_params_t* m, uint8_t index
     case NTE_FRAMES_PARAM_ALPHA: *value = m->alpha; *std_raw = m->alpha_std_log10; break;
     case NTE_FRAMES_PARAM_BETA: *value = m->beta; *std_raw = m->beta_std_log10; break;
     case NTE_FRAMES_PARAM_G_FAST: *value = m->g_fast; *std_raw = m->g_fast_std_log10; break;
-    default: *value = m->g_slow; *std_raw = m->g_slow_std_log10; break;
+    case NTE_FRAMES_PARAM_G_SLOW: *value = m->g_slow; *std_raw = m->g_slow_std_log10; break;
+    default: *value = m->delta; *std_raw = m->delta_std_log10; break;
     }
 }
 

@@ -208,12 +208,13 @@ static void nte_node_all_params(const nte_node_t* self, float value[NTE_FRAMES_P
 {
     nte_param_estimate_t pe[NTE_IDENTIFIED_MAX];
     const nte_config_t* c = &self->cfg.estimator[self->model - 1];
-    /* the frame's indices are nte_param_id_t 0..NTE_FRAMES_PARAM_COUNT - 1; Model III's
-     * identified turn-over length (nte_param_delta) is not in the DBC yet */
+    /* NTE_FRAMES_PARAM_COUNT == NTE_PARAM_COUNT: the frame's indices are nte_param_id_t */
     for (uint32_t j = 0u; j < (uint32_t)NTE_FRAMES_PARAM_COUNT; j++) {
         value[j] = (float)c->nominal[j];
         sd[j] = 0.0f;
     }
+    /* Model III's turn-over length starts at presliding_mm (nominal[delta] is not read) */
+    value[nte_param_delta] = (float)c->presliding_mm;
     if (self->model == 1) {
         value[nte_param_beta] = (float)c->beta0;
     }

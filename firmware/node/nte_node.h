@@ -7,7 +7,7 @@
  *   (firmware/include/nte.h) per accepted Force frame, with depth and velocity interpolated
  *   linearly to the force sample's own timestamp.  After every step it sends one Estimate frame
  *   and `params_per_step` Params frames (rotating through the multiplexer indices: 0..6 in
- *   Models I and II, 0..8 in Model III, whose 7 and 8 are g_fast and g_slow); every
+ *   Models I and II, 0..9 in Model III, whose 7, 8 and 9 are g_fast, g_slow and delta); every
  *   `heartbeat_period_us` of the port's clock it sends a Heartbeat.  In Model III it also sends
  *   a Contact frame (see MODEL III).  It counts every dropped or rejected frame by cause
  *   (nte_node_event_t).

@@ -100,6 +100,7 @@ SIG(params, sigma2) SIG(params, sigma2_std_log10) SIG(params, f1) SIG(params, f1
 SIG(params, f2) SIG(params, f2_std_log10) SIG(params, alpha) SIG(params, alpha_std_log10)
 SIG(params, beta) SIG(params, beta_std_log10)
 SIG(params, g_fast) SIG(params, g_fast_std_log10) SIG(params, g_slow) SIG(params, g_slow_std_log10)
+SIG(params, delta) SIG(params, delta_std_log10)
 static const signal_t params_signals[] = {
     ENTRY(params, crc, "Crc"), ENTRY(params, counter, "Counter"),
     ENTRY(params, param_index, "ParamIndex"),
@@ -111,7 +112,8 @@ static const signal_t params_signals[] = {
     ENTRY(params, alpha, "Alpha"), ENTRY(params, alpha_std_log10, "AlphaStdLog10"),
     ENTRY(params, beta, "Beta"), ENTRY(params, beta_std_log10, "BetaStdLog10"),
     ENTRY(params, g_fast, "GFast"), ENTRY(params, g_fast_std_log10, "GFastStdLog10"),
-    ENTRY(params, g_slow, "GSlow"), ENTRY(params, g_slow_std_log10, "GSlowStdLog10")};
+    ENTRY(params, g_slow, "GSlow"), ENTRY(params, g_slow_std_log10, "GSlowStdLog10"),
+    ENTRY(params, delta, "Delta"), ENTRY(params, delta_std_log10, "DeltaStdLog10")};
 
 MSG(heartbeat)
 SIG(heartbeat, crc) SIG(heartbeat, counter) SIG(heartbeat, node_state)

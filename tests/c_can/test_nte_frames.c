@@ -356,8 +356,9 @@ static void test_estimate_clamp_and_flags(void** state)
 static void test_params(void** state)
 {
     /* Model II nominal values (reference_py/MODEL.md §3) and a spread of standard deviations */
-    static const float values[9] = {7.9e-3f, 2.46f, 4.14e-3f, 5.59e-2f, -2.11e-2f, 5.25e-2f,
-                                    2.55e-2f, 0.15f, 0.25f}; /* + Model III's g_fast, g_slow */
+    static const float values[10] = {7.9e-3f, 2.46f, 4.14e-3f, 5.59e-2f, -2.11e-2f, 5.25e-2f,
+                                     2.55e-2f, 0.15f, 0.25f, 2.5f}; /* + Model III's g_fast,
+                                                                        g_slow, delta */
     static const float stds[] = {0.0f, 1e-30f, 3.3e-7f, 1e-4f, 0.0123f, 1.0f, 517.0f, 1e30f};
     link_t l;
     unsigned i;
@@ -365,7 +366,7 @@ static void test_params(void** state)
     nte_frames_param_t out;
     (void)state;
     link_init(&l, nte_frames_kind_params);
-    for (i = 0; i < 9u; ++i) {
+    for (i = 0; i < 10u; ++i) {
         for (j = 0; j < sizeof stds / sizeof stds[0]; ++j) {
             nte_frames_param_t in = {(uint8_t)i, values[i], stds[j]};
             assert_int_equal(nte_frames_encode_param(&in, &l.tx, l.frame), nte_frames_ok);
@@ -383,7 +384,7 @@ static void test_params(void** state)
         }
     }
     {
-        nte_frames_param_t bad_index = {9u, 1.0f, 1.0f};
+        nte_frames_param_t bad_index = {10u, 1.0f, 1.0f};
         nte_frames_param_t neg_std = {0u, 1.0f, -1e-3f};
         nte_frames_param_t nan_value = {0u, NAN, 1.0f};
         nte_frames_param_t inf_std = {0u, 1.0f, INFINITY};

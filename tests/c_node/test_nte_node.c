@@ -1026,7 +1026,7 @@ static void test_heartbeat_uptime_after_long_runs(void** state)
 }
 
 /* ---------------------------------------------------------------------------------------- */
-/* Model III: selected by Command, Params 0..8 with g_fast and g_slow, the Contact frame.      */
+/* Model III: selected by Command, Params 0..9 with g_fast, g_slow, delta; the Contact frame.  */
 
 #define M3_SURFACE_MM 1.0f
 #define M3_TARE_N 0.05f
@@ -1074,8 +1074,8 @@ static bool m3_same_float(float a, float b)
 
 /* ModelSel 3 switches a Model II node to Model III out of tissue; every Estimate then equals a
  * directly stepped Model III estimator (contact front end on: the depth is the stage
- * position, InTissue its contact state); Params cycle 0..8, 7 and 8 carrying that estimator's
- * g_fast and g_slow bit for bit; a Contact frame follows exactly the steps the documented rule
+ * position, InTissue its contact state); Params cycle 0..9, 7 to 9 carrying that estimator's
+ * g_fast, g_slow and delta bit for bit; a Contact frame follows exactly the steps the documented rule
  * names (change of state or surface, else 100 ms of sensor time) with that estimator's
  * contact state, surface and tare; the heartbeat says Model III (2).  Back to Model I: Params
  * 0..6 again and no Contact frame. */
@@ -1085,7 +1085,7 @@ static void test_model3_params_contact(void** state)
     bench_t b;
     static nte_t ref;
     static nte_output_t ro[M3_N];
-    static float g_val[M3_N][2];
+    static float g_val[M3_N][3]; /* g_fast, g_slow, delta of the reference at each step */
     (void)state;
     nte_node_config_default(&cfg, 2);
     assert_true(cfg.estimator[2].contact.enabled);
@@ -1132,6 +1132,7 @@ static void test_model3_params_contact(void** state)
         assert_int_equal(pe[7].id, nte_param_delta);
         g_val[i][0] = (float)pe[5].value;
         g_val[i][1] = (float)pe[6].value;
+        g_val[i][2] = (float)pe[7].value;
     }
     /* the scenario exercises the front end: contact found near the surface, tare learned */
     uint32_t first_tissue = M3_N;
@@ -1187,7 +1188,7 @@ static void test_model3_params_contact(void** state)
             assert_int_equal(nte_frames_decode_param(&rxp, fr->data, 8u, &p, NULL, NULL),
                              nte_frames_ok);
             if (prev_index >= 0) {
-                assert_int_equal(p.index, (uint32_t)(prev_index + 1) % 9u);
+                assert_int_equal(p.index, (uint32_t)(prev_index + 1) % 10u);
             }
             prev_index = (int32_t)p.index;
             seen[p.index]++;
@@ -1197,7 +1198,9 @@ static void test_model3_params_contact(void** state)
             if (p.index >= NTE_FRAMES_PARAM_G_FAST) {
                 const float g = g_val[step][p.index - NTE_FRAMES_PARAM_G_FAST];
                 assert_true(m3_same_float(p.value, g));
-                assert_true((p.value > 0.0f) && (p.value < 1.0f));
+                /* the strengths are fractions; delta is a length in mm */
+                assert_true((p.value > 0.0f) &&
+                            ((p.index == NTE_FRAMES_PARAM_DELTA) || (p.value < 1.0f)));
             }
         } else if (fr->id == BASE + NTE_FRAMES_OFFSET_CONTACT) {
             nte_frames_contact_t c;
@@ -1223,8 +1226,8 @@ static void test_model3_params_contact(void** state)
         }
     }
     assert_int_equal(step + 1, (int32_t)M3_N);
-    for (uint32_t j = 0u; j < 9u; j++) {
-        assert_true(seen[j] >= M3_N / 9u);
+    for (uint32_t j = 0u; j < 10u; j++) {
+        assert_true(seen[j] >= M3_N / 10u);
     }
     /* the rule, independently: the first step, a change of state or surface, else 1000 ticks */
     {

@@ -395,7 +395,7 @@ def test_check_refuses_a_directory_without_a_record(tmp_path, capsys):
 def test_check_model3_against_the_node(tmp_path, capsys):
     """nte-bench check --model 3 (the host half of a Model III replay): the phantom's first 6 s
     through nte-node --replay --model 3 (stage position in the Depth frames, the raw force):
-    Estimate, Params (0..8) and Contact frames all equal the reference -> exit 0 with 0
+    Estimate, Params (0..9) and Contact frames all equal the reference -> exit 0 with 0
     mismatches; the same record checked as Model II disagrees -> exit 1."""
     import json
     from host_bench.cli import scenario_frames, write_candump
@@ -422,6 +422,6 @@ def test_check_model3_against_the_node(tmp_path, capsys):
     assert s["estimate_mismatches"] == s["param_value_mismatches"] == 0
     assert s["contact_node"] == s["contact_reference"] > 0 and s["contact_mismatches"] == 0
     assert set(s["final_parameters"]) == {"sigma0", "sigma1", "sigma2", "f1", "f2", "alpha",
-                                          "beta", "g_fast", "g_slow"}
+                                          "beta", "g_fast", "g_slow", "delta"}
     assert main(["check", str(d), "--model", "2", "--no-plot"]) == 1
     capsys.readouterr()

@@ -282,7 +282,7 @@ def replay_node_args(tmp_path: Path, frames: list, tag: str, args: list[str]) ->
 
 def test_replay_model3_phantom_equals_mirror(tmp_path: Path, phantom: tuple[Path, dict]) -> None:
     """nte-node --replay --model 3 on the phantom (stage position in the Depth frames, raw force
-    with its tare): every Estimate, Params (cycling 0..8, 7-8 g_fast/g_slow) and Contact frame
+    with its tare): every Estimate, Params (cycling 0..9, 7-9 g_fast/g_slow/delta) and Contact frame
     equals the mirror's (reference_py FilterBank, Model III, contact front end) bit for bit; the
     surface published is the truth's within 0.2 mm; the heartbeat says Model III."""
     csv, truth = phantom
@@ -298,11 +298,15 @@ def test_replay_model3_phantom_equals_mirror(tmp_path: Path, phantom: tuple[Path
     assert res["contact_node"] == res["contact_reference"] == st["tx"]["contact"] > 0
     assert res["contact_mismatches"] == 0
     assert st["model"] == 3 and st["steps"] == len(est)
-    # Params: 0..8 in turn; g_fast and g_slow identified (std given), fractions in (0, 1)
-    assert [p.index for p in par[:18]] == list(range(9)) * 2
+    # Params: 0..9 in turn; g_fast and g_slow identified (std given), fractions in (0, 1)
+    assert [p.index for p in par[:20]] == list(range(10)) * 2
     g = [p for p in par if p.index in (7, 8)]
-    assert len(g) >= 2 * (len(par) // 9)
+    assert len(g) >= 2 * (len(par) // 10)
     assert all(0.0 < float(p.value) < 1.0 and p.std_raw != -32768 for p in g[9:])
+    # delta identified (std given), a turn-over length in mm within its clip (2.5 e^+-3.9)
+    dl = [p for p in par if p.index == 9]
+    assert len(dl) >= len(par) // 10
+    assert all(0.05 < float(p.value) < 124.0 and p.std_raw != -32768 for p in dl)
     # the front end: air first (tare learned), then tissue; the surface near the truth's
     assert contacts[0].contact_state == 0 and contacts[0].surface_valid == 0
     touched = [c for c in contacts if c.contact_state == 1]

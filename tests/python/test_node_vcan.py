@@ -22,7 +22,7 @@ compares with the reference after, on the host.
   SensorFault stretch and a lost force sensor: the node equals the mirror bit for bit.
 - model3: the first 5.5 s of phantom lab seed 101 (stage position, raw force with its tare) to a
   Model II node, a Command selecting Model III at 0.5 s (in the air): applied; the node's
-  Estimate, Params (0..8) and Contact frames equal the mirror's bit for bit.
+  Estimate, Params (0..9) and Contact frames equal the mirror's bit for bit.
 """
 from __future__ import annotations
 
@@ -196,7 +196,7 @@ def test_model3_selected_by_command_equals_mirror(results: dict) -> None:
     assert st["commands_applied"] == 1 and st["model"] == 3 and r["mirror_model"] == 3
     assert r["contact_node"] == r["contact_reference"] == st["tx"]["contact"] > 0
     assert r["contact_mismatches"] == 0
-    assert r["param_indices"] == list(range(9))
+    assert r["param_indices"] == list(range(10))
     # the front end in the air, then in the tissue (the surface 6.48 mm is reached at 4.3 s)
     assert r["contact_states"][0] == 0 and r["contact_states"][-1] == 1
     assert len(r["surfaces_mm"]) == 1 and abs(r["surfaces_mm"][0] - 6.475) < 0.2

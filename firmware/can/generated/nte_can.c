@@ -977,6 +977,7 @@ int nte_can_params_pack(
 {
     uint16_t alpha_std_log10;
     uint16_t beta_std_log10;
+    uint16_t delta_std_log10;
     uint16_t f1_std_log10;
     uint16_t f2_std_log10;
     uint16_t g_fast_std_log10;
@@ -986,6 +987,7 @@ int nte_can_params_pack(
     uint16_t sigma2_std_log10;
     uint32_t alpha;
     uint32_t beta;
+    uint32_t delta;
     uint32_t f1;
     uint32_t f2;
     uint32_t g_fast;
@@ -1105,6 +1107,17 @@ int nte_can_params_pack(
         dst_p[7] |= pack_right_shift_u16(g_slow_std_log10, 8u, 0xffu);
         break;
 
+    case 9:
+        memcpy(&delta, &src_p->delta, sizeof(delta));
+        dst_p[2] |= pack_left_shift_u32(delta, 0u, 0xffu);
+        dst_p[3] |= pack_right_shift_u32(delta, 8u, 0xffu);
+        dst_p[4] |= pack_right_shift_u32(delta, 16u, 0xffu);
+        dst_p[5] |= pack_right_shift_u32(delta, 24u, 0xffu);
+        delta_std_log10 = (uint16_t)src_p->delta_std_log10;
+        dst_p[6] |= pack_left_shift_u16(delta_std_log10, 0u, 0xffu);
+        dst_p[7] |= pack_right_shift_u16(delta_std_log10, 8u, 0xffu);
+        break;
+
     default:
         break;
     }
@@ -1119,6 +1132,7 @@ int nte_can_params_unpack(
 {
     uint16_t alpha_std_log10;
     uint16_t beta_std_log10;
+    uint16_t delta_std_log10;
     uint16_t f1_std_log10;
     uint16_t f2_std_log10;
     uint16_t g_fast_std_log10;
@@ -1128,6 +1142,7 @@ int nte_can_params_unpack(
     uint16_t sigma2_std_log10;
     uint32_t alpha;
     uint32_t beta;
+    uint32_t delta;
     uint32_t f1;
     uint32_t f2;
     uint32_t g_fast;
@@ -1245,6 +1260,17 @@ int nte_can_params_unpack(
         dst_p->g_slow_std_log10 = (int16_t)g_slow_std_log10;
         break;
 
+    case 9:
+        delta = unpack_right_shift_u32(src_p[2], 0u, 0xffu);
+        delta |= unpack_left_shift_u32(src_p[3], 8u, 0xffu);
+        delta |= unpack_left_shift_u32(src_p[4], 16u, 0xffu);
+        delta |= unpack_left_shift_u32(src_p[5], 24u, 0xffu);
+        memcpy(&dst_p->delta, &delta, sizeof(dst_p->delta));
+        delta_std_log10 = unpack_right_shift_u16(src_p[6], 0u, 0xffu);
+        delta_std_log10 |= unpack_left_shift_u16(src_p[7], 8u, 0xffu);
+        dst_p->delta_std_log10 = (int16_t)delta_std_log10;
+        break;
+
     default:
         break;
     }
@@ -1315,12 +1341,12 @@ float nte_can_params_param_index_decode(uint8_t value)
 
 bool nte_can_params_param_index_is_in_range(uint8_t value)
 {
-    return (value <= 8u);
+    return (value <= 9u);
 }
 
 bool nte_can_params_param_index_is_in_phys_range(float value)
 {
-    return ((value >= 0.0f) && (value <= 8.0f));
+    return ((value >= 0.0f) && (value <= 9.0f));
 }
 
 float nte_can_params_sigma0_encode(float value)
@@ -1499,6 +1525,26 @@ bool nte_can_params_g_slow_is_in_range(float value)
 }
 
 bool nte_can_params_g_slow_is_in_phys_range(float value)
+{
+    return ((value >= -1e+30f) && (value <= 1e+30f));
+}
+
+float nte_can_params_delta_encode(float value)
+{
+    return (float)(value);
+}
+
+float nte_can_params_delta_decode(float value)
+{
+    return ((float)value);
+}
+
+bool nte_can_params_delta_is_in_range(float value)
+{
+    return ((value >= -1e+30f) && (value <= 1e+30f));
+}
+
+bool nte_can_params_delta_is_in_phys_range(float value)
 {
     return ((value >= -1e+30f) && (value <= 1e+30f));
 }
@@ -1697,6 +1743,28 @@ bool nte_can_params_g_slow_std_log10_is_in_range(int16_t value)
 }
 
 bool nte_can_params_g_slow_std_log10_is_in_phys_range(float value)
+{
+    return ((value >= -32.768f) && (value <= 32.767f));
+}
+
+int16_t nte_can_params_delta_std_log10_encode(float value)
+{
+    return (int16_t)(roundf(value / 0.001f));
+}
+
+float nte_can_params_delta_std_log10_decode(int16_t value)
+{
+    return ((float)value * 0.001f);
+}
+
+bool nte_can_params_delta_std_log10_is_in_range(int16_t value)
+{
+    (void)value;
+
+    return (true);
+}
+
+bool nte_can_params_delta_std_log10_is_in_phys_range(float value)
 {
     return ((value >= -32.768f) && (value <= 32.767f));
 }

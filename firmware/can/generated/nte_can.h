@@ -106,6 +106,7 @@ extern "C" {
 #define NTE_CAN_PARAMS_PARAM_INDEX_BETA_CHOICE (6u)
 #define NTE_CAN_PARAMS_PARAM_INDEX_G_FAST_CHOICE (7u)
 #define NTE_CAN_PARAMS_PARAM_INDEX_G_SLOW_CHOICE (8u)
+#define NTE_CAN_PARAMS_PARAM_INDEX_DELTA_CHOICE (9u)
 
 #define NTE_CAN_HEARTBEAT_NODE_STATE_INIT_CHOICE (0u)
 #define NTE_CAN_HEARTBEAT_NODE_STATE_RUNNING_CHOICE (1u)
@@ -171,6 +172,7 @@ extern "C" {
 #define NTE_CAN_PARAMS_BETA_NAME "Beta"
 #define NTE_CAN_PARAMS_G_FAST_NAME "GFast"
 #define NTE_CAN_PARAMS_G_SLOW_NAME "GSlow"
+#define NTE_CAN_PARAMS_DELTA_NAME "Delta"
 #define NTE_CAN_PARAMS_SIGMA0_STD_LOG10_NAME "Sigma0StdLog10"
 #define NTE_CAN_PARAMS_SIGMA1_STD_LOG10_NAME "Sigma1StdLog10"
 #define NTE_CAN_PARAMS_SIGMA2_STD_LOG10_NAME "Sigma2StdLog10"
@@ -180,6 +182,7 @@ extern "C" {
 #define NTE_CAN_PARAMS_BETA_STD_LOG10_NAME "BetaStdLog10"
 #define NTE_CAN_PARAMS_G_FAST_STD_LOG10_NAME "GFastStdLog10"
 #define NTE_CAN_PARAMS_G_SLOW_STD_LOG10_NAME "GSlowStdLog10"
+#define NTE_CAN_PARAMS_DELTA_STD_LOG10_NAME "DeltaStdLog10"
 #define NTE_CAN_HEARTBEAT_CRC_NAME "Crc"
 #define NTE_CAN_HEARTBEAT_COUNTER_NAME "Counter"
 #define NTE_CAN_HEARTBEAT_NODE_STATE_NAME "NodeState"
@@ -468,7 +471,7 @@ struct nte_can_estimate_t {
 /**
  * Signals in message Params.
  *
- * Identified parameters and their standard deviations, multiplexed by ParamIndex; one index per frame, cycling 0..6 in Models I and II (every 10 ms, a full set every 70 ms) and 0..8 in Model III (a full set every 90 ms). Id offset 0x11. The value is an IEEE-754 float32 (relative resolution 6e-8 over the whole range of magnitudes, 1e-4 .. 10, found in the paper). The standard deviation is sent as log10(std) in a 16-bit integer with resolution 0.001 decade (relative step 0.23 %); the raw value -32768 (-32.768) means std = 0, i.e. the parameter is fixed (e.g. beta in Model I, alpha and f2 in Model II, g_slow in Model III with one relaxation branch).
+ * Identified parameters and their standard deviations, multiplexed by ParamIndex; one index per frame, cycling 0..6 in Models I and II (every 10 ms, a full set every 70 ms) and 0..9 in Model III (a full set every 100 ms). Id offset 0x11. The value is an IEEE-754 float32 (relative resolution 6e-8 over the whole range of magnitudes, 1e-4 .. 10, found in the paper). The standard deviation is sent as log10(std) in a 16-bit integer with resolution 0.001 decade (relative step 0.23 %); the raw value -32768 (-32.768) means std = 0, i.e. the parameter is fixed (e.g. beta in Model I, alpha and f2 in Model II, g_slow in Model III with one relaxation branch).
  *
  * All signal values are as on the CAN bus.
  */
@@ -488,9 +491,9 @@ struct nte_can_params_t {
     uint8_t counter;
 
     /**
-     * 0 sigma0, 1 sigma1, 2 sigma2, 3 f1, 4 f2, 5 alpha, 6 beta (beta0 in Model I), 7 g_fast, 8 g_slow (Model III only).
+     * 0 sigma0, 1 sigma1, 2 sigma2, 3 f1, 4 f2, 5 alpha, 6 beta (beta0 in Model I), 7 g_fast, 8 g_slow, 9 delta (Model III only).
      *
-     * Range: 0..8 (0..8 -)
+     * Range: 0..9 (0..9 -)
      * Scale: 1
      * Offset: 0
      */
@@ -564,6 +567,15 @@ struct nte_can_params_t {
     float g_slow;
 
     /**
+     * Model III: turn-over length of the direction state, mm, identified from the turn-overs (its configured start, presliding_mm, with the direction memory off: std 0).
+     *
+     * Range: -1e+30..1e+30 (-1e+30..1e+30 mm)
+     * Scale: 1
+     * Offset: 0
+     */
+    float delta;
+
+    /**
      * Range: -32768..32767 (-32.768..32.767 log10)
      * Scale: 0.001
      * Offset: 0
@@ -625,6 +637,13 @@ struct nte_can_params_t {
      * Offset: 0
      */
     int16_t g_slow_std_log10;
+
+    /**
+     * Range: -32768..32767 (-32.768..32.767 log10)
+     * Scale: 0.001
+     * Offset: 0
+     */
+    int16_t delta_std_log10;
 };
 
 /**
@@ -2542,6 +2561,46 @@ bool nte_can_params_g_slow_is_in_phys_range(float value);
  *
  * @return Encoded signal.
  */
+float nte_can_params_delta_encode(float value);
+
+/**
+ * Decode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to decode.
+ *
+ * @return Decoded signal.
+ */
+float nte_can_params_delta_decode(float value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_params_delta_is_in_range(float value);
+
+/**
+ * Check that given physical value is in allowed range before encoding.
+ *
+ * Use this BEFORE calling _encode() to avoid silent integer overflow:
+ *   encode(-1.0) on a [0,100] signal wraps to 255 and passes is_in_range().
+ *   is_in_phys_range(-1.0) correctly returns false.
+ *
+ * @param[in] value Physical signal value to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_params_delta_is_in_phys_range(float value);
+
+/**
+ * Encode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to encode.
+ *
+ * @return Encoded signal.
+ */
 int16_t nte_can_params_sigma0_std_log10_encode(float value);
 
 /**
@@ -2894,6 +2953,46 @@ bool nte_can_params_g_slow_std_log10_is_in_range(int16_t value);
  * @return true if in range, false otherwise.
  */
 bool nte_can_params_g_slow_std_log10_is_in_phys_range(float value);
+
+/**
+ * Encode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to encode.
+ *
+ * @return Encoded signal.
+ */
+int16_t nte_can_params_delta_std_log10_encode(float value);
+
+/**
+ * Decode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to decode.
+ *
+ * @return Decoded signal.
+ */
+float nte_can_params_delta_std_log10_decode(int16_t value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_params_delta_std_log10_is_in_range(int16_t value);
+
+/**
+ * Check that given physical value is in allowed range before encoding.
+ *
+ * Use this BEFORE calling _encode() to avoid silent integer overflow:
+ *   encode(-1.0) on a [0,100] signal wraps to 255 and passes is_in_range().
+ *   is_in_phys_range(-1.0) correctly returns false.
+ *
+ * @param[in] value Physical signal value to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_params_delta_std_log10_is_in_phys_range(float value);
 
 /**
  * Pack message Heartbeat.
