@@ -200,6 +200,10 @@ def read_truth(path: str) -> Truth:
         for name, k in zip(("g_fast", "g_slow"), order):
             truth.params[name] = (_real(doc, path, ["spec", "tissue", "relax_g", k]),
                                   f"phantom g (τ {float(tau[k]):.2g} s)")
+    if "presliding_mm" in _get(doc, path, ["spec", "tissue"]):
+        # the phantom's Dahl length of the friction: what Model III's delta identifies
+        truth.params["delta"] = (_real(doc, path, ["spec", "tissue", "presliding_mm"]),
+                                 "phantom δ")
     phase = doc.get("samples", {}).get("phase") if isinstance(doc.get("samples"), dict) else None
     if isinstance(phase, list):
         truth.samples = len(phase)
