@@ -70,11 +70,11 @@
  *   uses nte_model.h and nte_ekf.h; everything uses nte_real.h.  No circle.
  *
  * MEMORY MODEL
- *   The caller owns every instance (static, stack or pool).  sizeof(nte_t) on x86-64:
- *   776 bytes (float) / 1440 (double) with NTE_ROBUST_BUFFER_LEN = 0 (the bank and the
+ *   The caller owns every instance (static, stack or pool).  sizeof(nte_t) on x86-64 (gcc):
+ *   824 bytes (float) / 1528 (double) with NTE_ROBUST_BUFFER_LEN = 0 (the bank and the
  *   contact front end, whose share is 96 / 176 bytes: its state 52 / 88, its config and its
- *   three published fields); with the default 96: 2904 (float, +2128) / 5656 (double,
- *   +4216), of which the buffer of
+ *   three published fields); with the default 96: 2952 (float, +2128) / 5752 (double,
+ *   +4224), of which the buffer of
  *   96 x 4 reals is 1536 / 3072 and the LM workspace (J^T J and J^T r at the current and the
  *   trial point, both parameter vectors) 384 / 768.  The refinement's deepest stack frame
  *   (nte_step -> refinement -> lm -> simulate -> rk3) adds about 1.2 KiB (float) / 1.9 KiB
@@ -83,10 +83,10 @@
  *   working memory is the instance plus a fixed, small stack frame (measure it with
  *   -fstack-usage).  Several instances may coexist.
  *   Model III's share of these sizes: NTE_STATE_MAX = 4 (three 4 x 4 covariances instead of
- *   3 x 3: +84 / +168 bytes), nine parameters instead of seven in the config and the model
- *   (+48 / +96), its config fields, direction state and two memories (+28 / +40), and the LM
- *   workspace sized for NTE_MODEL_PARAM_COUNT = 7 (+120 / +240): without the contact front end
- *   680 / 1264 bytes for the bank alone and 2808 / 5480 with the default buffer.
+ *   3 x 3: +84 / +168 bytes), ten parameters instead of seven in the config and the model,
+ *   its config fields, the direction state with its sensitivity to delta and its flag, and two
+ *   memories (the turn-over length identified since this header's last count: +32 / +64 of
+ *   the totals above); the LM workspace stays sized for NTE_MODEL_PARAM_COUNT = 7.
  *
  * THREAD SAFETY
  *   None.  An instance must not be used from two contexts at once; different instances are
