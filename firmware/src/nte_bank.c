@@ -300,17 +300,21 @@ static nte_real_t relax_terms(const nte_t* self, const step_ctx_t* c, const size
 }
 
 /* Model III's exponentials of a sample (bank._direction, bank._advance): e[0] =
- * exp(-|dl| / delta) for the direction state, e[1], e[2] = exp(-dt / tau_i) for the relaxation
- * branches, only those in use.  One call site of the inline nte_exp keeps the code small. */
+ * exp(-|dl| / delta) for the direction state (its exponent |dl| / delta kept in *adl for
+ * delta's sensitivity), e[1], e[2] = exp(-dt / tau_i) for the relaxation branches, only those
+ * in use.  One call site of the inline nte_exp keeps the code small. */
 static void model3_exps(const nte_t* self, const bool dir, const size_t nr, const nte_real_t dl,
-                        const nte_real_t dt, nte_real_t e[3])
+                        const nte_real_t dt, nte_real_t e[3], nte_real_t* adl)
 {
     const nte_real_t den[3] = {self->th.v[nte_param_delta], self->cfg.tau_fast_s,
                                self->cfg.tau_slow_s};
+    *adl = NTE_C(0.0);
     for (size_t i = 0U; i < 3U; i++) {
         e[i] = NTE_C(0.0);
         if ((i == 0U) ? dir : (i <= nr)) {
-            e[i] = nte_exp(-(((i == 0U) ? nte_abs(dl) : dt) / den[i]));
+            const nte_real_t x = ((i == 0U) ? nte_abs(dl) : dt) / den[i];
+            *adl = (i == 0U) ? x : *adl;
+            e[i] = nte_exp(-x);
         }
     }
 }
@@ -322,11 +326,10 @@ static void model3_exps(const nte_t* self, const bool dir, const size_t nr, cons
  * second term counts once the motion has gone against s since the surface (the entry's rise
  * is the tissue's contact, not a turn-over). */
 static void direction(const nte_t* self, const nte_real_t dl, const nte_real_t E,
-                      step_ctx_t* c)
+                      const nte_real_t adl, step_ctx_t* c)
 {
     const nte_real_t sig =
         (dl > NTE_C(0.0)) ? NTE_C(1.0) : ((dl < NTE_C(0.0)) ? NTE_C(-1.0) : NTE_C(0.0));
-    const nte_real_t adl = nte_abs(dl) / self->th.v[nte_param_delta];
     c->s = sig + ((self->sdir - sig) * E);
     c->turned = self->turned || ((sig * self->sdir) < NTE_C(0.0));
     c->s_du = (E * self->sdir_du) + (c->turned ? (((self->sdir - sig) * E) * adl) : NTE_C(0.0));
@@ -559,10 +562,11 @@ void nte_bank_advance(nte_t* self, const bool first, const nte_real_t dt, const 
     const bool dir = m3 && self->cfg.direction_memory && !(c.surface || first);
     const nte_real_t dl = c.l - c.l_prev;
     nte_real_t e3[3];
-    model3_exps(self, dir, nr, dl, dt, e3);
+    nte_real_t adl;
+    model3_exps(self, dir, nr, dl, dt, e3, &adl);
     if (m3 && self->cfg.direction_memory) {
         if (dir) {
-            direction(self, dl, e3[0], &c);
+            direction(self, dl, e3[0], adl, &c);
         }
     } else {
         c.s = nte_model_smooth_sign(v, self->cfg.eps_mm_s);
