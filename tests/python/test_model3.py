@@ -41,16 +41,16 @@ def _points(rng: np.random.Generator):
     q = rng.normal(0.0, 0.5, B)
     m = rng.normal(0.0, 0.3, (2, B))
     a = rng.uniform(0.01, 0.999, (2, B))
-    return z, u, l, (s, q), m, a
+    return z, u, l, (s, q, u[9].copy()), m, a
 
 
 def _h_and_row(bank: FilterBank, z, u, l, sq, m, a):
     """The predicted force and its Jacobian row over (z, u of every Model III parameter).  The
     direction state moves with u_delta by its sensitivity q (first order: what the filter's
-    linearisation assumes), s = s0 + q (u_delta - u0_delta)."""
+    linearisation assumes), s = s0 + q (u_delta - u0_delta), u0_delta the drawn point's."""
     R = F64
-    s0, q = sq
-    s = s0 + q * (u[9] - U0_DELTA)
+    s0, q, u0_delta = sq
+    s = s0 + q * (u[9] - u0_delta)
     bank.u = [R.arr(x) for x in u]
     bank.th = bank.scaled.theta(bank.u)
     bank.G = [bank.scaled.nominal[7 + k] * R.exp(bank.u[7 + k]) for k in range(2)]
@@ -67,14 +67,9 @@ def _h_and_row(bank: FilterBank, z, u, l, sq, m, a):
     return h, row[:1 + len(dyn)] + row[2 + len(dyn):] + [row[1 + len(dyn)]]
 
 
-U0_DELTA = 0.0
-
-
 def test_output_partials_against_finite_differences():
     rng = np.random.default_rng(11)
     z, u, l, s, m, a = _points(rng)
-    global U0_DELTA
-    U0_DELTA = u[9].copy()
     bank = _bank(N_POINTS)
     _, row = _h_and_row(bank, z, u, l, s, m, a)
     coords = ["z"] + list(NAMES3)
