@@ -100,7 +100,9 @@ def positive_definite(R: Real, P: Matrix) -> Array:
                  + m2(0, 0, 3) * m2(2, 1, 2)) + m2(0, 1, 2) * m2(2, 0, 3))
                - m2(0, 1, 3) * m2(2, 0, 2)) + m2(0, 2, 3) * m2(2, 0, 1))
         ok = ok & (d4 > zero)
-    for row in P:
-        for v in row:
-            ok = ok & np.isfinite(v)
+    # P is symmetric by construction (predict_covariance and joseph_update write both
+    # triangles from one value): the upper triangle holds every value
+    for i in range(n):
+        for j in range(i, n):
+            ok = ok & np.isfinite(P[i][j])
     return ok

@@ -130,9 +130,14 @@ bool nte_ekf_positive_definite(const size_t n, nte_mat3_t P)
         ok = ok && (d4 > NTE_C(0.0));
     }
 #endif
+    /* P is symmetric by construction (the prediction and the Joseph update write both
+     * triangles from one value, the guard's reset is diagonal): the upper triangle holds every
+     * value, and the lower one would repeat the check (3 n (n - 1) / 2 loop passes a step) */
     for (size_t i = 0U; i < n; i++) {
-        for (size_t j = 0U; j < n; j++) {
-            ok = ok && nte_isfinite(P[i][j]);
+        for (size_t j = i; j < n; j++) {
+            if (!nte_isfinite(P[i][j])) {
+                return false;
+            }
         }
     }
     return ok;

@@ -31,7 +31,9 @@ nte_ekf_update_t nte_ekf_joseph_update(size_t n, nte_real_t* x, nte_mat3_t P, co
                                        nte_real_t innovation, nte_real_t r, nte_real_t gate2,
                                        bool open_gate, bool apply);
 
-/** Sylvester's criterion on the leading minors, and every entry finite (P read only). */
+/** Sylvester's criterion on the leading minors, and every entry finite (P read only; P must be
+ *  symmetric, as every covariance of the bank is: only its upper triangle is checked for
+ *  finite values). */
 bool nte_ekf_positive_definite(size_t n, nte_mat3_t P);
 
 #endif /* NTE_EKF_H */
