@@ -28,8 +28,11 @@ depth, no false alarm, for drift 1 and thresholds 20-40) and checked on records 
 `lab` tissues (seeds 201-210, 0-3 ruptures each) and the five presets (seeds 111-112):
 tests/python/test_layers.py measures the index (its figures in the README).
 
-The detector watches; it does not change the bank's estimate (the parameters each layer needs
-are the next step).  It runs on Model III's accepted samples after the bank's step.
+The bank (bank._watch_layers) runs the detector on filter 1's prior innovation of every
+accepted sample, before any filter's update, and treats the sample of a rupture as a tear
+(bank._tear_prior): every filter's covariance restarts at P0 — the torn layer's estimates are
+the next layer's start — and that sample updates z alone.  Which parameters each layer ends
+with is not kept per layer yet (the export carries the last layer's).
 """
 from __future__ import annotations
 

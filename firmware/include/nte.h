@@ -178,8 +178,11 @@
  *   NTE_K_LAYER_HOLDOFF_MM (1.5 mm) below the surface and the previous rupture (the contact
  *   onset and the bank's re-adaptation after a drop make negative innovations too); out of the
  *   tissue the index returns to 0.  Measured on held-out phantom records by
- *   tests/python/test_layers.py (README).  It does not change the estimate.  Cost per
- *   sample: 1 sqrt, 1 division, 3 flops; memory: nte_layers_t in the instance.
+ *   tests/python/test_layers.py (README).  The detector runs inside the bank's step, on
+ *   filter 1's prior innovation before any update, and a rupture's sample is a tear: every
+ *   filter's covariance restarts at its initial value (the torn layer's estimates start the
+ *   next layer) and the sample updates z alone, so the drop drives no parameter to its clip.
+ *   Cost per sample: 1 sqrt, 1 division, 3 flops; memory: nte_layers_t in the instance.
  *
  * THE PREDICT-ONLY MODE (sensorless prediction; cfg.predict_only, nte_set_predict_only)
  *   For a force sensor that fails (or is taken away) mid-insertion: the estimate goes on from

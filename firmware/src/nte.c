@@ -3,9 +3,10 @@
  * the estimator), nte_set_predict_only, nte_predict_only, nte_get_params, nte_param_name.  The reference composes the same way:
  * FilterBank.step validates the sample, passes it through the contact front end when it is
  * on (nte_contact.c: stage -> tissue depth, force -> force - tare) and advances the bank
- * (nte_bank.c), then, in Model III, the layer index (nte_layers.c); RobustEstimator.step
- * runs the bank's step, then its own (nte_robust.c) on what the bank was given.  This file
- * uses the four components; the bank knows nothing of the others.
+ * (nte_bank.c; in Model III its filter 1's prior innovation feeds the layer index,
+ * nte_layers.c, before the updates, so that a tear's sample is treated as one);
+ * RobustEstimator.step runs the bank's step, then its own (nte_robust.c) on what the bank was
+ * given.  This file uses the four components; of the others the bank knows only the layers.
  */
 #include "nte_bank.h"
 #include "nte_contact.h"
@@ -109,10 +110,8 @@ nte_err_t nte_step(nte_t* self, const nte_sample_t* sample, nte_output_t* out)
             nte_contact_step(self, l_in, v, y, &fed.depth_mm, &fed.force_n);
         }
         nte_bank_advance(self, first, dt, fed.depth_mm, v, fed.force_n, &self->last);
-        if ((cfg->model == 3) && cfg->layers) {
-            /* after the bank's step, on what it was fed (nte_layers.c) */
-            nte_layers_step(self, !first, fed.depth_mm, v, &self->last);
-        }
+        /* the bank ran the rupture detector (nte_layers.c) on this sample before its updates */
+        self->last.layer = ((cfg->model == 3) && cfg->layers) ? self->layers.layer : 0U;
         if (first) {
             self->last.status |= NTE_STATUS_INIT;
         } else {

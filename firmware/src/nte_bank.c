@@ -8,6 +8,7 @@
 #include "nte_bank.h"
 
 #include "nte_ekf.h"
+#include "nte_layers.h"
 #include "nte_model.h"
 
 /* Table I: the parameters each filter identifies together with z, per model (Model III:
@@ -273,6 +274,7 @@ typedef struct step_ctx_t {
     bool surface;
     bool gap;
     bool rotate;
+    bool tear;          /* Model III: a layer tore at this sample (nte_layers_watch) */
 } step_ctx_t;
 
 /* ---- Model III (reference_py/MODEL.md §3b, JACOBIANS.md §7) ---- */
@@ -454,10 +456,22 @@ static uint32_t measure(const nte_t* self, const step_ctx_t* c, const nte_depth_
     return status;
 }
 
+/* bank._tear_prior: at a tear the needle meets new tissue.  The filter's covariance restarts
+ * at P0 (the estimates carry over as the new layer's start, with the uncertainty of a start),
+ * and the tear's own sample updates z alone (its row on the parameters 0): the drop is the
+ * tissue's, which no parameter of the torn layer explains. */
+static void tear_prior(const nte_t* self, filter_work_t* w)
+{
+    p0(self, w->n, w->P);
+    for (size_t a = 1U; a < NTE_EKF_N_MAX; a++) {
+        w->h[a] = NTE_C(0.0);
+    }
+}
+
 /* bank._update_and_guard: the gated Joseph update (active filters only), the guard, and the
  * commit of the filter's covariance and parameters to the shared model. */
 static uint32_t update_and_guard(nte_t* self, const size_t i, const nte_depth_terms_t* d,
-                                 filter_work_t* w, filter_out_t* fo)
+                                 const bool tear, filter_work_t* w, filter_out_t* fo)
 {
     const size_t n = w->n;
     const size_t na = n - 1U;
@@ -471,7 +485,8 @@ static uint32_t update_and_guard(nte_t* self, const size_t i, const nte_depth_te
         }
     }
     /* a gate that refused too many samples in a row would lock the filter out: open it */
-    const bool open_gate = self->gated_run[i] >= (uint32_t)self->cfg.gate_reopen_after;
+    const bool open_gate =
+        (self->gated_run[i] >= (uint32_t)self->cfg.gate_reopen_after) || tear;
     const nte_ekf_update_t upd = nte_ekf_joseph_update(n, xn, Pn, w->h, w->innovation, w->r_eff,
                                                        self->gate2, open_gate, fo->active);
     if (fo->active) {
@@ -514,7 +529,7 @@ static uint32_t update_and_guard(nte_t* self, const size_t i, const nte_depth_te
 }
 
 /* One filter of the bank at a running sample (one pass of bank._advance's loop). */
-static uint32_t run_filter(nte_t* self, const step_ctx_t* c, const size_t i,
+static uint32_t run_filter(nte_t* self, step_ctx_t* c, const size_t i,
                            const nte_rk3_result_t* shared, filter_out_t* fo)
 {
     const size_t mi = model_index(self);
@@ -540,7 +555,19 @@ static uint32_t run_filter(nte_t* self, const step_ctx_t* c, const size_t i,
     nte_model_depth_terms(&d, &self->th, c->l);
     predict(self, c, i, pred, &d, &w);
     uint32_t status = measure(self, c, &d, fo->active, &w);
-    status |= update_and_guard(self, i, &d, &w, fo);
+    if ((i == 0U) && (self->cfg.model == 3) && self->cfg.layers) {
+        /* bank._watch_layers: the rupture detector on filter 1's prior innovation, before any
+         * update of this sample, so that a tear's sample is treated as one (tear_prior); the
+         * filters run on running samples only (at the first one the detector is at its start,
+         * where the reference's call leaves it) */
+        const bool watched = !self->cfg.predict_only && w.in_range;
+        c->tear = nte_layers_watch(self, true, c->l, c->v, watched ? w.innovation : NTE_C(0.0));
+        status |= c->tear ? NTE_STATUS_RUPTURE : 0U;
+    }
+    if (c->tear) {
+        tear_prior(self, &w);
+    }
+    status |= update_and_guard(self, i, &d, c->tear, &w, fo);
     return status;
 }
 

@@ -13,8 +13,8 @@ void nte_layers_start(nte_t* self)
     self->layers.layer = 0U;
 }
 
-void nte_layers_step(nte_t* self, bool run, nte_real_t depth_mm, nte_real_t velocity_mm_s,
-                     nte_output_t* out)
+bool nte_layers_watch(nte_t* self, bool run, nte_real_t depth_mm, nte_real_t velocity_mm_s,
+                      nte_real_t innovation_n)
 {
     nte_layers_t* st = &self->layers;
     const nte_real_t zero = NTE_C(0.0);
@@ -24,7 +24,7 @@ void nte_layers_step(nte_t* self, bool run, nte_real_t depth_mm, nte_real_t velo
     /* the innovation in units of the sensor noise (the front end's, or sqrt(r_n2)) */
     const nte_real_t sigma = self->cfg.contact.enabled ? nte_contact_noise_sigma(self)
                                                       : nte_sqrt(self->cfg.r_n2);
-    const nte_real_t nu = out->innovation_n / sigma;
+    const nte_real_t nu = innovation_n / sigma;
     nte_real_t g = (st->g - nu) - NTE_K_LAYER_DRIFT_SIGMA;
     g = (may && (g > zero)) ? g : zero;
     const bool rupture = may && (g > NTE_K_LAYER_THRESHOLD_SIGMA);
@@ -32,12 +32,11 @@ void nte_layers_step(nte_t* self, bool run, nte_real_t depth_mm, nte_real_t velo
         st->layer = (st->layer + 1U < NTE_LAYER_MAX) ? (st->layer + 1U) : (NTE_LAYER_MAX - 1U);
         st->last_mm = depth_mm;
         g = zero;
-        out->status |= NTE_STATUS_RUPTURE;
     }
     if (!inside) { /* out of the tissue: the next insertion starts in the first layer */
         st->layer = 0U;
         st->last_mm = zero;
     }
     st->g = g;
-    out->layer = st->layer;
+    return rupture;
 }

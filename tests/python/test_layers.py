@@ -132,8 +132,16 @@ def test_layer_index_right_after_90_percent_of_ruptures(held_out):
     assert held_out["right"] >= 0.9 * held_out["total"]
 
 
+#: the identified parameters' columns of a Model III file (their _sd columns aside)
+PARAM_COLUMNS = ("sigma0", "sigma1", "sigma2", "f1", "beta", "g_fast", "g_slow", "delta")
+
+
 @pytest.mark.parametrize("precision", ["float64", "float32"])
-def test_c_equals_reference_and_layers_only_watch(tmp_path, precision):
+def test_c_equals_reference_and_a_tear_moves_z_alone(tmp_path, precision):
+    """C is the reference bit for bit through the tears; without the layers the file is the
+    same up to the first rupture, whose sample leaves every parameter where it was (the tear
+    updates z alone, its gate open) and after which the estimates differ (the covariances
+    restarted)."""
     rec, _ = _phantom(tmp_path, "lab", 204)          # three ruptures
     if not C64.exists():
         pytest.skip("build/host missing: make build")
@@ -145,16 +153,21 @@ def test_c_equals_reference_and_layers_only_watch(tmp_path, precision):
     _run(C64 if precision == "float64" else C32, str(rec), "--model", "3", "--out", str(c_out))
     assert r_out.read_bytes() == c_out.read_bytes()
     e = np.genfromtxt(c_out, delimiter=",", names=True)
-    assert e["layer"].max() == 3 and np.count_nonzero(e["status"].astype(int) & (1 << 12)) == 3
-    # without the layers: the same file but the column (and the rupture bit)
+    status = e["status"].astype(int)
+    tears = np.flatnonzero(status & (1 << 12))
+    assert e["layer"].max() == 3 and len(tears) == 3
+    assert not np.any(status[tears] & (1 << 2)), "a tear's sample is never gated"
     n_out = tmp_path / "n.csv"
     _run(C64 if precision == "float64" else C32, str(rec), "--model", "3", "--no-layers",
          "--out", str(n_out))
-    with_l = np.genfromtxt(c_out, delimiter=",", names=True)
     without = np.genfromtxt(n_out, delimiter=",", names=True)
     assert "layer" not in without.dtype.names
+    k = tears[0]
+    params = [n for n in without.dtype.names if n in PARAM_COLUMNS]
+    assert len(params) == 8
     for name in without.dtype.names:
-        a, b = with_l[name], without[name]
-        if name == "status":
-            a = a.astype(int) & ~(1 << 12)
+        a, b = e[name][:k], without[name][:k]
         assert np.array_equal(a, b, equal_nan=True), name
+    for name in params:
+        assert e[name][k] == e[name][k - 1], f"{name} moved at the tear"
+    assert not np.array_equal(e["force_hat_n"][k + 1:], without["force_hat_n"][k + 1:])
