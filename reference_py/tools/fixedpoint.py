@@ -144,14 +144,14 @@ class RecordingBank(FilterBank):
 
     def _update_and_guard(self, i: int, names: tuple[str, ...], x: list[Array], P_pred: Matrix,
                           hrow: list[Array], innovation: Array, r_eff: Array, active: Array,
-                          run: Array, in_range: Array, z_ss: Array
+                          run: Array, in_range: Array, z_ss: Array, tear: Array | None = None
                           ) -> tuple[Array, Array, Array]:
         n = len(x)
         pht = [sum((P_pred[a][b] * hrow[b] for b in range(1, n)), P_pred[a][0] * hrow[0])
                for a in range(n)]
         s = sum((hrow[a] * pht[a] for a in range(1, n)), hrow[0] * pht[0]) + r_eff
         z_i, nis, st = super()._update_and_guard(i, names, x, P_pred, hrow, innovation, r_eff,
-                                                 active, run, in_range, z_ss)
+                                                 active, run, in_range, z_ss, tear)
         labels = ["z"] + list(names)
         for name, val in self._pending.items():
             self._put(name, val, active)
