@@ -11,23 +11,26 @@
  *
  *   with depth l in mm, velocity v in mm/s, force f in N, z dimensionless and the smooth sign
  *   s(v) = tanh(v / eps).  Each sample feeds the paper's bank of three joint state-parameter
- *   extended Kalman filters in switching mode (Model I or Model II, paper Table I).
+ *   extended Kalman filters in switching mode (Models I and II, paper Table I; Model III
+ *   below).
  *
- *   Model III (cfg.model = 3; reference_py/MODEL.md §3b) is Model II plus two parts, each
- *   switchable: a direction state s driven by the travelled depth (Dahl: ds/dl =
- *   (1 - s sign(dl)) / presliding_mm, integrated exactly per sample) replaces tanh(v/eps), so
- *   the friction holds in a dwell and turns over within a few mm at a reversal; and one or
- *   two relaxation branches (time constants tau_fast_s, tau_slow_s) keep memories
- *   m_i <- a_i m_i + (1 - a_i) f_e of the elastic force f_e, a_i = exp(-dt / tau_i), and publish
- *   f = f_e - sum g_i m_i: a held force decays by sum g_i and recovers after an unloading.  The
- *   strengths g_fast, g_slow are identified (as odds, g_i = G_i / (1 + sum G) < 1) by filter 1
- *   with sigma0; the memories are treated as known inputs (JACOBIANS.md §7).  The turn-over
- *   length delta (starting at presliding_mm) is identified by filter 2 with f1 and sigma1,
- *   from the samples after the motion first goes against s (JACOBIANS.md §8).  Parameters
- *   are identified in log form relative to nominal values, theta = nominal exp(u), so every
- *   state stays O(1) in float32.  The derivations of the Jacobians are in
- *   reference_py/JACOBIANS.md; the model reading (sign of the velocity, z reset at the surface)
- *   in the project's model notes.
+ *   Model III (cfg.model = 3; reference_py/MODEL.md §3b) is Model II plus three parts, each
+ *   switchable (cfg.direction_memory, cfg.relaxation, cfg.layers), usually run behind the
+ *   contact front end (cfg.contact: THE CONTACT FRONT END).  (1) A direction state s driven
+ *   by the travelled depth (Dahl: ds/dl = (1 - s sign(dl)) / delta, integrated exactly per
+ *   sample) replaces tanh(v/eps), so the friction holds in a dwell and turns over within a
+ *   few mm at a reversal; the turn-over length delta (starting at presliding_mm) is
+ *   identified by filter 2 with f1 and sigma1, from the samples after the motion first goes
+ *   against s (JACOBIANS.md §8).  (2) One or two relaxation branches (time constants
+ *   tau_fast_s, tau_slow_s) keep memories m_i <- a_i m_i + (1 - a_i) f_e of the elastic force
+ *   f_e, a_i = exp(-dt / tau_i), and publish f = f_e - sum g_i m_i: a held force decays by
+ *   sum g_i and recovers after an unloading.  The strengths g_fast, g_slow are identified (as
+ *   odds, g_i = G_i / (1 + sum G) < 1) by filter 1 with sigma0; the memories are treated as
+ *   known inputs (JACOBIANS.md §7).  (3) The layer index (THE LAYER INDEX): a tear's sample
+ *   restarts the filters' covariances and moves z alone.  Parameters are identified in log
+ *   form relative to nominal values, theta = nominal exp(u), so every state stays O(1) in
+ *   float32.  The derivations of the Jacobians are in reference_py/JACOBIANS.md; the model
+ *   reading (sign of the velocity, z reset at the surface) in the project's model notes.
  *
  * THE SPECIFICATION IS THE PYTHON REFERENCE
  *   reference_py/ (numpy) is the executable specification.  This library performs the same
@@ -54,7 +57,9 @@
  *                       predict, measure,         _measure, _update_and_guard, _guard;
  *                       update_and_guard, guard;  Model III: _direction, _relax_terms,
  *                       Model III's direction     _relax_output, _relax_fractions,
- *                       state and relaxation      _relax_nominal)
+ *                       state, relaxation, tear   _relax_nominal, _watch_layers,
+ *                                                 _tear_prior)
+ *   src/nte_layers.c/.h the layer index           layers.py RuptureDetector
  *   src/nte_robust.c/.h the robust estimator      robust.py RobustEstimator, ldlt_solve
  *   src/nte_contact.c/.h the surface and tare     contact.py ContactFrontEnd
  *                       front end
@@ -66,8 +71,10 @@
  *   src/nte_real.h      precision, exp, tanh      fmath.py
  *   src/nte_constants.h generated constants and   firmware/tools/gen_constants.py
  *                       configuration ranges
- *   Layers: nte.c uses nte_bank.h, nte_contact.h and nte_robust.h; nte_robust.c uses nte_bank.h; the bank
- *   uses nte_model.h and nte_ekf.h; everything uses nte_real.h.  No circle.
+ *   Layers: nte.c uses nte_bank.h, nte_contact.h, nte_layers.h and nte_robust.h;
+ *   nte_robust.c uses nte_bank.h; the bank uses nte_model.h, nte_ekf.h and nte_layers.h (the
+ *   rupture detector, which uses nte_contact.h for the noise); everything uses nte_real.h.
+ *   No circle.
  *
  * MEMORY MODEL
  *   The caller owns every instance (static, stack or pool).  sizeof(nte_t) on x86-64 (gcc):
