@@ -13,13 +13,14 @@ void nte_layers_start(nte_t* self)
     self->layers.layer = 0U;
 }
 
-bool nte_layers_watch(nte_t* self, bool run, nte_real_t depth_mm, nte_real_t velocity_mm_s,
+bool nte_layers_watch(nte_t* self, nte_real_t depth_mm, nte_real_t velocity_mm_s,
                       nte_real_t innovation_n)
 {
     nte_layers_t* st = &self->layers;
     const nte_real_t zero = NTE_C(0.0);
     const bool inside = depth_mm > zero;
-    const bool may = run && inside && (velocity_mm_s > self->cfg.v_still_mm_s) &&
+    /* the reference's `run` is true here: the bank calls this on running samples only */
+    const bool may = inside && (velocity_mm_s > self->cfg.v_still_mm_s) &&
                      ((depth_mm - st->last_mm) > NTE_K_LAYER_HOLDOFF_MM);
     /* the innovation in units of the sensor noise (the front end's, or sqrt(r_n2)) */
     const nte_real_t sigma = self->cfg.contact.enabled ? nte_contact_noise_sigma(self)

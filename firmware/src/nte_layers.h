@@ -1,8 +1,8 @@
 /*
  * Model III's layer index: a rupture detector on the bank's innovations (reference_py/layers.py
  * RuptureDetector).  See THE LAYER INDEX in nte.h.  Internal header; the bank (nte_bank.c)
- * calls it after filter 1's measurement of every accepted sample when cfg.model == 3 and
- * cfg.layers.
+ * calls it after filter 1's measurement of every running sample (the first after init
+ * updates nothing) when cfg.model == 3 and cfg.layers.
  */
 #ifndef NTE_LAYERS_H
 #define NTE_LAYERS_H
@@ -14,13 +14,13 @@ void nte_layers_start(nte_t* self);
 
 /**
  * RuptureDetector.step for one accepted sample, before any filter's update (the bank calls
- * it, nte_bank.c): `run` false at the first sample after init; depth below the surface (mm,
- * what the bank was fed), velocity (mm/s) and filter 1's prior innovation of this sample (N;
- * 0 where it is not watched), in units of the noise the contact front end learned (sqrt(r_n2)
- * with it off).  Advances self->layers.layer at a rupture; returns whether one was found.
+ * it, nte_bank.c, on running samples: the reference's `run` is true); depth below the
+ * surface (mm, what the bank was fed, clamped at 0), velocity (mm/s) and filter 1's prior
+ * innovation of this sample (N; 0 where it is not watched), in units of the noise the
+ * contact front end learned (sqrt(r_n2) with it off).  Advances self->layers.layer at a rupture; returns whether one was found.
  * Cost: 1 sqrt, 1 division, 3 flops.
  */
-bool nte_layers_watch(nte_t* self, bool run, nte_real_t depth_mm, nte_real_t velocity_mm_s,
+bool nte_layers_watch(nte_t* self, nte_real_t depth_mm, nte_real_t velocity_mm_s,
                       nte_real_t innovation_n);
 
 #endif /* NTE_LAYERS_H */
