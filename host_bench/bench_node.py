@@ -25,8 +25,10 @@ from pathlib import Path
 import can
 import numpy as np
 
-from .cli import scenario_frames, write_candump
-from .dbc import TICK_S, NteDatabase
+from reference_py.bus.candump import write_candump
+from reference_py.bus.dbc import TICK_S, NteDatabase
+
+from .replay import scenario_frames
 
 ROOT = Path(__file__).resolve().parents[1]
 DB = NteDatabase()

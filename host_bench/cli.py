@@ -50,63 +50,17 @@ from typing import Sequence
 import can
 import numpy as np
 
+from reference_py.bus.candump import write_candump
+from reference_py.bus.dbc import PARAM_NAMES, PARAM_SIGNALS, NteDatabase, log10_to_std
 from reference_py.params import PRESETS
-from reference_py.tools.cli import (EXIT_BAD_INPUT, OneLineParser, add_unit_arguments, bounded,
-                                    units_from)
-from reference_py.tools.csvio import Units
+from reference_py.tools.arguments import (EXIT_BAD_INPUT, OneLineParser, add_unit_arguments,
+                                          bounded, units_from)
 from reference_py.tools.safe_write import Outputs
 
-from .dbc import PARAM_NAMES, PARAM_SIGNALS, TICK_S, NteDatabase, log10_to_std
 from .node_mirror import NodeMirror, compare, contact_outputs, node_outputs
-from .replay import read_scenario
+from .replay import read_scenario, scenario_frames
 
 PARAM_LABELS = PARAM_NAMES
-
-
-def scenario_frames(csv_path: str, db: NteDatabase, depth_rate_hz: float,
-                    clipped: dict[str, int] | None = None,
-                    units: Units | None = None) -> list[tuple[float, can.Message]]:
-    """(t_s, message) for a scenario CSV: depth at depth_rate_hz (interpolated), force at the
-    CSV rows that have one; at equal times depth first.  Times are on the 100 us tick grid.
-    A value outside its signal's DBC range is clipped to the range and counted in ``clipped``
-    (by signal name) when a dict is given; ``units`` converts and checks the CSV (csvio)."""
-    rows = read_scenario(csv_path, units)
-    t = np.array([r.t_s for r in rows])
-    d = np.array([r.depth_mm for r in rows])
-    v = np.array([r.velocity_mm_s for r in rows])
-    tx = db.sender()
-    ranges = {sig: db.signal_range(msg, sig)
-              for msg, sig in (("Depth", "Depth"), ("Depth", "Velocity"), ("Force", "Force"))}
-    counts = clipped if clipped is not None else {}
-
-    def clip(sig: str, x: float) -> float:
-        lo, hi = ranges[sig]
-        if lo <= x <= hi:
-            return x
-        counts[sig] = counts.get(sig, 0) + 1
-        return min(max(x, lo), hi)
-
-    step_ticks = max(1, int(round(1.0 / depth_rate_hz / TICK_S)))
-    t0 = int(round(t[0] / TICK_S))
-    t1 = int(round(t[-1] / TICK_S))
-    events: list[tuple[int, int, float, float]] = []   # (ticks, kind 0 depth / 1 force, a, b)
-    for k in range(t0, t1 + 1, step_ticks):
-        ts = k * TICK_S
-        events.append((k, 0, float(np.interp(ts, t, d)), float(np.interp(ts, t, v))))
-    for r in rows:
-        if r.force_n is not None:
-            events.append((int(round(r.t_s / TICK_S)), 1, r.force_n, 0.0))
-    events.sort(key=lambda e: (e[0], e[1]))
-    out = []
-    for k, kind, a, b in events:
-        st = (k % 65536) * TICK_S
-        if kind == 0:
-            msg = tx.message("Depth", {"Depth": clip("Depth", a), "Velocity": clip("Velocity", b),
-                                       "SensorTime": st})
-        else:
-            msg = tx.message("Force", {"Force": clip("Force", a), "SensorTime": st})
-        out.append((k * TICK_S, msg))
-    return out
 
 
 def sensor_failures(frames: list[tuple[float, can.Message]], db: NteDatabase,
@@ -160,21 +114,6 @@ def log_frames(path: str) -> list[tuple[float, can.Message]]:
         raise ValueError(f"{path}: no frames")
     t0 = msgs[0].timestamp
     return [(m.timestamp - t0, m) for m in msgs if not m.is_error_frame]
-
-
-def write_candump(path: Path, frames: list[tuple[float, can.Message]], channel: str,
-                  speed: float, start: float = 1_000_000.0) -> None:
-    """candump -l format (python-can's CanutilsLogWriter, frames marked T for sent), times
-    scaled by 1/speed (canplayer replays them in real time)."""
-    writer = can.CanutilsLogWriter(str(path), channel=channel)
-    try:
-        for t, m in frames:
-            writer.on_message_received(can.Message(
-                timestamp=start + t / speed, arbitration_id=m.arbitration_id,
-                is_extended_id=m.is_extended_id, data=bytes(m.data), is_rx=False,
-                channel=channel))
-    finally:
-        writer.stop()
 
 
 def _send_python(bus: can.BusABC, frames, speed: float, progress: bool) -> float:

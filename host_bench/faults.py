@@ -13,7 +13,9 @@ from dataclasses import dataclass
 import can
 import numpy as np
 
-from .dbc import TICK_S, NteDatabase
+from reference_py.bus.candump import write_candump
+from reference_py.bus.dbc import TICK_S, NteDatabase
+
 from .sensor_failures import reencode, sensor_fault, sensor_lost
 
 
@@ -172,7 +174,6 @@ def run_replay(node: str, frames: list[tuple[float, can.Message]], work: "Path",
     import json
     import subprocess
 
-    from .cli import write_candump
     log, rec, st = work / f"{tag}.in.log", work / f"{tag}.out.log", work / f"{tag}.stats.json"
     write_candump(log, frames, "vcan0", 1.0, start=1000.0)
     subprocess.run([node, "--replay", str(log), "--record", str(rec), "--stats", str(st),
@@ -194,8 +195,7 @@ def table(node: str, csv: str, work: "Path", rows: list[str] | None = None) -> l
     after which none is stale or faulted; None for a fault that spans the run), RMS error of the
     fresh estimates against the true force after recovery (the whole run for a fault that spans
     it), as a ratio to the fault-free run's over the same span, and the counters that moved."""
-    from .cli import scenario_frames
-    from .replay import read_scenario
+    from .replay import read_scenario, scenario_frames
     db = NteDatabase()
     frames = scenario_frames(csv, db, 1000.0)
     sc = read_scenario(csv)

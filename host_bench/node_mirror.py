@@ -25,13 +25,12 @@ from typing import Iterable, Iterator
 import numpy as np
 
 from reference_py.bank import FilterBank, identified_names
+from reference_py.bus.dbc import FRAME_LENGTH, PARAM_SIGNALS, NteDatabase
 from reference_py.config import ContactConfig
 from reference_py.contact import CONTACT_TISSUE
 from reference_py.tools.estimate import make_config
 from reference_py.fmath import real_for
 from reference_py.params import ALL_NAMES, PRESETS, RELAX_NOMINAL
-
-from .dbc import FRAME_LENGTH, PARAM_SIGNALS, NteDatabase
 
 F32 = np.float32
 TICK_US = 100

@@ -12,6 +12,9 @@ python-can's writers (CSV and candump -L log); the frames sent are written too, 
     nte-bench send scenario.csv --interface socketcan --channel vcan0 \\
         --record-csv run.csv --record-log run.log
 
+``nte-bench replay`` sends the same scenario resampled instead (scenario_frames): depth frames at
+a fixed rate, interpolated from the rows, force frames at the rows that have one, on the 100 us
+tick grid, values outside a signal's DBC range clipped and counted rather than refused.
 """
 
 from __future__ import annotations
@@ -24,10 +27,10 @@ from pathlib import Path
 from typing import Iterable, Sequence
 
 import can
+import numpy as np
 
+from reference_py.bus.dbc import TICK_S, NteDatabase, seconds_to_ticks
 from reference_py.tools.csvio import Units, read_trial
-
-from .dbc import TICK_S, NteDatabase, seconds_to_ticks
 
 DEPTH_MAX_MM = 500.0
 DEPTH_SLACK_MM = 1e-6  #: depths within this of the range are clamped, not rejected
@@ -81,6 +84,52 @@ def schedule(rows: Sequence[ScenarioRow], db: NteDatabase, force_every: int = 1)
                 n_force += 1
         except Exception as exc:  # cantools raises its own EncodeError for range errors
             raise ValueError(f"row {i}: t_s={r.t_s}: {exc}") from None
+    return out
+
+
+def scenario_frames(csv_path: str, db: NteDatabase, depth_rate_hz: float,
+                    clipped: dict[str, int] | None = None,
+                    units: Units | None = None) -> list[tuple[float, can.Message]]:
+    """(t_s, message) for a scenario CSV: depth at depth_rate_hz (interpolated), force at the
+    CSV rows that have one; at equal times depth first.  Times are on the 100 us tick grid.
+    A value outside its signal's DBC range is clipped to the range and counted in ``clipped``
+    (by signal name) when a dict is given; ``units`` converts and checks the CSV (csvio)."""
+    rows = read_scenario(csv_path, units)
+    t = np.array([r.t_s for r in rows])
+    d = np.array([r.depth_mm for r in rows])
+    v = np.array([r.velocity_mm_s for r in rows])
+    tx = db.sender()
+    ranges = {sig: db.signal_range(msg, sig)
+              for msg, sig in (("Depth", "Depth"), ("Depth", "Velocity"), ("Force", "Force"))}
+    counts = clipped if clipped is not None else {}
+
+    def clip(sig: str, x: float) -> float:
+        lo, hi = ranges[sig]
+        if lo <= x <= hi:
+            return x
+        counts[sig] = counts.get(sig, 0) + 1
+        return min(max(x, lo), hi)
+
+    step_ticks = max(1, int(round(1.0 / depth_rate_hz / TICK_S)))
+    t0 = int(round(t[0] / TICK_S))
+    t1 = int(round(t[-1] / TICK_S))
+    events: list[tuple[int, int, float, float]] = []   # (ticks, kind 0 depth / 1 force, a, b)
+    for k in range(t0, t1 + 1, step_ticks):
+        ts = k * TICK_S
+        events.append((k, 0, float(np.interp(ts, t, d)), float(np.interp(ts, t, v))))
+    for r in rows:
+        if r.force_n is not None:
+            events.append((int(round(r.t_s / TICK_S)), 1, r.force_n, 0.0))
+    events.sort(key=lambda e: (e[0], e[1]))
+    out = []
+    for k, kind, a, b in events:
+        st = (k % 65536) * TICK_S
+        if kind == 0:
+            msg = tx.message("Depth", {"Depth": clip("Depth", a), "Velocity": clip("Velocity", b),
+                                       "SensorTime": st})
+        else:
+            msg = tx.message("Force", {"Force": clip("Force", a), "SensorTime": st})
+        out.append((k * TICK_S, msg))
     return out
 
 

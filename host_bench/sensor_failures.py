@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import can
 
-from .dbc import NteDatabase
+from reference_py.bus.dbc import NteDatabase
 
 
 def _in_spans(t: float, spans) -> bool:

@@ -35,7 +35,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import sys  # noqa: E402
 from pathlib import Path  # noqa: E402
 
-from ..tools.cli import OneLineParser, add_unit_arguments, units_from  # noqa: E402
+from ..tools.arguments import OneLineParser, add_unit_arguments, units_from  # noqa: E402
 from ..tools.safe_write import check_directory  # noqa: E402
 from .io import InputError, Trial, read_trial  # noqa: E402
 from .prep import TooShort  # noqa: E402

@@ -4,7 +4,7 @@ A trial is one insertion recording: times (s), stage/insertion depth (mm), axial
 when the recorder logged it, the stage velocity (mm/s).  Readers are chosen by file suffix from
 :data:`READERS`: CSV (the tools' one reader: a spreadsheet export with a byte-order mark and
 quoted cells is fine) and candump logs (``.log``, ``candump -l``/``-L``) decoded with the
-project's DBC (firmware/can/nte.dbc through host_bench.dbc, end-to-end checks included).
+project's DBC (firmware/can/nte.dbc through reference_py.bus.dbc, end-to-end checks included).
 """
 from __future__ import annotations
 
@@ -76,7 +76,7 @@ def read_candump(path: Path) -> Trial:
     """
     try:
         import can
-        from host_bench.dbc import NteDatabase
+        from ..bus.dbc import NteDatabase
     except ImportError as exc:
         raise InputError(path, None, None, f"candump logs need python-can and cantools ({exc})"
                          ) from None

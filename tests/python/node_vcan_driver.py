@@ -17,8 +17,9 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from host_bench.cli import scenario_frames, write_candump  # noqa: E402
-from host_bench.dbc import NteDatabase, TICK_S  # noqa: E402
+from host_bench.replay import scenario_frames  # noqa: E402
+from reference_py.bus.candump import write_candump  # noqa: E402
+from reference_py.bus.dbc import NteDatabase, TICK_S  # noqa: E402
 from host_bench.faults import burst  # noqa: E402
 from host_bench.node_mirror import NodeMirror, compare, contact_outputs, node_outputs  # noqa: E402
 

@@ -7,7 +7,7 @@ frames, the replay's and the heartbeats: under TCG it lags the bus by seconds, a
 when the replay ends left frames still queued in its socket unwritten), runs the replay engine
 (nte-bench send, as python -m host_bench.cli send) on the scenario with --record-csv/--record-log into OUTDIR, and
 meanwhile plays a stand-in for the node: five Heartbeat frames (E2E protected, from
-host_bench.dbc) sent 0.2 s apart, which the replay must record. Both child processes are
+reference_py.bus.dbc) sent 0.2 s apart, which the replay must record. Both child processes are
 stopped by their own PIDs.
 """
 from __future__ import annotations
@@ -19,7 +19,7 @@ from pathlib import Path
 
 import can
 
-from host_bench.dbc import NteDatabase
+from reference_py.bus.dbc import NteDatabase
 
 
 def main() -> int:

@@ -2,7 +2,7 @@
 
 A 1 s scenario (1 kHz depth, 200 Hz force, starting at t = 6.4 s so that the 16-bit sensor
 clock wraps in the middle) is replayed at half speed; candump captures the bus. The capture is
-decoded with host_bench.dbc and must hold every sample, in order, E2E-valid with continuous
+decoded with reference_py.bus.dbc and must hold every sample, in order, E2E-valid with continuous
 counters, values within half a resolution step, sensor times equal to the scenario's; its
 timing is printed. The pacing rule (never early, catch up after a stall, worst lateness
 reported) is asserted on a virtual clock, where load cannot move it. The replay's own records (CSV and candump-format
@@ -20,7 +20,7 @@ from pathlib import Path
 import can
 import pytest
 
-from host_bench.dbc import TICK_S, NteDatabase, seconds_to_ticks
+from reference_py.bus.dbc import TICK_S, NteDatabase, seconds_to_ticks
 from host_bench.replay import read_scenario, schedule
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -307,7 +307,7 @@ def test_bench_on_this_host_without_af_can(tmp_path):
 
 
 def test_out_of_range_values_are_clipped_and_counted(tmp_path):
-    from host_bench.cli import scenario_frames
+    from host_bench.replay import scenario_frames
     p = tmp_path / "s.csv"
     p.write_text("t_s,depth_mm,velocity_mm_s,force_n\n0,0,0,0\n0.001,10,700,60\n"
                  "0.002,20,0,-75\n0.003,30,0,1\n")
@@ -347,7 +347,7 @@ def test_bench_refuses_implausible_units_naming_the_option(tmp_path, capsys):
                                 f"exceed the configured range ±50 N (up to 400): probably "
                                 f"millinewtons: convert with --force-unit mN")
     assert not out.exists()
-    from host_bench.cli import scenario_frames
+    from host_bench.replay import scenario_frames
     from reference_py.tools.csvio import Units
     frames = scenario_frames(str(p), NteDatabase(), 100.0, {}, Units(force="mN"))
     rx = NteDatabase().receiver()
@@ -359,7 +359,8 @@ def test_bench_refuses_implausible_units_naming_the_option(tmp_path, capsys):
 def test_candump_input_log_written_by_python_can(tmp_path):
     """The canplayer input (write_candump) is python-can's candump -l format: every frame read
     back by can.LogReader with its id and data, at start + t / speed, marked sent (T)."""
-    from host_bench.cli import scenario_frames, write_candump
+    from host_bench.replay import scenario_frames
+    from reference_py.bus.candump import write_candump
     p = tmp_path / "s.csv"
     write_scenario(p)
     frames = scenario_frames(str(p), NteDatabase(), 1000.0)
@@ -398,7 +399,8 @@ def test_check_model3_against_the_node(tmp_path, capsys):
     Estimate, Params (0..9) and Contact frames all equal the reference -> exit 0 with 0
     mismatches; the same record checked as Model II disagrees -> exit 1."""
     import json
-    from host_bench.cli import scenario_frames, write_candump
+    from host_bench.replay import scenario_frames
+    from reference_py.bus.candump import write_candump
     node = next((p for p in (ROOT / "build/host/bin/nte-node", ROOT / "build/node/bin/nte-node")
                  if p.exists()), None)
     if node is None:

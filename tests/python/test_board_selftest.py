@@ -304,7 +304,7 @@ def _short_insertion_frames(tmp_path: Path, db) -> list:
     """The frames (E2E-protected, depth and force at 200 Hz) of a short paper insertion, 8 mm at
     the preset's speed with a 0.1 s dwell: the input both board-over-SLCAN tests replay."""
     sys.path.insert(0, str(ROOT))
-    from host_bench.cli import scenario_frames
+    from host_bench.replay import scenario_frames
     csv = tmp_path / "s.csv"
     subprocess.run([sys.executable, "-m", "reference_py", "simulate", "--preset", "paper-10mms",
                     "--depth", "8", "--dwell", "0.1", "--seed", "1", "--out", str(csv)],
@@ -320,7 +320,7 @@ def test_board_node_over_slcan_matches_mirror(built, tmp_path: Path) -> None:
     can = pytest.importorskip("can")
     pytest.importorskip("numpy")
     sys.path.insert(0, str(ROOT))
-    from host_bench.dbc import NteDatabase
+    from reference_py.bus.dbc import NteDatabase
     from host_bench.node_mirror import NodeMirror, compare, node_outputs
 
     db = NteDatabase()
@@ -403,7 +403,7 @@ def test_board_over_python_can_slcan_matches_mirror(built, tmp_path: Path) -> No
     pytest.importorskip("serial")  # pyserial: python-can's slcan interface opens the URL with it
     pytest.importorskip("numpy")
     sys.path.insert(0, str(ROOT))
-    from host_bench.dbc import NteDatabase
+    from reference_py.bus.dbc import NteDatabase
     from host_bench.node_mirror import NodeMirror, compare, node_outputs
 
     db = NteDatabase()

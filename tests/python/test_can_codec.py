@@ -25,7 +25,7 @@ import cantools
 import pytest
 from e2e.p11 import E2E_P11_DATAID_BOTH, e2e_p11_check, e2e_p11_protect
 
-from host_bench.dbc import DBC_PATH, NteDatabase
+from reference_py.bus.dbc import DBC_PATH, NteDatabase
 
 ROOT = Path(__file__).resolve().parents[2]
 BUILD = ROOT / "build" / "can"
@@ -335,7 +335,7 @@ def test_check_verdicts_on_autosar_e2e_frames(ctool: CTool) -> None:
 
 
 def test_bench_encoder_matches_c(ctool: CTool, db) -> None:
-    """host_bench.dbc (cantools + autosar-e2e) and C (generated + nte_e2e) give the same frame."""
+    """reference_py.bus.dbc (cantools + autosar-e2e) and C (generated + nte_e2e) give the same frame."""
     nd = NteDatabase()
     tx = nd.sender()
     msg = db.get_message_by_name("Depth")

@@ -436,8 +436,9 @@ def test_node_takes_the_config_and_flags_override_it(tmp_path):
     the default r_n2 publishes the same frames as --preset; another r_n2 changes them; the
     workflow-style model 3 needs --model."""
     sys.path.insert(0, str(ROOT))
-    from host_bench.cli import scenario_frames, write_candump
-    from host_bench.dbc import NteDatabase
+    from host_bench.replay import scenario_frames
+    from reference_py.bus.candump import write_candump
+    from reference_py.bus.dbc import NteDatabase
     csv = tmp_path / "paper.csv"
     subprocess.run([sys.executable, "-m", "reference_py", "simulate", "--preset", "paper-10mms",
                     "--depth", "10", "--dwell", "0.2", "--seed", "1", "--out", str(csv)],

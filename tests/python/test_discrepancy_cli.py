@@ -113,7 +113,7 @@ def test_candump_log_decoded_with_the_dbc(tmp_path: Path) -> None:
     """A candump log of the bench's Depth and Force frames, written with python-can through the
     project's DBC, reads back as the trial (to the frames' scaling)."""
     can = pytest.importorskip("can")
-    from host_bench.dbc import NteDatabase
+    from reference_py.bus.dbc import NteDatabase
     from reference_py.discrepancy.io import read_trial
     tr = make_case(("dwell_relaxation",), 5).trials[0]
     tx = NteDatabase().sender()

@@ -64,8 +64,9 @@ import sys  # noqa: E402
 import can  # noqa: E402
 
 sys.path.insert(0, str(ROOT))
-from host_bench.cli import scenario_frames, write_candump  # noqa: E402
-from host_bench.dbc import NteDatabase  # noqa: E402
+from host_bench.replay import scenario_frames  # noqa: E402
+from reference_py.bus.candump import write_candump  # noqa: E402
+from reference_py.bus.dbc import NteDatabase  # noqa: E402
 from host_bench.faults import burst, clock_jump  # noqa: E402
 from host_bench.node_mirror import NodeMirror, compare, node_outputs  # noqa: E402
 

@@ -17,8 +17,10 @@ import pytest
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
-from host_bench.cli import scenario_frames, sensor_failures, write_candump  # noqa: E402
-from host_bench.dbc import NteDatabase  # noqa: E402
+from host_bench.cli import sensor_failures  # noqa: E402
+from host_bench.replay import scenario_frames  # noqa: E402
+from reference_py.bus.candump import write_candump  # noqa: E402
+from reference_py.bus.dbc import NteDatabase  # noqa: E402
 from host_bench.node_mirror import NodeMirror, compare, contact_outputs, node_outputs  # noqa: E402
 
 DB = NteDatabase()

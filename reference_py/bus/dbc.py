@@ -28,7 +28,7 @@ import cantools
 from e2e.p11 import E2E_P11_DATAID_BOTH, e2e_p11_check, e2e_p11_protect
 
 #: Where the DBC lives in the repository; NTE_DBC overrides it.
-DBC_PATH = Path(__file__).resolve().parent.parent / "firmware" / "can" / "nte.dbc"
+DBC_PATH = Path(__file__).resolve().parents[2] / "firmware" / "can" / "nte.dbc"
 
 COUNTER_MODULUS = 15  #: counter counts 0..14
 FRAME_LENGTH = 8
