@@ -795,7 +795,7 @@ def make_case(kind: str | tuple[str, ...], seed: int, forms: dict[str, str] | No
 
 # ------------------------------------------------------------------------------------------
 # The blind harness: run the workflow as a user would and grade it against the hidden truth
-# (shared by tests/python/test_discrepancy_blind.py and reference_py/discrepancy/confusion.py)
+# (shared by tests/python/test_discrepancy_blind.py and tests/python/discrepancy_confusion.py)
 # ------------------------------------------------------------------------------------------
 #: cases per kind in a full run
 FULL_CASES = 20

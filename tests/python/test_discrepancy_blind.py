@@ -5,7 +5,7 @@ how much of the gap to the noise-free truth it closes, on the bounds of what it 
 
 The CI subset is the first CI_CASES cases of every kind (each effect form, none, the relaxation +
 pre-sliding pair, stick-slip): 4 x 23 = 92 cases, run once for the module in two processes. The
-full run (20 cases per kind) is ``python -m reference_py.discrepancy.confusion --full``; it prints
+full run (20 cases per kind) is ``tests/python/discrepancy_confusion.py --full``; it prints
 the confusion matrix per form and restricted to the held-out forms.  Targets are the issue's;
 a shortfall is a strict xfail carrying the figure measured on the CI subset, so the mark must go
 once it passes.

@@ -1,6 +1,6 @@
 """Confusion of the discrepancy workflow on blind cases whose effect forms it was not written for.
 
-The cases come from the tests' blind generator (tests/python/discrepancy_generator.py, which the
+The cases come from the blind generator beside this script (discrepancy_generator.py, which the
 workflow never uses): every vocabulary effect in two or three physically different forms, some of
 which the effect library fits ("library") and some it does not ("held out"), plus cases without a
 hidden effect, relaxation + pre-sliding pairs and a stick-slip oscillation outside the vocabulary.
@@ -10,10 +10,13 @@ held-out forms (rows: hidden, columns: first effect named); the pair and 'none' 
 "unexplained" verdict on stick-slip and on the vocabulary's own cases; parameters outside their
 documented bounds; the median gap shrink; the run time per trial.
 
-usage: python -m reference_py.discrepancy.confusion [--full | --cases N] [--workers W]
-                                                    [--results FILE] [--regrade FILE]
+usage: .venv/bin/python tests/python/discrepancy_confusion.py [--full | --cases N] [--workers W]
+                                                              [--results FILE] [--regrade FILE]
   --full      20 cases per effect form (and per none / pair / stick-slip kind), ~460 cases
   --cases N   N cases per kind (default 4: the CI subset of tests/python/test_discrepancy_blind.py)
+
+It lives in tests/, beside its generator, because the cases are the tests' own: an examiner the
+product never imports (README, "Blind confusion").
 """
 from __future__ import annotations
 
@@ -28,7 +31,8 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from .effects import NONE, VOCABULARY  # noqa: E402
+import discrepancy_generator  # noqa: E402
+from reference_py.discrepancy.effects import NONE, VOCABULARY  # noqa: E402
 
 SHORT = {"dwell_relaxation": "relax", "reversal_presliding": "presl", "velocity_friction": "visc",
          "direction_asymmetry": "asym", "layer_puncture": "layer", "sensor_drift": "drift",
@@ -132,18 +136,8 @@ def summarise(results: list[dict]) -> str:
     return "\n".join(L)
 
 
-def _generator():  # type: ignore[no-untyped-def]
-    tests = Path(__file__).resolve().parents[2] / "tests" / "python"
-    if not (tests / "discrepancy_generator.py").is_file():
-        return None
-    if str(tests) not in sys.path:
-        sys.path.insert(0, str(tests))
-    import discrepancy_generator  # type: ignore[import-not-found]
-    return discrepancy_generator
-
-
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m reference_py.discrepancy.confusion",
+    ap = argparse.ArgumentParser(prog="discrepancy_confusion.py",
                                  description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     size = ap.add_mutually_exclusive_group()
@@ -170,11 +164,6 @@ def main(argv: list[str] | None = None) -> int:
             return 2
         print(summarise(rows))
         return 0
-    gen = _generator()
-    if gen is None:
-        print("confusion: the blind generator tests/python/discrepancy_generator.py is not in "
-              "this checkout (the command runs from a source tree)", file=sys.stderr)
-        return 2
     if args.results:
         parent = Path(args.results).resolve().parent
         if not parent.is_dir() or not os.access(parent, os.W_OK):
@@ -182,7 +171,8 @@ def main(argv: list[str] | None = None) -> int:
                   "writable", file=sys.stderr)
             return 2
     cases = FULL_CASES if args.full else args.cases
-    rows = gen.run_all(gen.jobs_for(cases), workers=args.workers, progress=sys.stderr.isatty())
+    rows = discrepancy_generator.run_all(discrepancy_generator.jobs_for(cases),
+                                         workers=args.workers, progress=sys.stderr.isatty())
     if args.results:
         with open(args.results, "w") as fh:
             json.dump(rows, fh)
