@@ -79,9 +79,8 @@
  * MEMORY MODEL
  *   The caller owns every instance (static, stack or pool).  sizeof(nte_t) on x86-64 (gcc):
  *   824 bytes (float) / 1528 (double) with NTE_ROBUST_BUFFER_LEN = 0 (the bank and the
- *   contact front end, whose share is 96 / 176 bytes: its state 52 / 88, its config and its
- *   three published fields); with the default 96: 2952 (float, +2128) / 5752 (double,
- *   +4224), of which the buffer of
+ *   contact front end: its state 52 / 88 bytes, its configuration 36 / 64); with the default
+ *   96: 2952 (float, +2128) / 5752 (double, +4224), of which the buffer of
  *   96 x 4 reals is 1536 / 3072 and the LM workspace (J^T J and J^T r at the current and the
  *   trial point, both parameter vectors) 384 / 768.  The refinement's deepest stack frame
  *   (nte_step -> refinement -> lm -> simulate -> rk3) adds about 1.2 KiB (float) / 1.9 KiB

@@ -115,7 +115,7 @@ nte_err_t nte_step(nte_t* self, const nte_sample_t* sample, nte_output_t* out)
         if (first) {
             self->last.status |= NTE_STATUS_INIT;
         } else {
-            self->k_mod3 = (uint8_t)((self->k_mod3 + 1U) % 3U);
+            self->k_mod3 = (uint8_t)((self->k_mod3 + 1U) % (unsigned)NTE_FILTER_COUNT);
         }
         self->t_prev_us = sample->t_us;
         self->l_prev = fed.depth_mm;
