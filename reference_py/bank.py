@@ -57,6 +57,15 @@ STATUS_PREDICT_ONLY = 1 << 13   # processed in predict-only mode (cfg.predict_on
 # Counters of rejected samples, by cause
 REJECT_NONFINITE, REJECT_RANGE, REJECT_TIME = 0, 1, 2
 
+#: the data's bound on the published force: at most this many times the largest |force|
+#: accepted in the current insertion (at least the configured noise sd, sqrt(r_n2)).  A model
+#: whose parameters cannot describe the data (a sensor mounted the other way round, starts
+#: far off) otherwise published up to 70x the largest force it was ever given
+#: (nte-ref plausible); beyond it the published estimate is treated as diverged (z to its
+#: steady state, the force limited to the bound, STATUS_DIVERGED).  Not in predict-only mode:
+#: no force is read there.
+DATA_BOUND = 10.0
+
 
 @dataclass
 class StepOutput:
@@ -170,6 +179,8 @@ class FilterBank:
                   for nm in RELAX_NAMES[:self.n_relax]]
         self.t_prev = np.zeros(B, dtype=np.int64)
         self.l_prev = R.full(B, 0.0)
+        # the largest |force| accepted in this insertion (0 out of tissue), N: DATA_BOUND's base
+        self.y_max = R.full(B, 0.0)
         self.k = np.zeros(B, dtype=np.int64)   # accepted samples since reset (rotation index)
         self.rejects = np.zeros((3, B), dtype=np.int64)
         self.gated_run = [np.zeros(B, dtype=np.int64) for _ in self.subsets]
@@ -358,15 +369,27 @@ class FilterBank:
         fe = o.h   # Model III: the elastic force the relaxation memories follow
         if self.n_relax:
             force = fe - self._relax_terms(fe)[2]
-        bad = (run | first) & ~self._in_range(d, self.z, force)
+        fed = run | first
+        limit = c.force_max
+        if not cfg.predict_only:
+            # the data's bound (DATA_BOUND): the largest |force| of this insertion so far,
+            # this sample's included; after a sample out of tissue it starts again
+            ay = np.abs(y)
+            y_max = np.where(ay > self.y_max, ay, self.y_max)
+            self.y_max = np.where(fed, np.where(surface, R.c(0.0), y_max), self.y_max)
+            base = np.where(y_max > c.noise_sd, y_max, c.noise_sd)
+            bound = c.data_bound * base
+            limit = np.where(bound < c.force_max, bound, c.force_max)
+        bad = fed & ~(self._in_range(d, self.z, force) & (np.abs(force) <= limit))
         if np.any(bad):
-            # never publish a force or z outside their range: z to its steady state, and if the
-            # parameters still put the force out of range, the force saturated (NaN: 0)
+            # never publish a force or z outside their range (nor beyond the data's bound): z
+            # to its steady state, and if the parameters still put the force out of range, the
+            # force saturated at the limit (NaN: 0)
             z_ss = steady_state_z(R, self.th, d)
             z_fix = np.where(np.isfinite(z_ss), z_ss, R.c(0.0))
             self.z = np.where(bad, z_fix, self.z)
             o_fix = output(self.th, d, z_fix, s)
-            fmax = c.force_max
+            fmax = limit
             h = o_fix.h
             if self.n_relax:
                 fe = np.where(bad, o_fix.h, fe)
@@ -718,5 +741,7 @@ class _Constants:
         self.depth_max = R.c(cfg.depth_max_mm)
         self.speed_max = R.c(cfg.speed_max_mm_s)
         self.force_max = R.c(cfg.force_max_n)
+        self.noise_sd = np.sqrt(self.r)
+        self.data_bound = R.c(DATA_BOUND)
         self.tau = [R.c(cfg.tau_fast_s), R.c(cfg.tau_slow_s)]
         self.us_per_s = R.c(1.0e6)

@@ -78,9 +78,9 @@
  *
  * MEMORY MODEL
  *   The caller owns every instance (static, stack or pool).  sizeof(nte_t) on x86-64 (gcc):
- *   824 bytes (float) / 1528 (double) with NTE_ROBUST_BUFFER_LEN = 0 (the bank and the
+ *   824 bytes (float) / 1536 (double) with NTE_ROBUST_BUFFER_LEN = 0 (the bank and the
  *   contact front end: its state 52 / 88 bytes, its configuration 36 / 64); with the default
- *   96: 2952 (float, +2128) / 5752 (double, +4224), of which the buffer of
+ *   96: 2952 (float, +2128) / 5760 (double, +4224), of which the buffer of
  *   96 x 4 reals is 1536 / 3072 and the LM workspace (J^T J and J^T r at the current and the
  *   trial point, both parameter vectors) 384 / 768.  The refinement's deepest stack frame
  *   (nte_step -> refinement -> lm -> simulate -> rk3) adds about 1.2 KiB (float) / 1.9 KiB
@@ -218,6 +218,17 @@
  *   state (the gate may refuse the first innovations if the model drifted; it reopens after
  *   gate_reopen_after of them).  Cost in the mode: the bank's predictions without the
  *   updates, less than a normal step.
+ *
+ * THE DATA'S BOUND (reference_py/bank.py DATA_BOUND)
+ *   The published force_hat_n never exceeds NTE_K_BANK_DATA_BOUND (10) times the largest
+ *   |force| accepted in the current insertion, this sample's included (at least the noise sd
+ *   sqrt(r_n2); the count starts again after a sample out of tissue), nor force_max_n.  Beyond
+ *   it the output is handled as out of range: z set to its steady state, the force limited to
+ *   the bound, NTE_STATUS_DIVERGED and counters.diverged.  Why: a model that cannot describe
+ *   its data (a force sensor mounted the other way round, a start several times off)
+ *   published up to 70 times the largest force it had been given, within force_max_n and
+ *   unflagged (nte-ref plausible).  Not in predict-only mode (no force is read there).  Cost:
+ *   1 sqrt, 2 compares.
  */
 #ifndef NTE_H
 #define NTE_H
@@ -358,9 +369,10 @@ typedef enum nte_err_t {
                                              filter was reset (P to P0, z to its steady state
                                              beta g / sigma0), or, for the published output,
                                              z was set to its steady state and the force
-                                             saturated at +-force_max_n (NaN: 0).  A
-                                             published force_hat_n never leaves
-                                             +-force_max_n. */
+                                             saturated at +-force_max_n (NaN: 0); the same
+                                             for a published force beyond THE DATA'S
+                                             BOUND (limited to it).  A published
+                                             force_hat_n never leaves +-force_max_n. */
 #define NTE_STATUS_RUPTURE (1U << 12U) /**< Model III: a layer's rupture was found at this
                                            sample (nte_output_t.layer advanced; THE LAYER
                                            INDEX below) */
@@ -654,6 +666,9 @@ typedef struct nte_t {
     /* time line */
     int64_t t_prev_us;
     nte_real_t l_prev;
+    /* the largest |force| accepted in this insertion (0 out of tissue), N: the base of the
+     * data's bound on the published force (THE DATA'S BOUND) */
+    nte_real_t y_max;
     bool initialised;
     uint8_t k_mod3;
     nte_output_t last;

@@ -190,6 +190,7 @@ void nte_bank_start(nte_t* self)
     self->initialised = false;
     self->t_prev_us = 0;
     self->l_prev = NTE_C(0.0);
+    self->y_max = NTE_C(0.0);
     self->k_mod3 = 0U;
     self->last.force_hat_n = NTE_C(0.0);
     self->last.z = NTE_C(0.0);
@@ -655,13 +656,26 @@ void nte_bank_advance(nte_t* self, const bool first, const nte_real_t dt, const 
     if (nr > 0U) {
         force = o.h - relax_terms(self, &c, nr, o.h, g, mp);
     }
-    if (!in_range(self, &d, self->z, force)) {
-        /* never publish a force or z outside their range: z to its steady state, and if the
-         * parameters still put the force out of range, the force saturated (NaN: 0) */
+    nte_real_t limit = self->cfg.force_max_n;
+    if (!self->cfg.predict_only) {
+        /* the data's bound (bank.py DATA_BOUND): the largest |force| of this insertion so far,
+         * this sample's included; after a sample out of tissue it starts again */
+        const nte_real_t ay = nte_abs(y);
+        const nte_real_t y_max = (ay > self->y_max) ? ay : self->y_max;
+        self->y_max = c.surface ? NTE_C(0.0) : y_max;
+        const nte_real_t noise_sd = nte_sqrt(self->cfg.r_n2);
+        const nte_real_t base = (y_max > noise_sd) ? y_max : noise_sd;
+        const nte_real_t bound = NTE_K_BANK_DATA_BOUND * base;
+        limit = (bound < self->cfg.force_max_n) ? bound : self->cfg.force_max_n;
+    }
+    if (!(in_range(self, &d, self->z, force) && (nte_abs(force) <= limit))) {
+        /* never publish a force or z outside their range (nor beyond the data's bound): z to
+         * its steady state, and if the parameters still put the force out of range, the force
+         * saturated at the limit (NaN: 0) */
         const nte_real_t z_ss = nte_model_steady_state_z(&self->th, &d);
         self->z = nte_isfinite(z_ss) ? z_ss : NTE_C(0.0);
         nte_model_output(&o, &self->th, &d, self->z, c.s);
-        const nte_real_t fmax = self->cfg.force_max_n;
+        const nte_real_t fmax = limit;
         force = o.h;
         if (nr > 0U) {
             force = o.h - relax_terms(self, &c, nr, o.h, g, mp);

@@ -25,7 +25,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
-from reference_py import config, layers, params, rk3, robust  # noqa: E402
+from reference_py import bank, config, layers, params, rk3, robust  # noqa: E402
 from reference_py.fmath import F32, F64  # noqa: E402
 from reference_py.tools import csvio, verdict  # noqa: E402
 
@@ -113,6 +113,8 @@ def lib_header() -> str:
     for name in ("DRIFT_SIGMA", "THRESHOLD_SIGMA", "HOLDOFF_MM"):
         v = float(getattr(layers, name))
         rows.append(pair("NTE_K_LAYER_" + name, v, v))
+    # the data's bound on the published force (reference_py/bank.py)
+    rows.append(pair("NTE_K_BANK_DATA_BOUND", bank.DATA_BOUND, bank.DATA_BOUND))
     rows.append(pair("NTE_K_ROB_COST_HUGE", robust.COST_HUGE, robust.COST_HUGE))
     rows.append(pair("NTE_K_ROB_SURE", 0.99, 0.99))
     rows.append(pair("NTE_K_ROB_LAMBDA_MIN", 1e-7, 1e-7))

@@ -16,8 +16,9 @@ mounted the other way round).  A scenario is capped at MAX_SAMPLES samples: past
 is shortened, then the rate lowered (never below 20 Hz), then the depth.
 
 The property, on every sample: force_hat, z and the innovation finite, and |force_hat| <=
-10 x the largest |force| of the input.  Engine c (default): each scenario is written to a
-temporary CSV and estimated by the C library's host programs (nte-run, nte-run-double in
+10 x the largest |force| of the input (within ROUNDING: the estimator enforces the same factor,
+reference_py/bank.py DATA_BOUND, in its own precision).  Engine c (default): each scenario is
+written to a temporary CSV and estimated by the C library's host programs (nte-run, nte-run-double in
 --c-bin, default build/host/bin; make build), which agree with the reference at 0 ULP
 (tests/python/test_plausible.py checks it on a fixed subset); engine reference: bank scenarios
 of one configuration run together on the reference's batch axis (bit for bit the same as one at
@@ -53,6 +54,10 @@ from .trajectory import TrajectorySpec, lspb_profile
 
 MAX_SAMPLES = 6000
 BOUND = 10.0   # |force_hat| <= BOUND * max|force input|
+#: the property's slack: the estimator's own bound (bank.DATA_BOUND, the same factor) is
+#: computed in its working precision, so the limit it publishes can sit half a float32 ulp
+#: above BOUND x the force it saw
+ROUNDING = 2.0 ** -23
 
 
 @dataclass(frozen=True)
@@ -162,7 +167,7 @@ class Outcome:
 
     @property
     def ok(self) -> bool:
-        return self.finite and self.ratio <= BOUND
+        return self.finite and self.ratio <= BOUND * (1.0 + ROUNDING)
 
 
 def run_batch(scs: list[Scenario]) -> list[Outcome]:
@@ -321,7 +326,7 @@ def main_run(a: argparse.Namespace) -> int:
           f"samples {sum(r.n for r in res)}, engine {a.engine}, "
           f"{time.perf_counter() - t0:.0f} s with {a.jobs} job(s)")
     print(f"violations {len(bad)} (non-finite {sum(not r.finite for r in res)}, "
-          f"|force_hat| > {BOUND:g} x max|force| {sum(r.ratio > BOUND for r in res)})")
+          f"|force_hat| > {BOUND:g} x max|force| {sum(r.finite and not r.ok for r in res)})")
     print(f"largest |force_hat| / max|force| {worst.ratio:.3f} (seed {worst.seed}); "
           f"scenarios with DIVERGED flags {sum(r.diverged > 0 for r in res)}")
     for r in sorted(res, key=lambda r: -r.ratio)[:a.show]:
