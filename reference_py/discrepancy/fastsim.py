@@ -2,8 +2,9 @@
 
 The state equation dz/dt = l (beta - b(l) z), b = sigma0 / g(l), is linear in z.  One Kutta RK3
 sub-step (the same stages as :func:`reference_py.rk3.rk3_step`, depth linear within a sample) is
-therefore an affine map z -> a z + c whose coefficients depend on depth and parameters only.  All
-sub-step maps are computed at once with numpy and composed per sample; only the scalar recurrence
+therefore an affine map z -> a z + c whose coefficients depend on depth and parameters only
+(:mod:`reference_py.sim.kernel`, shared with ``simulate_force``).  All sub-step maps are computed
+at once with numpy and composed per sample; only the scalar recurrence
 z_{k+1} = A_k z_k + C_k runs sample by sample (a plain Python loop over floats, ~0.2 us/sample).
 Out of tissue (l <= 0) z is reset to 0, as in :func:`reference_py.tools.simulate.simulate_force`.
 
@@ -16,6 +17,7 @@ import numpy as np
 
 from ..fmath import Array
 from ..params import ParamSet
+from ..sim.kernel import rk3_affine, substep_fractions
 
 SUBSTEPS = 10
 
@@ -38,25 +40,17 @@ def state_trajectory(t_s: Array, l_mm: Array, p: float, q: float, alpha: float,
     la, lb = l_mm[:-1], l_mm[1:]
     dl = lb - la
     h = dt / substeps
-    h2, h6, twoh = h * 0.5, h / 6.0, h * 2.0
     big_a = np.ones(n - 1)
     big_c = np.zeros(n - 1)
-    nn = float(substeps)
-    for j in range(substeps):
-        l0 = np.maximum(la + dl * (j / nn), 0.0)
-        lm = np.maximum(la + dl * ((2 * j + 1) / (nn * 2.0)), 0.0)
-        l1 = np.maximum(la + dl * ((j + 1) / nn), 0.0)
+    # Python floats, as the arrays' own precision is the one to keep
+    for f0, fm, f1 in zip(*(f.tolist() for f in substep_fractions(substeps))):
+        l0 = np.maximum(la + dl * f0, 0.0)
+        lm = np.maximum(la + dl * fm, 0.0)
+        l1 = np.maximum(la + dl * f1, 0.0)
         d0, dm, d1 = l0 * _b_of_l(l0, p, q, alpha), lm * _b_of_l(lm, p, q, alpha), \
             l1 * _b_of_l(l1, p, q, alpha)
-        c0, cm, c1 = l0 * beta, lm * beta, l1 * beta
-        # stages as affine functions (coef on z, constant) of the sub-step's start value z
-        k1a, k1c = -d0, c0
-        z2a, z2c = 1.0 + h2 * k1a, h2 * k1c
-        k2a, k2c = -dm * z2a, cm - dm * z2c
-        z3a, z3c = (1.0 - h * k1a) + twoh * k2a, (-h * k1c) + twoh * k2c
-        k3a, k3c = -d1 * z3a, c1 - d1 * z3c
-        sa = 1.0 + h6 * ((k1a + 4.0 * k2a) + k3a)
-        sc = h6 * ((k1c + 4.0 * k2c) + k3c)
+        sa, sc = rk3_affine(h, ((l0 * beta, d0), (lm * beta, dm), (l1 * beta, d1)))
+        # the sample's map is the sub-steps' maps composed, first sub-step innermost
         big_a, big_c = sa * big_a, sa * big_c + sc
     inside = (l_mm[1:] > 0.0)
     big_a = np.where(inside, big_a, 0.0).tolist()

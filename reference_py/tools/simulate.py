@@ -2,7 +2,8 @@
 
 The state equation is integrated with the same RK3 step the filters use (float64, 10 sub-steps by
 default, depth linear within a sample); the output uses the exact direction sign(v) unless told
-otherwise (MODEL.md §2, §4).  z is reset to 0 whenever the depth is back at 0.
+otherwise (MODEL.md §2, §4).  z is reset to 0 whenever the depth is back at 0.  The sub-step's
+algebra is :mod:`reference_py.sim.kernel`'s, shared with the workflow's fast simulator.
 """
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ import numpy as np
 from ..fmath import F64, Array, Real
 from ..model import Theta, clamp_depth, depth_terms, exact_sign, output, smooth_sign
 from ..params import PARAM_NAMES, ParamSet
+from ..sim.kernel import rk3_affine, substep_fractions
 
 SIM_SUBSTEPS = 10
 
@@ -49,12 +51,8 @@ def simulate_force(params: list[ParamSet] | ParamSet, t_s: Array, depth_mm: Arra
 def _affine_substeps(R: Real, th, l: Array, dt: Array, substeps: int  # type: ignore[no-untyped-def]
                      ) -> tuple[Array, Array]:
     """Coefficients (batch, samples-1, substeps) of z -> a z + c for every RK3 sub-step."""
-    nsub = R.c(float(substeps))
-    h = (dt / nsub)[None, :, None]
-    j = np.arange(substeps, dtype=np.float64)
-    tau0 = R.arr(j)[None, None, :] / nsub
-    taum = R.arr(2.0 * j + 1.0)[None, None, :] / (nsub * R.c(2.0))
-    tau1 = R.arr(j + 1.0)[None, None, :] / nsub
+    h = (dt / R.c(float(substeps)))[None, :, None]
+    tau0, taum, tau1 = (f[None, None, :] for f in substep_fractions(substeps, R))
     l_a = l[:-1][None, :, None]
     dl = (l[1:] - l[:-1])[None, :, None]
     thx = _theta_direct(R, [getattr(th, nm)[:, :, None] for nm in PARAM_NAMES])
@@ -63,16 +61,7 @@ def _affine_substeps(R: Real, th, l: Array, dt: Array, substeps: int  # type: ig
     for tau in (tau0, taum, tau1):
         d = depth_terms(R, thx, clamp_depth(R, l_a + dl * tau))
         pq.append((d.l * thx.beta, d.l * d.b))
-    (p1, q1), (p2, q2), (p3, q3) = pq
-    h2, h6, twoh, four = h * R.c(0.5), h / R.c(6.0), h * R.c(2.0), R.c(4.0)
-    # k1 = p1 - q1 z;  z2 = z + h2 k1;  k2 = p2 - q2 z2;  z3 = z - h k1 + 2h k2;  k3 = p3 - q3 z3
-    k1a, k1c = -q1, p1
-    z2a, z2c = 1 + h2 * k1a, h2 * k1c
-    k2a, k2c = -q2 * z2a, p2 - q2 * z2c
-    z3a, z3c = (1 - h * k1a) + twoh * k2a, (-h * k1c) + twoh * k2c
-    k3a, k3c = -q3 * z3a, p3 - q3 * z3c
-    a = 1 + h6 * ((k1a + four * k2a) + k3a)
-    c = h6 * ((k1c + four * k2c) + k3c)
+    a, c = rk3_affine(h, tuple(pq), R)
     shape = (a.shape[0], len(dt), substeps)
     return np.broadcast_to(a, shape), np.broadcast_to(c, shape)
 
