@@ -1,4 +1,10 @@
-"""Insertion-dwell-retraction depth trajectories with linear segments and parabolic blends (LSPB)."""
+"""Insertion-dwell-retraction depth trajectories of the estimator's scenarios (LSPB moves).
+
+The scenario every simulated record of ``nte-ref simulate``, ``evaluate``, ``bench``,
+``fixedpoint`` and ``plausible`` follows: from the surface to a depth and back, cycle after cycle,
+sampled at a fixed rate with a phase per sample.  The move itself is
+:func:`reference_py.sim.motion.lspb_move`, the one the realistic phantom's stage makes too.
+"""
 from __future__ import annotations
 
 import math
@@ -7,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..fmath import Array
+from ..sim.motion import lspb_move, lspb_timing
 
 
 @dataclass(frozen=True)
@@ -32,28 +39,13 @@ class TrajectorySpec:
             raise ValueError("cycles must be >= 1")
 
 
-def _lspb(t: Array, distance: float, speed: float, accel: float) -> tuple[Array, Array, float]:
-    """Position and velocity of a 0 -> distance LSPB move at times t (s); also its duration."""
-    v = speed
-    if distance * accel < v * v:          # too short to reach the cruise speed: triangular
-        v = math.sqrt(distance * accel)
-    tb = v / accel
-    duration = distance / v + tb
-    t = np.clip(t, 0.0, duration)
-    pos = np.where(t < tb, 0.5 * accel * t * t,
-                   np.where(t <= duration - tb, 0.5 * accel * tb * tb + v * (t - tb),
-                            distance - 0.5 * accel * (duration - t) ** 2))
-    vel = np.where(t < tb, accel * t, np.where(t <= duration - tb, v, accel * (duration - t)))
-    return pos, vel, duration
-
-
 def lspb_profile(spec: TrajectorySpec) -> tuple[Array, Array, Array, Array]:
     """Sampled (t_s, depth_mm, velocity_mm_s, phase) for the whole scenario.
 
     phase: 0 out of tissue / rest, 1 insertion (v > 0), 2 dwell, 3 retraction (v < 0).
     """
     spec.validate()
-    _, _, move = _lspb(np.zeros(1), spec.depth_mm, spec.speed_mm_s, spec.accel_mm_s2)
+    move = lspb_timing(spec.depth_mm, spec.speed_mm_s, spec.accel_mm_s2)[2]
     cycle = move + spec.dwell_s + move + spec.rest_s
     total = spec.rest_s + spec.cycles * cycle
     n = int(math.floor(total * spec.rate_hz + 1e-9)) + 1
@@ -65,14 +57,14 @@ def lspb_profile(spec: TrajectorySpec) -> tuple[Array, Array, Array, Array]:
         t0 = spec.rest_s + c * cycle
         tin = t - t0
         sel = (tin >= 0.0) & (tin <= move)
-        p, vv, _ = _lspb(tin[sel], spec.depth_mm, spec.speed_mm_s, spec.accel_mm_s2)
+        p, vv, _ = lspb_move(tin[sel], spec.depth_mm, spec.speed_mm_s, spec.accel_mm_s2)
         depth[sel], vel[sel] = p, vv
         phase[sel] = np.where(vv > 0, 1, 0)
         sel = (tin > move) & (tin < move + spec.dwell_s)
         depth[sel], vel[sel], phase[sel] = spec.depth_mm, 0.0, 2
         tout = tin - (move + spec.dwell_s)
         sel = (tout >= 0.0) & (tout <= move)
-        p, vv, _ = _lspb(tout[sel], spec.depth_mm, spec.speed_mm_s, spec.accel_mm_s2)
+        p, vv, _ = lspb_move(tout[sel], spec.depth_mm, spec.speed_mm_s, spec.accel_mm_s2)
         depth[sel], vel[sel] = spec.depth_mm - p, -vv
         phase[sel] = np.where(vv > 0, 3, 2)
     # samples that fall on a segment boundary carry rounding dust (|v| ~ 1e-13): they are at rest
