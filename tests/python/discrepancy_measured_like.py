@@ -197,11 +197,11 @@ def grade(seed: int, trials: int = 1, **kw: object) -> dict:
 
 
 def phantom_trial(name: str, seed: int, **kw: object) -> tuple[Trial, np.ndarray, float, int]:
-    """One record of the realistic phantom (reference_py/tools/phantom.py, a preset or "lab"):
+    """One record of the realistic phantom (reference_py/sim/phantom.py, a preset or "lab"):
     the trial as recorded, the noise-free force with the sensor's offset and drift (what the
     workflow's prediction, tare included, should follow), the noise and the ruptures of the first
     insertion."""
-    from reference_py.tools.phantom import simulate_phantom
+    from reference_py.sim.phantom import simulate_phantom
     ph = simulate_phantom(name, seed=seed, **kw)  # type: ignore[arg-type]
     fs = float(ph.spec.sensor.force_sign)
     truth = ph.force_true_n + fs * (ph.spec.sensor.offset_n + ph.truth["samples"]["drift_n"])

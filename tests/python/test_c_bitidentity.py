@@ -129,7 +129,9 @@ def test_whole_files_with_the_contact_front_end(precision, extra, tmp_path):
     # a measured-like record (phantom lab seed 11, 3 mm/s, 75 Hz): the stage starts in the
     # air 3 mm before its zero, a tare, noise; the front end finds the surface and the bank
     # runs on the depth below it (tests/python/test_contact.py checks what it finds)
-    from reference_py.tools.phantom import LAB, simulate_phantom, write_phantom
+    from reference_py.sim.calibration import LAB
+    from reference_py.sim.phantom import simulate_phantom
+    from reference_py.tools.phantom import write_phantom
     from dataclasses import replace
     rec = simulate_phantom(LAB, seed=11, rate_hz=75.0, speeds_mm_s=(3.0,))
     csv = tmp_path / "air.csv"

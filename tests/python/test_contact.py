@@ -25,7 +25,9 @@ from reference_py.config import ContactConfig, default_config
 from reference_py.contact import CONTACT_AIR, CONTACT_TISSUE, ContactFrontEnd
 from reference_py.fmath import F32, F64, Real
 from reference_py.params import get_preset
-from reference_py.tools.phantom import LAB, PhantomResult, simulate_phantom, write_phantom
+from reference_py.sim.calibration import LAB
+from reference_py.sim.phantom import PhantomResult, simulate_phantom
+from reference_py.tools.phantom import write_phantom
 
 TUNING_SEEDS = range(1, 11)
 HELD_OUT_SEEDS = range(201, 231)

@@ -93,7 +93,7 @@ def test_velocity_friction_never_from_one_speed() -> None:
 
 
 def test_realistic_phantom_layers_relaxation_and_shrink() -> None:
-    """A record of the realistic phantom (tools/phantom.py: exponential tenting, Maxwell element
+    """A record of the realistic phantom (sim/tissue.py: exponential tenting, Maxwell element
     on the engaged tissue, Dahl pre-sliding over stage travel): its two ruptures found, relaxation
     named, no parameter outside its bounds, the RMSE to the noise-free force shrinks by >= 50 %."""
     from discrepancy_measured_like import phantom_trial

@@ -2,7 +2,7 @@
 hold (relaxation tests, hold-only protocols) is analysed with the phases it has -- it used to be
 refused ("no retraction inside the tissue", and a condition of such records "no trial could be
 split into phases", exit 2); two cycles in one record; the same tissue at 50 mN and at 10 N.
-Phantom records (reference_py/tools/phantom.py), the hold-only ones cut where the retraction would
+Phantom records (reference_py/sim/phantom.py), the hold-only ones cut where the retraction would
 start; seeds and holds not used anywhere else."""
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ import pytest
 from reference_py.discrepancy.io import Trial
 from reference_py.discrepancy.prep import PHASES, prepare
 from reference_py.discrepancy.workflow import run
-from reference_py.tools.phantom import simulate_phantom
+from reference_py.sim.phantom import simulate_phantom
 
 
 def _ending_in_the_hold(name: str, seed: int, hold_s: float) -> Trial:

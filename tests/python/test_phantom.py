@@ -2,14 +2,16 @@
 of the tissue force, its truth is consistent, and its command writes the files or refuses."""
 import csv
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from reference_py.tools import phantom as ph
+from reference_py.sim import phantom_stats as ph
+from reference_py.sim.calibration import LAB, MEASURED, PRESETS
+from reference_py.sim.phantom import simulate_phantom
+from reference_py.sim.phantom_stats import lab_statistics, record_stats, result_stats
 from reference_py.tools.cli import main as cli_main
-from reference_py.tools.phantom import (LAB, MEASURED, PRESETS, lab_statistics, record_stats,
-                                        result_stats, simulate_phantom)
 
 N_LAB = 100
 # seeds 1-100 tuned the generator (its Dahl length ratio, its scales); the statistics are checked
@@ -148,12 +150,12 @@ def test_dwell_decay_is_the_same_maxwell_element_and_grows_with_speed():
 
 def test_no_relaxation_without_the_maxwell_element_and_the_relaxing_shares():
     base = PRESETS["skin-on-muscle"]
-    spec = ph.replace(base, tissue=ph.replace(base.tissue, maxwell_n_mm=(0.0, 0.0),
+    spec = replace(base, tissue=replace(base.tissue, maxwell_n_mm=(0.0, 0.0),
                                               relax_g=(0.0, 0.0)))
     assert abs(result_stats(simulate_phantom(spec, noise_n=0.0))["dwell_decay_pct"]) < 1e-9
     # the elastic forces alone relax by their shares: g_k (1 - exp(-dwell/tau_k)) at most, much
     # less as what was loaded early in the insertion has relaxed before the dwell (4.9 % here)
-    spec = ph.replace(base, tissue=ph.replace(base.tissue, maxwell_n_mm=(0.0, 0.0)))
+    spec = replace(base, tissue=replace(base.tissue, maxwell_n_mm=(0.0, 0.0)))
     res = simulate_phantom(spec, noise_n=0.0)
     ti, dwell = spec.tissue, spec.motion.dwell_s
     most = sum(g * (1.0 - np.exp(-dwell / tau)) for g, tau in zip(ti.relax_g, ti.maxwell_tau_s))
@@ -189,7 +191,7 @@ def test_relaxation_never_makes_a_contact_force_pull():
         assert s["total"][ins].min() > 0.05, name
         out = (s["phase"] == 3) & (s["tip_depth_mm"] <= 0.0)
         assert np.all(s["friction"][out] == 0.0), name
-    bad = ph.replace(PRESETS["skin"], tissue=ph.replace(PRESETS["skin"].tissue,
+    bad = replace(PRESETS["skin"], tissue=replace(PRESETS["skin"].tissue,
                                                         relax_g=(0.6, 0.5)))
     with pytest.raises(ValueError, match="relax_g"):
         simulate_phantom(bad)

@@ -19,7 +19,8 @@ import pytest
 
 from reference_py.discrepancy import workflow
 from reference_py.discrepancy.io import Trial
-from reference_py.tools.phantom import LAB, simulate_phantom
+from reference_py.sim.calibration import LAB
+from reference_py.sim.phantom import simulate_phantom
 
 # lab seeds: noise 18, 19, 53, 15 and 8 mN; 2, 1, 1, 3 and 0 ruptures; 1-3 mm/s
 CASES = [(LAB, s, {}) for s in (2001, 2002, 2004, 2006, 2007)] + [
