@@ -6,7 +6,7 @@ therefore an affine map z -> a z + c whose coefficients depend on depth and para
 (:mod:`reference_py.sim.kernel`, shared with ``simulate_force``).  All sub-step maps are computed
 at once with numpy and composed per sample; only the scalar recurrence
 z_{k+1} = A_k z_k + C_k runs sample by sample (a plain Python loop over floats, ~0.2 us/sample).
-Out of tissue (l <= 0) z is reset to 0, as in :func:`reference_py.tools.simulate.simulate_force`.
+Out of tissue (l <= 0) z is reset to 0, as in :func:`reference_py.sim.simulate.simulate_force`.
 
 Fitting uses the normalised state zh = z / beta (z scales exactly with beta), which depends only
 on b(l) = 1 / (p + q exp(-alpha l)) with p = f1 / sigma0 and q = f2 / sigma0.

@@ -3,7 +3,7 @@
 - ``reference_py.sim.motion``: the stage's motion -- LSPB moves (linear segments, parabolic
   blends), the phantom's insertion-dwell-retraction cycles and their duration.
 - ``reference_py.sim.kernel``: one Kutta RK3 sub-step of the state equation as an affine map
-  z -> a z + c (the simulator ``reference_py.tools.simulate`` and the workflow's fast simulator
+  z -> a z + c (the simulator ``reference_py.sim.simulate`` and the workflow's fast simulator
   ``reference_py.discrepancy.fastsim`` both build on it).
 - The realistic phantom, one job per module: ``spec`` (what a phantom is made of), ``tissue`` (the
   tissue's force law along the stage motion), ``calibration`` (the measured statistics, the

@@ -5,7 +5,7 @@ linear in time, so every stage rate is p - q z with p = l beta and q = l b(l) ta
 sub-step's start, middle and end.  The sub-step is then an affine map of its start value whose
 coefficients depend on depth and parameters only: both forward simulators compute them for all
 sub-steps at once with numpy and keep only a cheap recurrence per sample.  They differ in what
-they vectorise over and in how they run the recurrence (:func:`reference_py.tools.simulate.
+they vectorise over and in how they run the recurrence (:func:`reference_py.sim.simulate.
 simulate_force`: batches of parameter sets in any working precision, one map per sub-step;
 :func:`reference_py.discrepancy.fastsim.state_trajectory`: float64, the sub-steps composed into
 one map per sample), so the algebra of the step lives here, once.

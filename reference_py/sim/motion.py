@@ -3,7 +3,7 @@
 Every synthetic record is driven by the same move: ``distance`` mm with linear segments and
 parabolic blends (LSPB) -- accelerate at ``accel`` to the cruise speed, cruise, brake at ``accel``
 -- or a triangle when the distance is too short to reach the cruise speed.  It is written once,
-here: :func:`reference_py.tools.trajectory.lspb_profile` samples the estimator's scenarios from
+here: :func:`reference_py.sim.trajectory.lspb_profile` samples the estimator's scenarios from
 it (depth from 0, a phase per sample) and :func:`stage_motion` the phantom's stage (one cycle per
 speed, from rest in air; the tissue surface lies somewhere along the stroke).
 """

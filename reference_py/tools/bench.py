@@ -18,8 +18,8 @@ from ..fmath import F32, F64, Real
 from ..model import ScaledParams, clamp_depth, depth_terms, output, output_du, output_dz, smooth_sign
 from ..params import FILTER_SUBSETS, IDX, PARAM_NAMES, get_preset
 from ..rk3 import rk3_step
-from .simulate import simulate_force
-from .trajectory import TrajectorySpec, lspb_profile
+from ..sim.simulate import simulate_force
+from ..sim.trajectory import TrajectorySpec, lspb_profile
 
 
 def bench_scenario(samples: int):

@@ -315,8 +315,8 @@ def subcommand(name: str) -> argparse.ArgumentParser:
 
 
 def _simulate(a: argparse.Namespace) -> int:
-    from .simulate import simulate_force
-    from .trajectory import TrajectorySpec, lspb_profile
+    from ..sim.simulate import simulate_force
+    from ..sim.trajectory import TrajectorySpec, lspb_profile
 
     preset = get_preset(a.preset)
     speed = preset.speed_mm_s if a.speed is None else a.speed

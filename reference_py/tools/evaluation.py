@@ -22,8 +22,8 @@ from ..config import EstimatorConfig
 from ..fmath import Array, Real
 from .. import starts
 from ..params import MODEL_PARAMS, PARAM_NAMES, ParamSet, Preset
-from .simulate import simulate_force
-from .trajectory import TrajectorySpec, lspb_profile
+from ..sim.simulate import simulate_force
+from ..sim.trajectory import TrajectorySpec, lspb_profile
 
 NOISE_N = 2e-3
 EXCLUDE_FIRST = 5

@@ -38,8 +38,8 @@ from ..model import DepthTerms, output, output_du, output_dz
 from ..params import PARAM_NAMES, PRESETS, ParamSet
 from ..rk3 import Rk3Result
 from ..starts import start_values
-from .simulate import simulate_force
-from .trajectory import TrajectorySpec, lspb_profile
+from ..sim.simulate import simulate_force
+from ..sim.trajectory import TrajectorySpec, lspb_profile
 
 #: log2 histogram bins: |x| in [2^(e-1), 2^e) goes to bin e + EXP_OFFSET (frexp's exponent)
 EXP_OFFSET = 1100

@@ -49,8 +49,8 @@ from ..starts import start_values
 from .c_engine import C_BIN, C_EXE
 from .csvio import format_real, time_us
 from .estimate import make_config
-from .simulate import simulate_force
-from .trajectory import TrajectorySpec, lspb_profile
+from ..sim.simulate import simulate_force
+from ..sim.trajectory import TrajectorySpec, lspb_profile
 
 MAX_SAMPLES = 6000
 BOUND = 10.0   # |force_hat| <= BOUND * max|force input|

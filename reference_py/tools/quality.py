@@ -10,7 +10,7 @@ from ..config import profile_config
 from .evaluation import BOUNDS, make_scenario, metrics, passes, run_bank, start_values
 from ..fmath import real_for
 from ..params import get_preset
-from .trajectory import TrajectorySpec
+from ..sim.trajectory import TrajectorySpec
 
 METRIC_COLUMNS = (("rmse_ins_n", 1e3, "RMSE ins mN"), ("rmse_ret_n", 1e3, "RMSE ret mN"),
                   ("innov_rms_n", 1e3, "innov RMS mN"), ("nis_mean", 1.0, "mean NIS"),

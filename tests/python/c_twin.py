@@ -203,7 +203,7 @@ def make_reversal() -> None:
     (no blend: the velocity jumps by 20 mm/s between two samples), preset paper-10mms truth,
     exact sign, 2 mN noise (seed 1).  For the C fault-injection test."""
     from reference_py.tools.csvio import write_atomic
-    from reference_py.tools.simulate import simulate_force
+    from reference_py.sim.simulate import simulate_force
     rate, speed, depth = 200.0, 10.0, 30.0
     n_in = int(round(depth / speed * rate))
     t = np.arange(2 * n_in + 41) / rate

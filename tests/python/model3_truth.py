@@ -23,7 +23,7 @@ from reference_py.fmath import F64  # noqa: E402
 from reference_py.model import ScaledParams, clamp_depth, depth_terms, output  # noqa: E402
 from reference_py.params import ParamSet, get_preset  # noqa: E402
 from reference_py.rk3 import rk3_step  # noqa: E402
-from reference_py.tools.trajectory import TrajectorySpec, lspb_profile  # noqa: E402
+from reference_py.sim.trajectory import TrajectorySpec, lspb_profile  # noqa: E402
 
 
 def model3_force(p: ParamSet, t: np.ndarray, l: np.ndarray, g: tuple[float, ...],

@@ -325,16 +325,16 @@ def test_cycle_finder_finds_cycles():
 
 def test_twin_rule_flags_a_tool_or_library_import():
     graph = import_graph()
-    graph["reference_py.model"] = graph["reference_py.model"] | {"reference_py.tools.simulate",
+    graph["reference_py.model"] = graph["reference_py.model"] | {"reference_py.sim.simulate",
                                                                  "scipy.optimize"}
     bad = twin_violations(graph)
-    assert "reference_py.model imports reference_py.tools.simulate" in bad
+    assert "reference_py.model imports reference_py.sim.simulate" in bad
     assert "reference_py.model imports scipy.optimize" in bad
 
 
 def test_import_resolution_sees_relative_and_lazy_imports():
     graph = import_graph()
-    assert "reference_py.tools.simulate" in graph["reference_py.tools.cli"]  # inside a function
+    assert "reference_py.sim.simulate" in graph["reference_py.tools.cli"]  # inside a function
     assert "reference_py.params" in graph["reference_py.tools.cli"]          # from ..params
     assert "reference_py.starts" in graph["reference_py.tools.evaluation"]   # from .. import starts
 

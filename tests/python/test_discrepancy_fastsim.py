@@ -5,8 +5,8 @@ import pytest
 from reference_py.discrepancy.fastsim import simulate_force_fast
 from reference_py.discrepancy.effects import known_force_term, simulate_extended
 from reference_py.params import PRESETS
-from reference_py.tools.simulate import simulate_force
-from reference_py.tools.trajectory import TrajectorySpec, lspb_profile
+from reference_py.sim.simulate import simulate_force
+from reference_py.sim.trajectory import TrajectorySpec, lspb_profile
 
 
 @pytest.mark.parametrize("preset", sorted(PRESETS))

@@ -11,7 +11,7 @@ from reference_py.config import profile_config
 from reference_py.fmath import F64
 from reference_py.params import PRESETS
 from reference_py.tools import fixedpoint as fp
-from reference_py.tools.trajectory import TrajectorySpec
+from reference_py.sim.trajectory import TrajectorySpec
 
 SHORT = TrajectorySpec(depth_mm=10.0, dwell_s=0.2)
 
@@ -61,7 +61,7 @@ def test_recording_does_not_change_the_bank():
     cfg = replace(profile_config("default", 2), beta0=p.params.beta)
     plain = FilterBank(F64, cfg, sc.starts)
     rec = fp.RecordingBank(F64, cfg, sc.starts, ranges={})
-    from reference_py.tools.trajectory import lspb_profile
+    from reference_py.sim.trajectory import lspb_profile
     t, l, v, _ = lspb_profile(sc.spec)
     rng = np.random.default_rng(3)
     for k in range(0, len(t)):

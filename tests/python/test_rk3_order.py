@@ -5,7 +5,7 @@ from scipy.integrate import solve_ivp
 from reference_py.fmath import F64
 from reference_py.params import PARAM_NAMES, get_preset
 from reference_py.rk3 import rk3_step
-from reference_py.tools.simulate import _theta_direct
+from reference_py.sim.simulate import _theta_direct
 
 
 def _theta(p):

@@ -6,8 +6,8 @@ from reference_py import robust as rb
 from reference_py.config import default_config
 from reference_py.fmath import F64
 from reference_py.params import get_preset
-from reference_py.tools.simulate import simulate_force
-from reference_py.tools.trajectory import TrajectorySpec, lspb_profile
+from reference_py.sim.simulate import simulate_force
+from reference_py.sim.trajectory import TrajectorySpec, lspb_profile
 
 PRESET = get_preset("paper-10mms")
 

@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 
 from reference_py.params import get_preset
-from reference_py.tools.simulate import simulate_force
-from reference_py.tools.trajectory import TrajectorySpec, lspb_profile
+from reference_py.sim.simulate import simulate_force
+from reference_py.sim.trajectory import TrajectorySpec, lspb_profile
 
 
 @pytest.fixture(scope="module")
@@ -60,7 +60,7 @@ def test_affine_simulator_equals_rk3_steps():
     from reference_py.fmath import F64
     from reference_py.model import clamp_depth
     from reference_py.rk3 import rk3_step
-    from reference_py.tools.simulate import _theta_direct
+    from reference_py.sim.simulate import _theta_direct
     from reference_py.params import PARAM_NAMES
 
     p = get_preset("paper-6mms").params

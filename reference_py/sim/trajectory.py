@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..fmath import Array
-from ..sim.motion import lspb_move, lspb_timing
+from .motion import lspb_move, lspb_timing
 
 
 @dataclass(frozen=True)

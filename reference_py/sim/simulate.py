@@ -12,7 +12,7 @@ import numpy as np
 from ..fmath import F64, Array, Real
 from ..model import Theta, clamp_depth, depth_terms, exact_sign, output, smooth_sign
 from ..params import PARAM_NAMES, ParamSet
-from ..sim.kernel import rk3_affine, substep_fractions
+from .kernel import rk3_affine, substep_fractions
 
 SIM_SUBSTEPS = 10
 
