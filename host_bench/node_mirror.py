@@ -26,7 +26,7 @@ import numpy as np
 
 from reference_py.bank import FilterBank, identified_names
 from reference_py.bus.dbc import FRAME_LENGTH, PARAM_SIGNALS, NteDatabase
-from reference_py.config import ContactConfig
+from reference_py.config import ContactConfig, EstimatorConfig
 from reference_py.contact import CONTACT_TISSUE
 from reference_py.tools.estimate import make_config
 from reference_py.fmath import real_for
@@ -34,10 +34,15 @@ from reference_py.params import ALL_NAMES, PRESETS, RELAX_NOMINAL
 
 F32 = np.float32
 TICK_US = 100
-#: raw ranges of the input signals (the DBC's)
-DEPTH_RAW = (0, 500000)
-VELOCITY_RAW = (-50000, 50000)
-FORCE_RAW = (-500000, 500000)
+#: the envelope (EstimatorConfig's accepted ranges), which the DBC's signals span exactly
+#: (tests/python/test_envelope.py): the node's frame layer refuses inputs and clamps outputs there
+DEPTH_MAX_MM = EstimatorConfig.depth_max_mm
+SPEED_MAX_MM_S = EstimatorConfig.speed_max_mm_s
+FORCE_MAX_N = EstimatorConfig.force_max_n
+#: raw ranges of the input signals: the envelope in the DBC's steps (1 um, 0.01 mm/s, 0.1 mN)
+DEPTH_RAW = (0, round(DEPTH_MAX_MM / 1e-3))
+VELOCITY_RAW = (-round(SPEED_MAX_MM_S / 1e-2), round(SPEED_MAX_MM_S / 1e-2))
+FORCE_RAW = (-round(FORCE_MAX_N / 1e-4), round(FORCE_MAX_N / 1e-4))
 #: Contact frames: at least every this many sensor ticks when nothing changes (100 ms)
 CONTACT_PERIOD_TICKS = 1000
 #: steps on the Depth stream while the force sensor is lost: at least this many sensor ticks
@@ -218,7 +223,7 @@ class NodeMirror:
     def _hold(self, t: int, force: np.float32) -> None:
         self._count("stale")
         e = EstimateOut(**{**self.last.__dict__, "stale": 1})
-        _, c0 = quantise(self.last_vals[0], 1e-4, -50.0, 50.0)
+        _, c0 = quantise(self.last_vals[0], 1e-4, -FORCE_MAX_N, FORCE_MAX_N)
         _, c1 = quantise(self.last_vals[1], 4e-4, -0.8192, 0.8188)
         _, c2 = quantise(self.last_vals[2], 5e-4, -8.192, 8.1915)
         e.saturated = int(c0 or c1 or c2)
@@ -239,7 +244,7 @@ class NodeMirror:
         fh, z, inn, st = F32(o.force_hat[0]), F32(o.z[0]), F32(o.innovation[0]), int(o.status[0])
         self.par_vals = [float(x) for x in o.params[:, 0]]
         self.par_sd = [float(x) for x in o.params_sd[:, 0]]
-        fr, c0 = quantise(fh, 1e-4, -50.0, 50.0)
+        fr, c0 = quantise(fh, 1e-4, -FORCE_MAX_N, FORCE_MAX_N)
         ir, c1 = quantise(inn, 4e-4, -0.8192, 0.8188)
         zr, c2 = quantise(z, 5e-4, -8.192, 8.1915)
         front_end = self.cfg.contact.enabled
@@ -260,7 +265,7 @@ class NodeMirror:
         back)."""
         valid = not bool(np.isnan(surface))
         s_raw = roundf(F32(surface / F32(0.001))) if valid else 0
-        t_raw, _ = quantise(tare, 1e-4, -50.0, 50.0)
+        t_raw, _ = quantise(tare, 1e-4, -FORCE_MAX_N, FORCE_MAX_N)
         c = ContactOut(int(state == CONTACT_TISSUE), int(valid), self.model - 1, s_raw, t_raw,
                        layer)
         if self.contact_last is not None:
@@ -272,7 +277,7 @@ class NodeMirror:
                 return
         self.contact_last = (t, c)
         self._contact_surface = float(surface) if valid else 0.0
-        if valid and abs(float(surface)) > 500.0005:
+        if valid and abs(float(surface)) > DEPTH_MAX_MM + 0.0005:   # half a 1 um step over
             self._count("encode_error")
             return
         self.contacts.append(c)

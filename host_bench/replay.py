@@ -30,9 +30,11 @@ import can
 import numpy as np
 
 from reference_py.bus.dbc import TICK_S, NteDatabase, seconds_to_ticks
+from reference_py.config import EstimatorConfig
 from reference_py.tools.csvio import Units, read_trial
 
-DEPTH_MAX_MM = 500.0
+#: the envelope's depth (tests/python/test_envelope.py: the Depth signal's range is the same)
+DEPTH_MAX_MM = EstimatorConfig.depth_max_mm
 DEPTH_SLACK_MM = 1e-6  #: depths within this of the range are clamped, not rejected
 
 

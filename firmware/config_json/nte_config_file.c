@@ -6,6 +6,8 @@
  */
 #include "nte_config_file.h"
 
+#include "nte_constants.h"
+
 #include <cjson/cJSON.h>
 
 #include <errno.h>
@@ -17,7 +19,9 @@
 
 #define SCHEMA "nte-estimator-config/1"
 #define PARAM_MAX 1000.0      /* config.NOMINAL_ABS_MAX */
-#define SURFACE_MAX_MM 500.0
+/* |surface_mm|: a stage position, within the configuration's depth range (generated from
+ * reference_py/config.py, the envelope's one source; estconfig.SURFACE_MAX_MM) */
+#define SURFACE_MAX_MM ((double)NTE_K_DEF_DEPTH_MAX_MM)
 /* RELAX_NOMINAL: the split of a relative decay between the two strengths */
 #define G_FAST_NOMINAL 0.15
 #define G_SLOW_NOMINAL 0.25

@@ -34,6 +34,7 @@
 #include "export_select.h"
 #include "csv_in.h"
 #include "nte.h"
+#include "nte_constants.h"
 #include "nte_presets.h"
 #include "nte_units.h"
 #include "start_flag.h"
@@ -482,12 +483,15 @@ static int parse_args(int argc, char** argv, args_t* a)
             }
             a->contact = (strcmp(val, "on") == 0) ? 1 : 0;
         } else if (strcmp(name, "--surface") == 0) {
+            /* a stage position: within the configuration's depth range (generated from
+             * reference_py/config.py, the envelope's one source) */
+            const double smax = (double)NTE_K_DEF_DEPTH_MAX_MM;
             a->surface = strtod(val, &end);
-            if ((end == val) || (*end != '\0') || !((a->surface >= -500.0) &&
-                                                    (a->surface <= 500.0))) { /* also NaN */
+            if ((end == val) || (*end != '\0') || !((a->surface >= -smax) &&
+                                                    (a->surface <= smax))) { /* also NaN */
                 (void)snprintf(msg, sizeof msg,
-                               "argument --surface: must be a number >= -500 and <= 500 "
-                               "(got %s)", val);
+                               "argument --surface: must be a number >= %g and <= %g "
+                               "(got %s)", -smax, smax, val);
                 return usage(msg);
             }
         } else if (unit_flag(name, val, &a->units, msg, sizeof msg) != 0) {

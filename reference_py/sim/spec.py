@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from ..config import EstimatorConfig
 from .motion import Motion
 
 
@@ -92,8 +93,9 @@ class PhantomSpec:
         if s.force_sign not in (1, -1) or s.depth_sign not in (1, -1):
             raise ValueError("force_sign and depth_sign (--force-sign, --depth-sign) must be "
                              "+1 or -1")
-        # bounded like nte-ref simulate: a record of at most 10 M samples
-        for nm, v, hi in (("stroke_mm (--stroke)", m.stroke_mm, 500.0),
+        # bounded like nte-ref simulate (a stroke within the estimator's depth range): a
+        # record of at most 10 M samples
+        for nm, v, hi in (("stroke_mm (--stroke)", m.stroke_mm, EstimatorConfig.depth_max_mm),
                           ("dwell_s (--dwell)", m.dwell_s, 3600.0), ("rest_s", m.rest_s, 3600.0),
                           ("gaps (--gaps)", s.gaps, 1000)):
             if v > hi:

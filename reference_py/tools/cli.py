@@ -34,12 +34,17 @@ from . import fixedpoint, phantom, plausible
 from .arguments import EXIT_BAD_INPUT, OneLineParser, add_unit_arguments, bounded, units_from
 from .csvio import CsvError, read_trial, write_atomic
 from .safe_write import Outputs
+from ..config import EstimatorConfig
 from ..params import PRESETS, get_preset
+
+#: the envelope (EstimatorConfig's accepted ranges) bounds what the commands take
+DEPTH_MAX_MM = EstimatorConfig.depth_max_mm
+FORCE_MAX_N = EstimatorConfig.force_max_n
 
 if TYPE_CHECKING:
     from .csvio import Trial
     from .estconfig import FileConfig
-    from ..config import ContactConfig, EstimatorConfig
+    from ..config import ContactConfig
     from ..params import Preset
 
 MAX_SIMULATED_SAMPLES = 10_000_000    #: simulate refuses longer records (≈ 0.4 GB of CSV)
@@ -112,7 +117,7 @@ def build_parser() -> argparse.ArgumentParser:
                                    "insertion, dwell and retraction; write "
                                    "t_s,depth_mm,velocity_mm_s,force_n,force_true_n.")
     s.add_argument("--preset", required=True, help=f"parameter set, one of {presets}")
-    s.add_argument("--depth", type=bounded(0.0, 500.0, " mm", lo_open=True), required=True,
+    s.add_argument("--depth", type=bounded(0.0, DEPTH_MAX_MM, " mm", lo_open=True), required=True,
                    metavar="MM", help="insertion depth, mm (no default)")
     s.add_argument("--dwell", type=bounded(0.0, 3600.0, " s"), required=True, metavar="S",
                    help="dwell at depth, s (no default)")
@@ -122,7 +127,7 @@ def build_parser() -> argparse.ArgumentParser:
                    metavar="MM_S2", help="blend acceleration, mm/s^2")
     s.add_argument("--rate", type=bounded(1.0, 20_000.0, " Hz"), default=200.0, metavar="HZ",
                    help="sample rate, Hz")
-    s.add_argument("--noise", type=bounded(0.0, 50.0, " N"), default=2e-3, metavar="N",
+    s.add_argument("--noise", type=bounded(0.0, FORCE_MAX_N, " N"), default=2e-3, metavar="N",
                    help="white force noise standard deviation, N")
     s.add_argument("--seed", type=bounded(0, 2**32 - 1, integer=True), default=1, metavar="K",
                    help="noise seed")
@@ -199,8 +204,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "there, contact is found from the force onset and the bank gets the "
                         "depth below the surface found; adds the columns surface_mm, tare_n, "
                         "contact (0 air, 1 tissue)")
-    e.add_argument("--surface", type=bounded(-500.0, 500.0, " mm"), metavar="MM",
-                   help="a known surface (stage position, -500..500 mm) instead of finding it; "
+    e.add_argument("--surface", type=bounded(-DEPTH_MAX_MM, DEPTH_MAX_MM, " mm"), metavar="MM",
+                   help=f"a known surface (stage position, -{DEPTH_MAX_MM:g}..{DEPTH_MAX_MM:g} "
+                        "mm) instead of finding it; "
                         "turns the front end on (default: none, found from the force)")
     e.add_argument("--out", required=True, metavar="EST.csv", help="the estimates to write")
     e.add_argument("--plot", metavar="EST.png", help="also draw force and parameters (PNG; default: no plot)")

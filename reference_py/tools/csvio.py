@@ -42,6 +42,7 @@ from typing import Iterable, Iterator, Sequence
 
 import numpy as np
 
+from ..config import EstimatorConfig
 from ..fmath import Array
 from .safe_write import write_atomic  # noqa: F401  (re-exported)
 
@@ -259,12 +260,13 @@ class Units:
 @dataclass(frozen=True)
 class Limits:
     """The estimator's accepted ranges (EstimatorConfig's defaults): beyond them a sample is
-    rejected; a time step above dt_max_s restarts the state."""
-    depth_min_mm: float = -1.0
-    depth_max_mm: float = 500.0
-    speed_max_mm_s: float = 500.0
-    force_max_n: float = 50.0
-    dt_max_s: float = 0.5
+    rejected; a time step above dt_max_s restarts the state.  The defaults are read from
+    EstimatorConfig (reference_py/config.py), the envelope's one source."""
+    depth_min_mm: float = EstimatorConfig.depth_min_mm
+    depth_max_mm: float = EstimatorConfig.depth_max_mm
+    speed_max_mm_s: float = EstimatorConfig.speed_max_mm_s
+    force_max_n: float = EstimatorConfig.force_max_n
+    dt_max_s: float = EstimatorConfig.dt_max_s
 
     @classmethod
     def from_config(cls, cfg: object) -> "Limits":

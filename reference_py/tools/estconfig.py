@@ -36,12 +36,14 @@ import math
 import os
 from dataclasses import dataclass, field
 
+from ..config import EstimatorConfig
 from ..params import PARAM_NAMES, RELAX_NAMES, RELAX_NOMINAL
 
 CONFIG_SCHEMA = "nte-estimator-config/1"
 #: |x| of every nominal value (config.NOMINAL_ABS_MAX)
 PARAM_MAX = 1000.0
-SURFACE_MAX_MM = 500.0
+#: |surface_mm|: a surface is a stage position, accepted within +-depth_max_mm (ContactConfig)
+SURFACE_MAX_MM = EstimatorConfig.depth_max_mm
 #: the parameters that must be positive (f2 may take either sign)
 POSITIVE_PARAMS = ("sigma0", "sigma1", "sigma2", "f1", "alpha", "beta")
 

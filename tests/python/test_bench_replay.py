@@ -22,10 +22,15 @@ import pytest
 
 from reference_py.bus.dbc import TICK_S, NteDatabase, seconds_to_ticks
 from host_bench.replay import read_scenario, schedule
+from reference_py.config import EstimatorConfig
 
 ROOT = Path(__file__).resolve().parents[2]
 T0 = 6.4
 N = 1000
+#: the envelope's ends (EstimatorConfig): the range ends a scenario may reach
+DEPTH_MAX = EstimatorConfig.depth_max_mm
+SPEED_MAX = EstimatorConfig.speed_max_mm_s
+FORCE_MAX = EstimatorConfig.force_max_n
 
 
 def write_scenario(path: Path) -> list[tuple[float, float, float, float | None]]:
@@ -37,9 +42,9 @@ def write_scenario(path: Path) -> list[tuple[float, float, float, float | None]]
         vel = 10.0 + 0.004 * (k % 2)
         force = 0.05 + 0.2 * math.sin(6.0 * tau) if k % 5 == 0 else None
         rows.append((t, depth, vel, force))
-    rows[0] = (T0, 0.0, 0.0, -50.0)                  # range ends travel too
-    rows[-1] = (rows[-1][0], 500.0, -500.0, None)
-    rows[-5] = (rows[-5][0], 499.999, 500.0, 50.0)
+    rows[0] = (T0, 0.0, 0.0, -FORCE_MAX)             # range ends travel too
+    rows[-1] = (rows[-1][0], DEPTH_MAX, -SPEED_MAX, None)
+    rows[-5] = (rows[-5][0], DEPTH_MAX - 0.001, SPEED_MAX, FORCE_MAX)
     with open(path, "w") as f:
         f.write("t_s,depth_mm,velocity_mm_s,force_n\n")
         for t, d, v, fo in rows:
@@ -318,7 +323,7 @@ def test_out_of_range_values_are_clipped_and_counted(tmp_path):
     rx = db.receiver()
     forces = [rx.decode(m.arbitration_id, m.data)[1]["Force"] for _, m in frames
               if m.arbitration_id == db.frame_id("Force")]
-    assert forces == pytest.approx([0.0, 50.0, -50.0, 1.0], abs=1e-4)
+    assert forces == pytest.approx([0.0, FORCE_MAX, -FORCE_MAX, 1.0], abs=1e-4)
 
 
 def test_help_lists_every_flag_with_its_default(capsys):

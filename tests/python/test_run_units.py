@@ -28,6 +28,7 @@ import numpy as np
 import pytest
 
 from c_twin import ROOT
+from reference_py.config import EstimatorConfig
 from run_records import NEEDS_C, PROGS, body, c_run, records_fixture, reference
 
 pytestmark = NEEDS_C
@@ -149,7 +150,9 @@ def test_correct_records_are_never_refused(records, tmp_path, base):
     from reference_py.tools.csvio import Limits, Units, read_trial
     from dataclasses import replace
     read_trial(records[base], units=Units())
-    read_trial(records[base], units=Units(), limits=replace(Limits(), depth_min_mm=-500.0))
+    # a stage position (the contact front end) may go down to -depth_max_mm
+    read_trial(records[base], units=Units(),
+               limits=replace(Limits(), depth_min_mm=-EstimatorConfig.depth_max_mm))
     for prog in PROGS:
         for flags in (["--model", "2"], ["--model", "3"], ["--model", "1", "--contact", "on"]):
             c = c_run(prog, records[base], tmp_path / "est.csv", *flags)
@@ -220,7 +223,7 @@ def _probes(k: dict[str, float]) -> dict[str, tuple[Table, bool]]:
     n = 100
     ramp = np.linspace(0.0, 20.0, n)
     flat = np.full(n, 1.0)
-    fmax = 50.0
+    fmax = EstimatorConfig.force_max_n
     out: dict[str, tuple[Table, bool]] = {}
     for side, f in (("at", k["FORCE_IMPLAUSIBLE_FACTOR"] * fmax),
                     ("above", math.nextafter(k["FORCE_IMPLAUSIBLE_FACTOR"] * fmax, math.inf))):

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from reference_py.config import EstimatorConfig
 from reference_py.tools.cli import main
 from reference_py.tools.csvio import Units, UnitsError, check_units, read_trial
 
@@ -88,7 +89,7 @@ def test_no_units_check_accepts_and_counts_the_rejected(base, tmp_path, capsys):
     capsys.readouterr()
     assert estimate(src, tmp_path / "e.csv", ["--no-units-check"]) == 0
     last = capsys.readouterr().out.strip().splitlines()[-2]
-    n_out = sum(1 for _, _, f in rows if abs(f * 1000.0) > 50.0)
+    n_out = sum(1 for _, _, f in rows if abs(f * 1000.0) > EstimatorConfig.force_max_n)
     assert last.startswith(f"samples: {len(rows)}; rejected {n_out}, ")
 
 
