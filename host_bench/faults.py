@@ -15,6 +15,8 @@ import numpy as np
 
 from reference_py.bus.candump import write_candump
 from reference_py.bus.dbc import TICK_S, NteDatabase
+from reference_py.config import EstimatorConfig
+from reference_py.tools.csvio import read_trial
 
 from .sensor_failures import reencode, sensor_fault, sensor_lost
 
@@ -158,8 +160,9 @@ def fault_rows(frames: list[tuple[float, can.Message]], db: NteDatabase, seed: i
         out.append((t, m))
     rows.append(("stuck force 1 s", out, 5.0, 6.0))
     rows.append(("saturated force 1 s",
-                 [(t, reencode(db, "Force", m, Force=50.0)) if m.arbitration_id == frc and
-                  5.0 <= t < 6.0 else (t, m) for t, m in frames], 5.0, 6.0))
+                 [(t, reencode(db, "Force", m, Force=EstimatorConfig.force_max_n))
+                  if m.arbitration_id == frc and 5.0 <= t < 6.0 else (t, m)
+                  for t, m in frames], 5.0, 6.0))
     # the same stuck force, flagged by its driver (SensorFault): predicted from the model
     rows.append(("stuck force 1 s, SensorFault", sensor_fault(out, db, [(5.0, 6.0)]), 5.0, 6.0))
     rows.append(("force sensor lost 1 s", sensor_lost(frames, db, [(5.0, 6.0)]), 5.0, 6.0))
@@ -195,16 +198,13 @@ def table(node: str, csv: str, work: "Path", rows: list[str] | None = None) -> l
     after which none is stale or faulted; None for a fault that spans the run), RMS error of the
     fresh estimates against the true force after recovery (the whole run for a fault that spans
     it), as a ratio to the fault-free run's over the same span, and the counters that moved."""
-    from .replay import read_scenario, scenario_frames
+    from .replay import scenario_frames
     db = NteDatabase()
     frames = scenario_frames(csv, db, 1000.0)
-    sc = read_scenario(csv)
-    import csv as _csv
-    with open(csv) as f:
-        rd = list(_csv.DictReader(f))
-    t_true = np.array([float(r["t_s"]) for r in rd])
-    f_true = np.array([float(r["force_true_n"]) for r in rd])
-    del sc
+    # the true force beside the scenario, read by the tools' one reader (csvio)
+    truth = read_trial(csv, required=("t_s", "depth_mm", "force_n", "force_true_n"),
+                       sparse=("force_n",))
+    t_true, f_true = truth.t_s, truth.columns["force_true_n"]
     clean, st0 = run_replay(node, frames, work, "clean")
     t0 = 0.0  # Estimate times are scenario times (log time - 1000 s)
 
