@@ -57,7 +57,7 @@ from reference_py.tools.arguments import (EXIT_BAD_INPUT, OneLineParser, add_uni
                                           bounded, units_from)
 from reference_py.tools.safe_write import Outputs
 
-from .node_mirror import NodeMirror, compare, contact_outputs, node_outputs
+from .node_mirror import NODE, NodeMirror, compare, contact_outputs, node_outputs
 from .replay import read_scenario, scenario_frames
 
 PARAM_LABELS = PARAM_NAMES
@@ -462,15 +462,17 @@ def _base_id(text: str) -> int:
 
 
 def _node_flags(r: argparse.ArgumentParser) -> None:
-    """The node's settings the reference must share."""
-    r.add_argument("--model", type=int, choices=(1, 2, 3), default=2,
+    """The node's settings the reference must share (defaulting to the node's, nte_node.h)."""
+    r.add_argument("--model", type=int, choices=(1, 2, 3), default=NODE["DEFAULT_MODEL"],
                    help="the node's model (3: Model III with the contact front end, the depth "
                         "column the stage position)")
     r.add_argument("--preset", default="paper-10mms", choices=sorted(PRESETS), metavar="NAME",
                    help=f"the node's preset, one of {', '.join(sorted(PRESETS))}")
     r.add_argument("--depth-timeout-ms", type=bounded(0.0, 60_000.0, " ms", lo_open=True),
-                   default=50.0, help="the node's depth timeout, ms")
-    r.add_argument("--params-per-step", type=bounded(1, 7, integer=True), default=1,
+                   default=NODE["DEFAULT_DEPTH_TIMEOUT_US"] / 1000.0,
+                   help="the node's depth timeout, ms")
+    r.add_argument("--params-per-step", type=bounded(1, 7, integer=True),
+                   default=NODE["DEFAULT_PARAMS_PER_STEP"],
                    help="the node's setting: Params frames per estimator step")
 
 

@@ -19,7 +19,9 @@ and the Contact frames (``contacts``) follow the node's rule (nte_node.h, MODEL 
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Iterable, Iterator
 
 import numpy as np
@@ -43,11 +45,22 @@ FORCE_MAX_N = EstimatorConfig.force_max_n
 DEPTH_RAW = (0, round(DEPTH_MAX_MM / 1e-3))
 VELOCITY_RAW = (-round(SPEED_MAX_MM_S / 1e-2), round(SPEED_MAX_MM_S / 1e-2))
 FORCE_RAW = (-round(FORCE_MAX_N / 1e-4), round(FORCE_MAX_N / 1e-4))
+#: the node's header: its defaults and periods are read from its #define lines (one source)
+NODE_H = Path(__file__).resolve().parents[1] / "firmware" / "node" / "nte_node.h"
+
+
+def node_defines(path: Path = NODE_H) -> dict[str, int]:
+    """Every integer ``#define NTE_NODE_<NAME> <value>[u]`` of the header, by NAME."""
+    return {m.group(1): int(m.group(2)) for m in re.finditer(
+        r"^#define NTE_NODE_(\w+) (\d+)u?\s*$", path.read_text(), re.MULTILINE)}
+
+
+NODE = node_defines()
 #: Contact frames: at least every this many sensor ticks when nothing changes (100 ms)
-CONTACT_PERIOD_TICKS = 1000
+CONTACT_PERIOD_TICKS = NODE["CONTACT_PERIOD_US"] // TICK_US
 #: steps on the Depth stream while the force sensor is lost: at least this many sensor ticks
 #: apart (nte_node.h NTE_NODE_PREDICT_PERIOD_US, 5 ms)
-PREDICT_PERIOD_TICKS = 50
+PREDICT_PERIOD_TICKS = NODE["PREDICT_PERIOD_US"] // TICK_US
 
 
 def roundf(x: np.float32) -> int:
@@ -112,12 +125,12 @@ def param_count(model: int) -> int:
 @dataclass
 class NodeMirror:
     preset: str = "paper-10mms"
-    model: int = 2
+    model: int = NODE["DEFAULT_MODEL"]
     base_id: int | None = None
-    depth_timeout_us: int = 50000
-    resync_gap_us: int = 20000
-    command_interval_us: int = 100000
-    params_per_step: int = 1
+    depth_timeout_us: int = NODE["DEFAULT_DEPTH_TIMEOUT_US"]
+    resync_gap_us: int = NODE["DEFAULT_RESYNC_GAP_US"]
+    command_interval_us: int = NODE["DEFAULT_COMMAND_INTERVAL_US"]
+    params_per_step: int = NODE["DEFAULT_PARAMS_PER_STEP"]
     db: NteDatabase = field(init=False)
     estimates: list[EstimateOut] = field(default_factory=list)
     params: list[ParamOut] = field(default_factory=list)
@@ -401,12 +414,12 @@ class NodeMirror:
     def _store(self, name: str, t: int, a: np.float32, b: np.float32) -> None:
         if name == "Depth":
             self.depth.append((t, a, b))
-            if len(self.depth) > 32:
+            if len(self.depth) > NODE["DEPTH_HISTORY"]:
                 self.depth.pop(0)
             if self.depth_since_force is None:
                 self.depth_since_force = t
         else:
-            if len(self.forces) >= 16:
+            if len(self.forces) >= NODE["FORCE_QUEUE"]:
                 self._count("queue_overflow")
                 return
             self.last_force_t = t

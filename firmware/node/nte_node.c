@@ -46,12 +46,12 @@ void nte_node_config_default(nte_node_config_t* cfg, int32_t model)
     nte_config_default(&cfg->estimator[1], 2, nte_schedule_all);
     nte_config_default(&cfg->estimator[2], 3, nte_schedule_all);
     cfg->estimator[2].contact.enabled = true; /* Model III: Depth is the stage position */
-    cfg->depth_timeout_us = 50000u;
-    cfg->heartbeat_period_us = 100000u;
-    cfg->params_per_step = 1u;
-    cfg->rx_budget = 64u;
-    cfg->resync_gap_us = 20000u;
-    cfg->command_interval_us = 100000u;
+    cfg->depth_timeout_us = NTE_NODE_DEFAULT_DEPTH_TIMEOUT_US;
+    cfg->heartbeat_period_us = NTE_NODE_DEFAULT_HEARTBEAT_PERIOD_US;
+    cfg->params_per_step = NTE_NODE_DEFAULT_PARAMS_PER_STEP;
+    cfg->rx_budget = NTE_NODE_DEFAULT_RX_BUDGET;
+    cfg->resync_gap_us = NTE_NODE_DEFAULT_RESYNC_GAP_US;
+    cfg->command_interval_us = NTE_NODE_DEFAULT_COMMAND_INTERVAL_US;
 }
 
 static nte_node_err_t nte_node_check(const nte_node_config_t* cfg, const nte_node_port_t* port)

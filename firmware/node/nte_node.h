@@ -264,6 +264,17 @@ typedef enum nte_node_err_t {
 /** Sensor time between two Contact frames when nothing changes (Model III), us (10 Hz). */
 #define NTE_NODE_CONTACT_PERIOD_US 100000u
 
+/* The node's defaults, written once: nte_node_config_default, the Linux port's options
+ * (port/linux/nte_node_main.c) and the bench's node mirror (host_bench/node_mirror.py, which
+ * reads these lines at import) take them from here. */
+#define NTE_NODE_DEFAULT_MODEL 2
+#define NTE_NODE_DEFAULT_DEPTH_TIMEOUT_US 50000u
+#define NTE_NODE_DEFAULT_HEARTBEAT_PERIOD_US 100000u
+#define NTE_NODE_DEFAULT_PARAMS_PER_STEP 1u
+#define NTE_NODE_DEFAULT_RX_BUDGET 64u
+#define NTE_NODE_DEFAULT_RESYNC_GAP_US 20000u
+#define NTE_NODE_DEFAULT_COMMAND_INTERVAL_US 100000u
+
 /** Node state (as in the Heartbeat). */
 typedef enum nte_node_state_t {
     nte_node_state_init = 0,    /**< no estimate yet (after start, reset or model change) */

@@ -115,11 +115,12 @@ static int parse_args(int argc, char** argv, args_t* a)
     memset(a, 0, sizeof *a);
     a->preset = NTE_PRESET_DEFAULT;
     a->base_id = NTE_FRAMES_BASE_ID_DEFAULT;
-    a->model = 2;
-    a->timeout_ms = 50u;
-    a->heartbeat_ms = 100u;
-    a->params_per_step = 1u;
-    a->resync_gap_ms = 20u;
+    /* the node's defaults (nte_node.h), in the options' units */
+    a->model = NTE_NODE_DEFAULT_MODEL;
+    a->timeout_ms = NTE_NODE_DEFAULT_DEPTH_TIMEOUT_US / 1000u;
+    a->heartbeat_ms = NTE_NODE_DEFAULT_HEARTBEAT_PERIOD_US / 1000u;
+    a->params_per_step = NTE_NODE_DEFAULT_PARAMS_PER_STEP;
+    a->resync_gap_ms = NTE_NODE_DEFAULT_RESYNC_GAP_US / 1000u;
     a->kernel_filter = 1;
     for (int i = 1; i < argc; i++) {
         const char* o = argv[i];
