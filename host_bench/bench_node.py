@@ -28,7 +28,7 @@ import numpy as np
 from reference_py.bus.candump import write_candump
 from reference_py.bus.dbc import TICK_S, NteDatabase
 
-from .replay import scenario_frames
+from .replay import FrameEncoder, ScheduledFrame, scenario_frames
 
 ROOT = Path(__file__).resolve().parents[1]
 DB = NteDatabase()
@@ -94,16 +94,16 @@ def latency(exe: str, out: Path) -> dict:
             "p99_ms": float(np.percentile(lat, 99) * 1e3), "max_ms": float(lat.max() * 1e3)}
 
 
-def rate_stream(rate_hz: float, seconds: float) -> list:
-    tx = DB.sender()
+def rate_stream(rate_hz: float, seconds: float) -> list[ScheduledFrame]:
+    """A Depth and a Force frame every 1/rate_hz s (10 mm/s, 0.02 N/mm), by the bench's encoder."""
+    enc = FrameEncoder(DB)
     step = max(1, int(round(1.0 / rate_hz / TICK_S)))
     out = []
     for k in range(0, int(seconds / TICK_S), step):
         t = k * TICK_S
-        st = (k % 65536) * TICK_S
         d = 10.0 * t
-        out.append((t, tx.message("Depth", {"Depth": d, "Velocity": 10.0, "SensorTime": st})))
-        out.append((t, tx.message("Force", {"Force": 0.02 * d, "SensorTime": st})))
+        out.append(ScheduledFrame(t, enc.depth(k, d, 10.0)))
+        out.append(ScheduledFrame(t, enc.force(k, 0.02 * d)))
     return out
 
 

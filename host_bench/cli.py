@@ -58,7 +58,7 @@ from reference_py.tools.arguments import (EXIT_BAD_INPUT, OneLineParser, add_uni
 from reference_py.tools.safe_write import Outputs
 
 from .node_mirror import NODE, NodeMirror, compare, contact_outputs, node_outputs
-from .replay import read_scenario, scenario_frames
+from .replay import paced, read_scenario, scenario_frames, send_retrying
 
 PARAM_LABELS = PARAM_NAMES
 
@@ -114,31 +114,6 @@ def log_frames(path: str) -> list[tuple[float, can.Message]]:
         raise ValueError(f"{path}: no frames")
     t0 = msgs[0].timestamp
     return [(m.timestamp - t0, m) for m in msgs if not m.is_error_frame]
-
-
-def _send_python(bus: can.BusABC, frames, speed: float, progress: bool) -> float:
-    from tqdm import tqdm
-    it = tqdm(frames, desc="replay", unit="frame", disable=None if progress else True, leave=False)
-    t_first = frames[0][0]
-    start = time.perf_counter()
-    worst = 0.0
-    for t, m in it:
-        if speed > 0:
-            target = start + (t - t_first) / speed
-            while True:
-                now = time.perf_counter()
-                if now >= target:
-                    break
-                time.sleep(min(target - now, 0.002) if target - now > 0.0005 else 0)
-            worst = max(worst, time.perf_counter() - target)
-        for attempt in range(200):
-            try:
-                bus.send(can.Message(arbitration_id=m.arbitration_id, data=m.data,
-                                     is_extended_id=m.is_extended_id))
-                break
-            except can.CanOperationError:      # ENOBUFS: the TX queue is full, retry
-                time.sleep(0.0005)
-    return worst
 
 
 def _send_canplayer(log: Path, duration_s: float, progress: bool) -> None:
@@ -302,7 +277,7 @@ def cmd_replay(a: argparse.Namespace) -> int:
                 _send_canplayer(tmp["input.log"], (frames[-1][0] - frames[0][0]) / a.speed,
                                 not a.no_progress)
             else:
-                _send_python(bus, frames, a.speed, not a.no_progress)
+                paced(frames, a.speed, lambda m: send_retrying(bus, m), not a.no_progress)
             time.sleep(a.tail)
         finally:
             notifier.stop()
