@@ -646,6 +646,23 @@ static void nte_node_commit_e2e(nte_node_t* self, uint32_t stream, const nte_e2e
     (void)nte_node_decoded(self, nte_frames_ok, e2e, lost);
 }
 
+/* The frame against a held sample's timeline: its E2E counter checked against the held
+ * state `rx_p` (advanced if accepted), its values the ones `in` decoded against the committed
+ * timeline with result `err` (E2E result `e2e`) -- unless that timeline refused it as a
+ * repeat, the one E2E refusal that depends on a timeline's counter history: then its values
+ * were never unpacked, and they are here, against the held state. */
+static nte_frames_err_t nte_node_decode_held(uint32_t stream, nte_e2e_rx_t* rx_p,
+                                             const nte_node_frame_t* fr, nte_frames_err_t err,
+                                             nte_e2e_result_t e2e, nte_node_in_t* in,
+                                             nte_e2e_result_t* e2e_p, uint8_t* lost_p)
+{
+    if ((err == nte_frames_err_e2e) && (e2e == nte_e2e_err_repeated)) {
+        return nte_node_decode_sample(stream, rx_p, fr, in, e2e_p, lost_p);
+    }
+    *e2e_p = nte_e2e_check(rx_p, fr->data, fr->len, lost_p);
+    return ((int)*e2e_p >= 0) ? err : nte_frames_err_e2e;
+}
+
 /* A depth or force frame.  Time rules (nte_node.h, "TIME"): a sample later than its stream's
  * newest by at most resync_gap is accepted; one not later by at most resync_gap is dropped
  * (time_backwards); any other is held, with its E2E state and clock uncommitted, until the
@@ -683,10 +700,10 @@ static void nte_node_on_sample(nte_node_t* self, uint32_t stream, const nte_node
         nte_e2e_rx_t rx_p = p->rx;
         nte_e2e_result_t e2e_p = nte_e2e_ok;
         uint8_t lost_p = 0u;
-        nte_node_in_t in_p;
-        if (nte_node_decode_sample(stream, &rx_p, fr, &in_p, &e2e_p, &lost_p) == nte_frames_ok) {
+        if (nte_node_decode_held(stream, &rx_p, fr, err, e2e, &in, &e2e_p, &lost_p) ==
+            nte_frames_ok) {
             nte_frames_clock_t clk_p = p->clock;
-            const uint32_t t_p = nte_frames_clock_unwrap(&clk_p, in_p.raw_t);
+            const uint32_t t_p = nte_frames_clock_unwrap(&clk_p, in.raw_t);
             const int32_t d_p = nte_node_tdiff(t_p, p->t);
             if ((d_p > 0) && (d_p <= gap)) {
                 const nte_node_pending_t held = *p;
@@ -697,7 +714,7 @@ static void nte_node_on_sample(nte_node_t* self, uint32_t stream, const nte_node
                 nte_node_store(self, stream, held.t, held.a, held.b);
                 nte_node_commit_e2e(self, stream, &rx_p, e2e_p, lost_p);
                 self->clock = clk_p;
-                nte_node_store(self, stream, t_p, in_p.a, in_p.b);
+                nte_node_store(self, stream, t_p, in.a, in.b);
                 return;
             }
         }
