@@ -30,7 +30,8 @@ from .ekf import Matrix, joseph_update, positive_definite, predict_covariance
 from .fmath import Array, Real
 from .model import (DepthTerms, Theta, ScaledParams, clamp_depth, depth_terms, exact_sign, output,
                     output_du, output_dz, smooth_sign, steady_state_z)
-from .params import (ALL_NAMES, DIR_NAMES, FILTER_SUBSETS, IDX, MODEL_PARAMS, PARAM_NAMES,
+from .params import (ALL_NAMES, DIR_NAMES, FILTER_SUBSETS, IDX, LAYER_SET_NAMES, MODEL_PARAMS,
+                     PARAM_NAMES,
                      RELAX_NAMES, RELAX_NOMINAL)
 from .rk3 import Rk3Result, rk3_step
 
@@ -124,7 +125,10 @@ class FilterBank:
     """The bank for a batch of runs.  ``nominal``: per-run list of the seven start values (or
     nine: Model III's relaxation strengths g_fast, g_slow appended; default RELAX_NOMINAL)."""
 
-    def __init__(self, R: Real, cfg: EstimatorConfig, nominal: list[list[float]]) -> None:
+    def __init__(self, R: Real, cfg: EstimatorConfig, nominal: list[list[float]],
+                 layer_values: list[list[list[float]]] | None = None) -> None:
+        """``layer_values``: per run, the values of each of cfg.layer_sets (LAYER_SET_NAMES
+        order); default: the configuration's own for every run."""
         cfg.validate()
         check_nominal(nominal)
         self.R, self.cfg = R, cfg
@@ -153,6 +157,7 @@ class FilterBank:
         # Model III's layer index: a rupture detector on filter 1's innovations
         self.layers = (RuptureDetector(R, self.batch, cfg.v_still_mm_s)
                        if self.m3 and cfg.layers else None)
+        self._layer_sets(R, cfg, layer_values)
         self.reset()
         self.initial_theta = self.th
 
@@ -188,6 +193,8 @@ class FilterBank:
             self.contact.reset()
         if self.layers is not None:
             self.layers.reset()
+        # Model III's layer sets: the set whose values the model runs with (0: the nominal)
+        self.set_layer = np.zeros(B, dtype=np.uint32)
         self.last = StepOutput(R.full(B, 0.0), R.full(B, 0.0), R.full(B, 0.0), R.full(B, 0.0),
                                np.zeros(B, dtype=np.uint32),
                                R.arr(np.zeros((len(self.identified), B))),
@@ -283,8 +290,12 @@ class FilterBank:
         else:
             out.surface_mm, out.tare_n = R.full(self.batch, 0.0), R.full(self.batch, 0.0)
             out.contact = np.zeros(self.batch, dtype=np.uint32)
-        out.layer = (self.layers.layer.copy() if self.layers is not None
-                     else np.zeros(self.batch, dtype=np.uint32))
+        if po and self.set_starts:
+            out.layer = self.set_layer.copy()   # predict-only: the layer of the set in use
+        elif self.layers is not None:
+            out.layer = self.layers.layer.copy()
+        else:
+            out.layer = np.zeros(self.batch, dtype=np.uint32)
         self.t_prev = np.where(valid, t_us, self.t_prev)
         self.l_prev = np.where(valid, l_in, self.l_prev)
         self.initialised = self.initialised | valid
@@ -302,6 +313,8 @@ class FilterBank:
         l_prev = clamp_depth(R, self.l_prev)
         surface = ~(l > R.c(0.0))
         gap = run & (dt > c.dt_max)
+        if self.set_starts:
+            self._enter_layer_sets(run | first, l, surface)
         if self.m3 and cfg.direction_memory:
             s, s_du, turned = self._direction(l, l_prev, surface | first)
         else:
@@ -557,6 +570,60 @@ class FilterBank:
         NaN is out of range."""
         fmax = self.c.force_max
         return (np.abs(h) <= fmax) & (np.abs((self.th.sigma0 * z) * d.l) <= fmax)
+
+    def _layer_sets(self, R: Real, cfg: EstimatorConfig,
+                    layer_values: list[list[list[float]]] | None) -> None:
+        """The configured layer sets in the working precision: their start depths, and per set
+        and LAYER_SET_NAMES entry the value of every run (nte.h THE LAYER SETS)."""
+        sets = cfg.layer_sets
+        if layer_values is None:
+            layer_values = [[list(ls.values) for ls in sets] for _ in range(self.batch)]
+        if len(layer_values) != self.batch or any(len(v) != len(sets) for v in layer_values):
+            raise ValueError("layer_values: one list of the configured layer sets per run")
+        self.set_starts = [R.c(ls.start_mm) for ls in sets]
+        self.set_values = [[R.arr([run[k][j] for run in layer_values])
+                            for j in range(len(LAYER_SET_NAMES))] for k in range(len(sets))]
+        kappa = self.scaled.kappa
+        f2 = self.scaled.nominal[IDX["f2"]]
+        f1 = LAYER_SET_NAMES.index("f1")
+        # the part of each set's f1 the filters scale, as restart_from computes it
+        self.set_ex = [v[f1] - kappa * (-f2) for v in self.set_values]
+        if any(np.any(~(ex > R.c(0.0))) for ex in self.set_ex):
+            raise ValueError("layer_sets: every f1 must exceed -f2 (g(0) = f1 + f2 must be "
+                             "positive)")
+
+    def _enter_layer_sets(self, fed: Array, l: Array, surface: Array) -> None:
+        """Model III's layer sets (nte.h THE LAYER SETS): in predict-only mode the deepest set
+        whose start the tip has reached since it entered the tissue replaces the nominal values
+        of LAYER_SET_NAMES (their u restarts at 0, so the model runs with the set's values);
+        out of the tissue, in any mode, the configured nominal values return."""
+        R = self.R
+        reached = np.zeros(self.batch, dtype=np.uint32)
+        for start in self.set_starts:
+            reached = reached + (l >= start).astype(np.uint32)
+        deeper = np.where(reached > self.set_layer, reached, self.set_layer)
+        target = self.set_layer
+        if self.cfg.predict_only:
+            target = deeper
+        target = np.where(surface, np.uint32(0), target).astype(np.uint32)
+        change = fed & (target != self.set_layer)
+        if not np.any(change):
+            return
+        nominal0, ex0 = self._nominal0
+        for j, nm in enumerate(LAYER_SET_NAMES):
+            value = nominal0[IDX[nm]]
+            for k, vals in enumerate(self.set_values):
+                value = np.where(target == k + 1, vals[j], value)
+            self.scaled.nominal[IDX[nm]] = np.where(change, value, self.scaled.nominal[IDX[nm]])
+            self.u[IDX[nm]] = np.where(change, R.c(0.0), self.u[IDX[nm]])
+        ex = ex0
+        for k, ex_k in enumerate(self.set_ex):
+            ex = np.where(target == k + 1, ex_k, ex)
+        self.scaled.ex_nominal = np.where(change, ex, self.scaled.ex_nominal)
+        fresh = self.scaled.refresh(self.th, self.u, LAYER_SET_NAMES)
+        self.th = Theta(*(np.where(change, getattr(fresh, f), getattr(self.th, f))
+                          for f in Theta.__dataclass_fields__))
+        self.set_layer = np.where(change, target, self.set_layer).astype(np.uint32)
 
     def _watch_layers(self, first: Array, run: Array, l: Array, v: Array,
                       innovation: Array, in_range: Array) -> Array:

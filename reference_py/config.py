@@ -18,7 +18,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 
-from .params import ALL_NAMES, BETA0_DEFAULT, FILTER_SUBSETS
+from .layers import LAYER_MAX
+from .params import ALL_NAMES, BETA0_DEFAULT, FILTER_SUBSETS, LAYER_SET_NAMES
 
 #: Table I: the raw diagonal entries of Q, per model and parameter
 PAPER_Q_ENTRIES: dict[int, dict[str, float]] = {
@@ -121,6 +122,15 @@ class ContactConfig:
 
 
 @dataclass(frozen=True)
+class LayerSet:
+    """One layer below the first for Model III's predict-only mode (nte.h nte_layer_set_t):
+    from ``start_mm`` below the surface on, the model runs with ``values`` (LAYER_SET_NAMES
+    order: sigma0, f1, beta, sigma2) in place of the nominal ones (bank._enter_layer_sets)."""
+    start_mm: float                    # depth below the surface where the layer begins, mm
+    values: tuple[float, ...]          # LAYER_SET_NAMES order, each finite, > 0, <= 1000
+
+
+@dataclass(frozen=True)
 class EstimatorConfig:
     model: int = 2                     # 1, 2 (paper's Model I / Model II) or 3 (Model III)
     schedule: str = "all"              # "all": three filters every sample; "rotate": one per sample
@@ -157,6 +167,9 @@ class EstimatorConfig:
     tau_fast_s: float = 0.3            # time constant of the fast branch, s, > 0, <= 3600
     tau_slow_s: float = 3.0            # of the slow branch, s, > 0, <= 3600
     layers: bool = True                # the layer index: a rupture detector (layers.py)
+    # the layers below the first, in depth order (at most LAYER_MAX - 1): in predict-only mode
+    # the model takes each one's values from its start depth on (written by --export-config)
+    layer_sets: tuple[LayerSet, ...] = ()
     # the surface and tare front end (contact.py); off by default.  On, the depth column is the
     # stage position, accepted within [-depth_max_mm, depth_max_mm] (depth_min_mm unused)
     contact: ContactConfig = field(default_factory=ContactConfig)
@@ -194,6 +207,28 @@ class EstimatorConfig:
         for name, v in self.q_u.items():
             if name not in ALL_NAMES or not (math.isfinite(v) and v >= 0):
                 raise ValueError(f"config field q_u[{name!r}] invalid ({v!r})")
+        self._validate_layer_sets()
+
+    def _validate_layer_sets(self) -> None:
+        sets = self.layer_sets
+        if sets and self.model != 3:
+            raise ValueError("config field layer_sets: Model III only")
+        if len(sets) > LAYER_MAX - 1:
+            raise ValueError(f"config field layer_sets: at most {LAYER_MAX - 1} (got {len(sets)})")
+        previous = 0.0
+        for k, ls in enumerate(sets):
+            s = ls.start_mm
+            if not (math.isfinite(s) and previous < s <= self.depth_max_mm):
+                raise ValueError(f"config field layer_sets[{k}].start_mm must be > the previous "
+                                 f"start (> 0 for the first) and <= depth_max_mm (got {s!r})")
+            previous = s
+            if len(ls.values) != len(LAYER_SET_NAMES):
+                raise ValueError(f"config field layer_sets[{k}]: {len(LAYER_SET_NAMES)} values "
+                                 f"({', '.join(LAYER_SET_NAMES)})")
+            for name, v in zip(LAYER_SET_NAMES, ls.values):
+                if not (math.isfinite(v) and 0 < v <= NOMINAL_ABS_MAX):
+                    raise ValueError(f"config field layer_sets[{k}].{name} must be finite, > 0 "
+                                     f"and <= {NOMINAL_ABS_MAX:g} (got {v!r})")
 
 
 def check_nominal(nominal: list[list[float]]) -> None:

@@ -31,8 +31,9 @@ tests/python/test_layers.py measures the index (its figures in the README).
 The bank (bank._watch_layers) runs the detector on filter 1's prior innovation of every
 accepted sample, before any filter's update, and treats the sample of a rupture as a tear
 (bank._tear_prior): every filter's covariance restarts at P0 — the torn layer's estimates are
-the next layer's start — and that sample updates z alone.  Which parameters each layer ends
-with is not kept per layer yet (the export carries the last layer's).
+the next layer's start — and that sample updates z alone.  --export-config writes a layer set
+(MODEL.md §3b part 3, bank._enter_layer_sets) at each tear the detector found in a record's
+first insertion, for predict-only mode.
 """
 from __future__ import annotations
 

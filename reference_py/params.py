@@ -30,6 +30,11 @@ RELAX_NAMES: tuple[str, ...] = ("g_fast", "g_slow")
 DIR_NAMES: tuple[str, ...] = ("delta",)
 ALL_NAMES: tuple[str, ...] = PARAM_NAMES + RELAX_NAMES + DIR_NAMES
 IDX = {name: i for i, name in enumerate(ALL_NAMES)}
+#: Model III's layer sets (predict-only; MODEL.md §3b part 3): the values that set one layer's
+#: force-depth curve — its stiffness sigma0, its cutting level g(l) through f1 and beta, its
+#: friction slope sigma2.  The rest (sigma1, the strengths, delta) shape dwells and reversals,
+#: which happen at one depth in one layer: a record cannot tell them apart per layer.
+LAYER_SET_NAMES: tuple[str, ...] = ("sigma0", "f1", "beta", "sigma2")
 #: nominal (starting) strengths, fractions of the elastic force; their sum must be < 1
 #: (measured dwells lose 24-49 % in 5 s, a third of it within 0.3 s)
 RELAX_NOMINAL: dict[str, float] = {"g_fast": 0.15, "g_slow": 0.25}

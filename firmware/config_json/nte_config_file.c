@@ -6,6 +6,7 @@
  */
 #include "nte_config_file.h"
 
+#include "nte.h"
 #include "nte_constants.h"
 
 #include <cjson/cJSON.h>
@@ -28,6 +29,8 @@
 
 static const char* const param_names[7] = {"sigma0", "sigma1", "sigma2", "f1",
                                            "f2",     "alpha",  "beta"};
+/* LAYER_SET_NAMES, the order of nte_layer_set_t.values */
+static const char* const layer_names[NTE_LAYER_SET_VALUES] = {"sigma0", "f1", "beta", "sigma2"};
 
 typedef struct reader_t {
     const char* path;
@@ -96,6 +99,56 @@ static int section(const reader_t* r, const cJSON* obj, const char* key, const c
     }
     *sec = v;
     return 1;
+}
+
+/* estconfig._layer_sets: at most NTE_FILE_LAYER_SETS objects in depth order, each a start
+ * (> 0, <= the depth range, above the previous) and the four positive values, g(0) > 0 with
+ * the file's f2 (out->params read) */
+static int layer_sets(const reader_t* r, const cJSON* items, nte_file_config_t* out)
+{
+    if (!cJSON_IsArray(items) || (cJSON_GetArraySize(items) > NTE_FILE_LAYER_SETS)) {
+        return fail(r, "model3.layer_sets", "must be a list of at most %d objects",
+                    NTE_FILE_LAYER_SETS);
+    }
+    const double f2 = out->params[4];
+    double previous = 0.0;
+    int k = 0;
+    const cJSON* set = NULL;
+    cJSON_ArrayForEach(set, items)
+    {
+        char key[64];
+        (void)snprintf(key, sizeof key, "model3.layer_sets[%d]", k);
+        if (!cJSON_IsObject(set)) {
+            return fail(r, key, "must be an object");
+        }
+        char name[80];
+        (void)snprintf(name, sizeof name, "%s.start_mm", key);
+        const cJSON* start = item(set, "start_mm");
+        if (!(is_num(start) && (start->valuedouble > 0.0) &&
+              (start->valuedouble <= SURFACE_MAX_MM))) {
+            return fail(r, name, "must be a number > 0 and <= %g", SURFACE_MAX_MM);
+        }
+        if (!(start->valuedouble > previous)) {
+            return fail(r, name, "must be above the previous layer's start_mm");
+        }
+        previous = start->valuedouble;
+        out->layer_start_mm[k] = previous;
+        for (size_t j = 0U; j < NTE_LAYER_SET_VALUES; j++) {
+            const cJSON* v = item(set, layer_names[j]);
+            if (!(is_num(v) && (v->valuedouble > 0.0) && (v->valuedouble <= PARAM_MAX))) {
+                (void)snprintf(name, sizeof name, "%s.%s", key, layer_names[j]);
+                return fail(r, name, "must be a positive number <= %g", PARAM_MAX);
+            }
+            out->layer_values[k][j] = v->valuedouble;
+        }
+        if ((f2 < 0.0) && !((out->layer_values[k][nte_layer_f1] + f2) > 0.0)) {
+            (void)snprintf(name, sizeof name, "%s.f1", key);
+            return fail(r, name, "g(0) = f1 + f2 must be > 0");
+        }
+        k++;
+    }
+    out->layer_sets = k;
+    return 0;
 }
 
 static int check(const reader_t* r, const cJSON* doc, nte_file_config_t* out)
@@ -278,6 +331,10 @@ static int check(const reader_t* r, const cJSON* doc, nte_file_config_t* out)
             return -1;
         }
         out->has_tau_slow = out->has_tau_slow || got;
+        const cJSON* ls = item(m3, "layer_sets");
+        if ((ls != NULL) && !cJSON_IsNull(ls) && (layer_sets(r, ls, out) < 0)) {
+            return -1;
+        }
         const cJSON* st = NULL;
         got = section(r, m3, "strengths", "model3.strengths", &st);
         if (got < 0) {

@@ -8,7 +8,16 @@
 #ifndef NTE_CONFIG_FILE_H
 #define NTE_CONFIG_FILE_H
 
+#include "nte.h"
+
 #include <stddef.h>
+
+/** Layer sets a file may give: the estimator's capacity, NTE_LAYER_SETS_MAX (a program built
+ *  with fewer, as the board image is, cannot take the reader). */
+#define NTE_FILE_LAYER_SETS 3
+#if NTE_FILE_LAYER_SETS != NTE_LAYER_SETS_MAX
+#error "the configuration file's layer sets need NTE_LAYER_SETS_MAX = 3"
+#endif
 
 /** What a configuration file sets; each has_* says whether the file gave the value. */
 typedef struct nte_file_config_t {
@@ -33,6 +42,9 @@ typedef struct nte_file_config_t {
     int direction_memory;
     int has_strengths;  /**< g[0] g_fast, g[1] g_slow: nominal strengths */
     double g[2];
+    int layer_sets;     /**< model3.layer_sets given: the count, 0..NTE_FILE_LAYER_SETS */
+    double layer_start_mm[NTE_FILE_LAYER_SETS]; /**< each set's start, mm below the surface */
+    double layer_values[NTE_FILE_LAYER_SETS][4]; /**< sigma0, f1, beta, sigma2 */
 } nte_file_config_t;
 
 /**
@@ -40,5 +52,18 @@ typedef struct nte_file_config_t {
  * reason" or "FILE: reason") in msg.
  */
 int nte_config_file_read(const char* path, nte_file_config_t* out, char* msg, size_t cap);
+
+/** The file's layer sets into a Model III configuration (in the including program's
+ *  nte_real_t: the reader itself is built in double). */
+static inline void nte_config_file_layer_sets(const nte_file_config_t* fc, nte_config_t* cfg)
+{
+    cfg->layer_sets = (uint32_t)fc->layer_sets;
+    for (int k = 0; k < fc->layer_sets; k++) {
+        cfg->layer_set[k].start_mm = (nte_real_t)fc->layer_start_mm[k];
+        for (size_t j = 0U; j < NTE_LAYER_SET_VALUES; j++) {
+            cfg->layer_set[k].values[j] = (nte_real_t)fc->layer_values[k][j];
+        }
+    }
+}
 
 #endif /* NTE_CONFIG_FILE_H */

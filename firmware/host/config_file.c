@@ -47,6 +47,26 @@ static void put_real(text_t* t, const char* indent, const char* key, double x, i
     put(t, "%s\"%s\": %s%s\n", indent, key, r, last ? "" : ",");
 }
 
+/* model3.layer_sets as json.dumps(indent=2) writes estimate.py's list of objects */
+static void put_layer_sets(text_t* t, const nte_export_t* e)
+{
+    static const char* const names[4] = {"sigma0", "f1", "beta", "sigma2"};
+    put(t, "    \"layer_sets\": [\n");
+    for (size_t k = 0U; k < e->n_sets; k++) {
+        put(t, "      {\n");
+        put_real(t, "        ", "start_mm", e->set_start_mm[k], 0);
+        for (size_t j = 0U; j < 4U; j++) {
+            put_real(t, "        ", names[j], e->set_values[k][j], 0);
+        }
+        put(t, "        \"sd\": {\n");
+        for (size_t j = 0U; j < 4U; j++) {
+            put_real(t, "          ", names[j], e->set_sd[k][j], j == 3U);
+        }
+        put(t, "        }\n      }%s\n", (k + 1U < e->n_sets) ? "," : "");
+    }
+    put(t, "    ]\n");
+}
+
 int nte_config_file_export_text(const nte_export_t* e, char* buf, size_t cap)
 {
     text_t t = {buf, cap, 0U, 0};
@@ -81,7 +101,7 @@ int nte_config_file_export_text(const nte_export_t* e, char* buf, size_t cap)
         for (int block = 0; block < 2; block++) {
             put(&t, "    \"%s\": ", (block == 0) ? "strengths" : "strengths_sd");
             if (e->n_g == 0U) {
-                put(&t, "{}%s\n", (block == 0) ? "," : "");
+                put(&t, "{}%s\n", ((block == 0) || (e->n_sets > 0U)) ? "," : "");
                 continue;
             }
             put(&t, "{\n");
@@ -89,7 +109,10 @@ int nte_config_file_export_text(const nte_export_t* e, char* buf, size_t cap)
                 put_real(&t, "      ", e->g_name[k], (block == 0) ? e->g[k] : e->g_sd[k],
                          k + 1U == e->n_g);
             }
-            put(&t, "    }%s\n", (block == 0) ? "," : "");
+            put(&t, "    }%s\n", ((block == 0) || (e->n_sets > 0U)) ? "," : "");
+        }
+        if (e->n_sets > 0U) {
+            put_layer_sets(&t, e);
         }
         put(&t, "  }%s\n", e->contact ? "," : "");
     }

@@ -35,6 +35,10 @@ typedef struct nte_export_t {
     const char* g_name[2];
     double g[2];
     double g_sd[2];
+    size_t n_sets;       /**< layer sets fitted (written as model3.layer_sets) */
+    double set_start_mm[NTE_FILE_LAYER_SETS];
+    double set_values[NTE_FILE_LAYER_SETS][4]; /**< sigma0, f1, beta, sigma2 */
+    double set_sd[NTE_FILE_LAYER_SETS][4];     /**< NaN: null */
     /* the contact front end */
     int contact;
     double surface_mm;   /**< NaN: not found (null) */

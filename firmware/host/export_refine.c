@@ -10,12 +10,14 @@
 
 #define P_MAX NTE_EXPORT_ROW_MAX
 
-/* export_refine.readable: the row kept where a reader accepts it */
-static void readable(double* row, size_t row_len)
+/* export_refine.readable: the row kept where a reader accepts it (n_sets layer sets at its
+ * end, each with its own f1) */
+static void readable(double* row, size_t row_len, size_t n_sets)
 {
+    const size_t end = row_len - (NTE_LAYER_SET_VALUES * n_sets); /* the strengths end here */
     double total = 0.0;
     for (size_t j = 0U; j < row_len; j++) {
-        if (j >= 7U) {
+        if ((j >= 7U) && (j < end)) {
             row[j] = fmin(row[j], NTE_REFINE_STRENGTH_MAX);
             total = total + row[j];
         } else {
@@ -24,14 +26,17 @@ static void readable(double* row, size_t row_len)
     }
     if (total > NTE_REFINE_STRENGTH_MAX) {
         const double scale = NTE_REFINE_STRENGTH_MAX / total;
-        for (size_t j = 7U; j < row_len; j++) {
+        for (size_t j = 7U; j < end; j++) {
             row[j] = row[j] * scale;
         }
     }
-    const size_t f1 = (size_t)nte_param_f1;
     const size_t f2 = (size_t)nte_param_f2;
-    if ((row[f2] < 0.0) && !((row[f1] + row[f2]) > 0.0)) {
-        row[f1] = -row[f2] * NTE_REFINE_G0_MARGIN;
+    for (size_t k = 0U; k <= n_sets; k++) {
+        const size_t f1 = (k == 0U) ? (size_t)nte_param_f1
+                                    : (end + ((k - 1U) * NTE_LAYER_SET_VALUES) + nte_layer_f1);
+        if ((row[f2] < 0.0) && !((row[f1] + row[f2]) > 0.0)) {
+            row[f1] = -row[f2] * NTE_REFINE_G0_MARGIN;
+        }
     }
 }
 
@@ -97,7 +102,8 @@ static void cholesky_solve(const double L[P_MAX][P_MAX], size_t n, const double*
 /* The rows of one point's Jacobian (export_refine._perturbed): each fitted entry moved by
  * its relative step, forward, or backward where forward would leave what a reader accepts;
  * neither: the row itself (the column stays 0). */
-static void perturbed(const double* row, size_t row_len, size_t j, double* moved, double* step)
+static void perturbed(const double* row, size_t row_len, size_t n_sets, size_t j, double* moved,
+                      double* step)
 {
     const double hs[2] = {NTE_REFINE_H, -NTE_REFINE_H};
     *step = NTE_REFINE_H;
@@ -108,7 +114,7 @@ static void perturbed(const double* row, size_t row_len, size_t j, double* moved
         (void)memcpy(cand, row, row_len * sizeof row[0]);
         cand[j] = row[j] * (1.0 + hs[t]);
         (void)memcpy(kept, cand, row_len * sizeof row[0]);
-        readable(kept, row_len);
+        readable(kept, row_len, n_sets);
         if (same_row(kept, cand, row_len)) {
             *step = hs[t];
             (void)memcpy(moved, cand, row_len * sizeof row[0]);
@@ -125,12 +131,13 @@ typedef struct normal_t {
 } normal_t;
 
 /* Replay a point and its Jacobian rows; sums in sample order (export_refine._normal_equations).
- * res holds (1 + P) * n doubles; *m: the counted samples. */
+ * res holds (1 + P) * n doubles, n = tr->n times the replays per row (export_replay.h); *m:
+ * the counted samples. */
 static int point_pass(const nte_config_t* run_cfg, const nte_trial_t* tr, const double* row,
                       size_t row_len, const size_t* idx, size_t P, double surface_mm,
                       double tare_n, nte_t* scratch, double* res, normal_t* ne, size_t* m)
 {
-    const size_t n = tr->n;
+    const size_t n = tr->n * ((run_cfg->layer_sets > 0U) ? NTE_EXPORT_LAYER_SHIFTS : 1U);
     double steps[P_MAX];
     nte_export_replay_t rep;
     if (nte_export_replay(run_cfg, tr, row, row_len, surface_mm, tare_n, scratch, res, &rep) !=
@@ -140,7 +147,7 @@ static int point_pass(const nte_config_t* run_cfg, const nte_trial_t* tr, const 
     *m = rep.counted;
     for (size_t j = 0U; j < P; j++) {
         double moved[NTE_EXPORT_ROW_MAX];
-        perturbed(row, row_len, idx[j], moved, &steps[j]);
+        perturbed(row, row_len, run_cfg->layer_sets, idx[j], moved, &steps[j]);
         if (nte_export_replay(run_cfg, tr, moved, row_len, surface_mm, tare_n, scratch,
                               res + ((j + 1U) * n), &rep) != 0) {
             return -1;
@@ -180,8 +187,8 @@ static int point_pass(const nte_config_t* run_cfg, const nte_trial_t* tr, const 
 
 /* export_refine._step: the values after the step solving (A + lam diag(A)) d = -b; the row
  * itself when the system cannot be solved. */
-static void damped_step(const double* row, size_t row_len, const size_t* idx, size_t P,
-                        const normal_t* ne, double lam, double* moved)
+static void damped_step(const double* row, size_t row_len, size_t n_sets, const size_t* idx,
+                        size_t P, const normal_t* ne, double lam, double* moved)
 {
     double M[P_MAX][P_MAX];
     double L[P_MAX][P_MAX];
@@ -211,7 +218,7 @@ static void damped_step(const double* row, size_t row_len, const size_t* idx, si
         const double dk = fmin(fmax(d[k], NTE_REFINE_STEP_MIN), NTE_REFINE_STEP_MAX);
         moved[idx[k]] = row[idx[k]] * ((2.0 + dk) / (2.0 - dk));
     }
-    readable(moved, row_len);
+    readable(moved, row_len, n_sets);
 }
 
 int nte_export_refine(const nte_config_t* run_cfg, const nte_trial_t* tr, const double* start,
@@ -225,7 +232,10 @@ int nte_export_refine(const nte_config_t* run_cfg, const nte_trial_t* tr, const 
             idx[P++] = j;
         }
     }
-    double* res = malloc((P + 1U) * (tr->n > 0U ? tr->n : 1U) * sizeof(double));
+    /* every replay: NTE_EXPORT_LAYER_SHIFTS of them with layer sets (export_replay.h) */
+    const size_t n_res = (tr->n > 0U ? tr->n : 1U) *
+                         ((run_cfg->layer_sets > 0U) ? NTE_EXPORT_LAYER_SHIFTS : 1U);
+    double* res = malloc((P + 1U) * n_res * sizeof(double));
     if (res == NULL) {
         return -1;
     }
@@ -245,8 +255,9 @@ int nte_export_refine(const nte_config_t* run_cfg, const nte_trial_t* tr, const 
         /* two damped steps replayed together: lam and NTE_REFINE_LAMBDA_WIDE * lam */
         double light[NTE_EXPORT_ROW_MAX];
         double heavy[NTE_EXPORT_ROW_MAX];
-        damped_step(row, row_len, idx, P, &cur, lam, light);
-        damped_step(row, row_len, idx, P, &cur, lam * NTE_REFINE_LAMBDA_WIDE, heavy);
+        damped_step(row, row_len, run_cfg->layer_sets, idx, P, &cur, lam, light);
+        damped_step(row, row_len, run_cfg->layer_sets, idx, P, &cur,
+                    lam * NTE_REFINE_LAMBDA_WIDE, heavy);
         if (same_row(light, row, row_len) && same_row(heavy, row, row_len)) {
             break;
         }

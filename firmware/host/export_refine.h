@@ -27,7 +27,8 @@
 
 /** The fit's result. */
 typedef struct nte_export_fit_t {
-    double row[NTE_EXPORT_ROW_MAX]; /**< the fitted row (the seven values, then the strengths) */
+    double row[NTE_EXPORT_ROW_MAX]; /**< the fitted row (the seven values, the strengths, the
+                                         layer sets' values) */
     double sd[NTE_EXPORT_ROW_MAX];  /**< the fit's sd of each fitted entry */
     bool has_sd[NTE_EXPORT_ROW_MAX]; /**< false: not fitted, or A could not be factored */
     double rmse_n;                  /**< RMSE of the fitted values' replay, N */

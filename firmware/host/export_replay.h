@@ -15,8 +15,16 @@
 
 #include <stddef.h>
 
-/** Entries of a replayed row: the seven force-model values, then up to two strengths. */
-#define NTE_EXPORT_ROW_MAX 9U
+/** Entries of a replayed row: the seven force-model values, up to two strengths, then the
+ *  NTE_LAYER_SET_VALUES values of each of the configuration's layer sets. */
+#define NTE_EXPORT_ROW_MAX (9U + (NTE_LAYER_SET_VALUES * NTE_LAYER_SETS_MAX))
+
+/** With layer sets, every row is replayed with their starts moved by each of these (mm) and
+ *  the residuals follow one another: a trial of the same condition tears a little deeper or
+ *  shallower, and a set fitted at one depth alone switched its force 1 mm early or late on the
+ *  next trial (export_replay.py LAYER_SHIFTS_MM, the measurement). */
+#define NTE_EXPORT_LAYER_SHIFTS 3U
+#define NTE_EXPORT_LAYER_SHIFTS_MM {-1.0, 0.0, 1.0}
 
 /** One replay's verdict. */
 typedef struct nte_export_replay_t {
@@ -25,11 +33,14 @@ typedef struct nte_export_replay_t {
 } nte_export_replay_t;
 
 /**
- * Replay `row` (row_len entries: the seven values in nte_param_id_t order, then the relaxation
- * strengths in use) over `tr` with the run's configuration `run_cfg` turned into a reader's.
+ * Replay `row` (row_len entries: the seven values in nte_param_id_t order, the relaxation
+ * strengths in use, then the values of each of run_cfg's layer_sets, nte_layer_set_t order)
+ * over `tr` with the run's configuration `run_cfg` turned into a reader's.
  * Writes prediction - (force - tare) of every counted sample, in sample order, into `res`
- * (capacity tr->n; may be NULL when only the verdict is wanted) and returns 0, or -1 when the
- * row is refused as a configuration.  `scratch` is the estimator the replay runs in.
+ * (capacity tr->n, NTE_EXPORT_LAYER_SHIFTS times that with layer sets: one replay per shift
+ * of their starts, one after the other; may be NULL when only the verdict is wanted) and
+ * returns 0, or -1 when the row is refused as a configuration.  out->counted counts every
+ * replay's samples.  `scratch` is the estimator the replay runs in.
  */
 int nte_export_replay(const nte_config_t* run_cfg, const nte_trial_t* tr, const double* row,
                       size_t row_len, double surface_mm, double tare_n, nte_t* scratch,

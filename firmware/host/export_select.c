@@ -50,10 +50,90 @@ static void keep_snapshot(const nte_export_snapshot_t* s, const double fixed[7],
                                out->g_name, &out->n_g);
 }
 
+void nte_export_layers_start(nte_export_layers_t* acc)
+{
+    (void)memset(acc, 0, sizeof *acc);
+}
+
+void nte_export_layers_add(nte_export_layers_t* acc, size_t k, double depth_mm, int contact,
+                           int with_layer, const nte_output_t* o)
+{
+    const unsigned prev = acc->prev_layer;
+    acc->prev_layer = (unsigned)o->layer;
+    if ((with_layer == 0) || (k == 0U) || (acc->done != 0)) {
+        return;
+    }
+    double depth = depth_mm;
+    if (contact != 0) {
+        const double surface = (double)o->surface_mm;
+        depth = isfinite(surface) ? (depth_mm - surface) : 0.0;
+    }
+    if (depth > 0.0) {
+        acc->entered = 1;
+    } else if (acc->entered != 0) {
+        acc->done = 1; /* the first insertion ended */
+        return;
+    }
+    if (((unsigned)o->layer > prev) && (depth > 0.0) &&
+        ((acc->count == 0U) || (depth > acc->start_mm[acc->count - 1U])) &&
+        (acc->count < NTE_LAYER_SETS_MAX)) {
+        acc->start_mm[acc->count] = depth;
+        acc->count++;
+    }
+}
+
+/* The fit again with a layer set at each start, all from the fitted values (export_select.py
+ * choose_export): kept when its replay is closer.  Returns -1 as nte_export_refine. */
+static int fit_layers(const nte_config_t* replay_cfg, const nte_trial_t* tr,
+                      const nte_export_layers_t* layers, const bool fitted[NTE_EXPORT_ROW_MAX],
+                      size_t row_len, double surface_mm, double tare_n, nte_t* scratch,
+                      nte_export_fit_t* fit, nte_export_choice_t* out)
+{
+    static const size_t ids[NTE_LAYER_SET_VALUES] = {
+        (size_t)nte_param_sigma0, (size_t)nte_param_f1, (size_t)nte_param_beta,
+        (size_t)nte_param_sigma2};
+    nte_config_t cfg = *replay_cfg;
+    double row[NTE_EXPORT_ROW_MAX];
+    bool moved[NTE_EXPORT_ROW_MAX];
+    (void)memcpy(row, fit->row, row_len * sizeof row[0]);
+    (void)memcpy(moved, fitted, sizeof moved);
+    cfg.layer_sets = (uint32_t)layers->count;
+    size_t len = row_len;
+    for (size_t k = 0U; k < layers->count; k++) {
+        cfg.layer_set[k].start_mm = (nte_real_t)layers->start_mm[k];
+        for (size_t j = 0U; j < NTE_LAYER_SET_VALUES; j++) {
+            cfg.layer_set[k].values[j] = (nte_real_t)fit->row[ids[j]];
+            row[len] = fit->row[ids[j]];
+            moved[len] = true;
+            len++;
+        }
+    }
+    nte_export_fit_t layered;
+    if (nte_export_refine(&cfg, tr, row, len, moved, surface_mm, tare_n, scratch, &layered) != 0) {
+        return -1;
+    }
+    const unsigned passes = fit->passes + layered.passes;
+    if (layered.rmse_n < fit->rmse_n) {
+        out->n_sets = layers->count;
+        for (size_t k = 0U; k < layers->count; k++) {
+            out->set_start_mm[k] = layers->start_mm[k];
+            for (size_t j = 0U; j < NTE_LAYER_SET_VALUES; j++) {
+                const size_t e = row_len + (k * NTE_LAYER_SET_VALUES) + j;
+                out->set_values[k][j] = layered.row[e];
+                out->set_sd[k][j] = layered.has_sd[e] ? layered.sd[e] : (double)NAN;
+            }
+        }
+        *fit = layered; /* its first row_len entries: the seven and the strengths */
+    }
+    fit->passes = passes;
+    return 0;
+}
+
 int nte_export_choose(const nte_config_t* run_cfg, const nte_trial_t* tr,
                       const nte_export_snapshot_t snaps[NTE_EXPORT_CANDIDATES],
-                      const double fixed[7], int model, double surface_mm, double tare_n,
-                      nte_t* scratch, nte_export_choice_t* out)
+                      const nte_export_layers_t* layers, const double fixed[7], int model,
+                      double surface_mm, double tare_n, nte_t* scratch,
+                      nte_export_choice_t* out)
 {
     /* Model III's turn-over length as identified by the end of the record (it is learned from
      * the turn-overs only): every replay and the fit run with it, and it is exported */
@@ -71,6 +151,7 @@ int nte_export_choose(const nte_config_t* run_cfg, const nte_trial_t* tr,
     out->peak_n = (double)NAN;
     out->fit_rmse_n = (double)NAN;
     out->fit_passes = 0U;
+    out->n_sets = 0U;
     keep_snapshot(&snaps[out->candidate], fixed, model, out);
     if (replay_cfg.contact.enabled && !isfinite(surface_mm)) {
         return 0; /* no surface: a reader could not predict from this file either */
@@ -132,6 +213,11 @@ int nte_export_choose(const nte_config_t* run_cfg, const nte_trial_t* tr,
     nte_export_fit_t fit;
     if (nte_export_refine(&replay_cfg, tr, row[best], row_len, fitted, surface_mm, tare_n, scratch,
                           &fit) != 0) {
+        return -1;
+    }
+    if ((layers != NULL) && (layers->count > 0U) &&
+        (fit_layers(&replay_cfg, tr, layers, fitted, row_len, surface_mm, tare_n, scratch, &fit,
+                    out) != 0)) {
         return -1;
     }
     for (size_t j = 0U; j < row_len; j++) {

@@ -47,7 +47,32 @@ typedef struct nte_export_choice_t {
     unsigned fit_passes;  /**< the fit's replays */
     double presliding_mm; /**< Model III's turn-over length replayed and exported, mm: the
                                last snapshot's identified delta, else the run's */
+    size_t n_sets;        /**< layer sets fitted (0: none found, or they did not help) */
+    double set_start_mm[NTE_LAYER_SETS_MAX]; /**< each one's start, mm below the surface */
+    double set_values[NTE_LAYER_SETS_MAX][NTE_LAYER_SET_VALUES]; /**< nte_layer_set_t order */
+    double set_sd[NTE_LAYER_SETS_MAX][NTE_LAYER_SET_VALUES];     /**< the fit's (NaN: none) */
 } nte_export_choice_t;
+
+/** Where the layers below the first begin (export_select.py layer_starts), gathered while the
+ *  run goes: the depths below the surface of the tears the rupture detector found in the
+ *  record's first insertion. */
+typedef struct nte_export_layers_t {
+    size_t count;                         /**< starts found */
+    double start_mm[NTE_LAYER_SETS_MAX];  /**< mm below the surface, increasing */
+    unsigned prev_layer;                  /**< the previous sample's published layer */
+    int entered;                          /**< the tip has been in the tissue */
+    int done;                             /**< the first insertion ended */
+} nte_export_layers_t;
+
+/** Start gathering (before the first sample). */
+void nte_export_layers_start(nte_export_layers_t* acc);
+
+/**
+ * Sample k's published output `o` and its input depth (stage position with the front end on,
+ * `contact`; the surface is o's).  Without the layer index (`with_layer` 0) nothing is found.
+ */
+void nte_export_layers_add(nte_export_layers_t* acc, size_t k, double depth_mm, int contact,
+                           int with_layer, const nte_output_t* o);
 
 /** Sample index of snapshot j (0-based, j < NTE_EXPORT_CANDIDATES) in a record of n samples:
  * ((j + 1) * n) / K - 1, at least 0. */
@@ -66,7 +91,9 @@ void nte_export_snapshot_values(const nte_export_snapshot_t* s, const double fix
  * Replay every snapshot from depth alone over `tr` with the run's configuration `run_cfg`
  * (Model III: its presliding_mm replaced by the last snapshot's identified delta, exported as
  * out->presliding_mm) turned into a reader's (export_replay.h), choose the best and fit its identified values to
- * the record (export_refine.h); `out` holds the values to export.  `scratch` is an estimator
+ * the record (export_refine.h); with layer starts, fit again with a layer set at each of them
+ * (every set starting at the fitted values) and keep that when its replay is closer; `out`
+ * holds the values to export.  `scratch` is an estimator
  * the replays run in.  With the front end on and no surface found nothing is replayed: the
  * last snapshot is exported as it is and rmse_n is NaN.  Returns 0, or -1 when a replay's
  * configuration is refused or memory runs out (not expected: the run accepted values of the
@@ -74,7 +101,8 @@ void nte_export_snapshot_values(const nte_export_snapshot_t* s, const double fix
  */
 int nte_export_choose(const nte_config_t* run_cfg, const nte_trial_t* tr,
                       const nte_export_snapshot_t snaps[NTE_EXPORT_CANDIDATES],
-                      const double fixed[7], int model, double surface_mm, double tare_n,
-                      nte_t* scratch, nte_export_choice_t* out);
+                      const nte_export_layers_t* layers, const double fixed[7], int model,
+                      double surface_mm, double tare_n, nte_t* scratch,
+                      nte_export_choice_t* out);
 
 #endif /* NTE_HOST_EXPORT_SELECT_H */

@@ -651,7 +651,7 @@ typedef struct counts_t {
  * Returns 0, EXIT_BAD_INPUT (the place cannot be written) or 1 (a write failed). */
 static int run(const args_t* a, const out_t* out, const nte_trial_t* tr, nte_t* est,
                counts_t* counts, nte_output_t* last, nte_export_snapshot_t* snaps,
-               nte_verdict_acc_t* verdict)
+               nte_export_layers_t* layers, nte_verdict_acc_t* verdict)
 {
     char tmp[sizeof out->target + 16U];
     const char* slash = strrchr(out->target, '/');
@@ -704,6 +704,7 @@ static int run(const args_t* a, const out_t* out, const nte_trial_t* tr, nte_t* 
                     (void)memcpy(snaps[c].pe, pe, sizeof pe);
                 }
             }
+            nte_export_layers_add(layers, k, tr->depth_mm[k], a->contact == 1, with_layer, &o);
         }
         fprintf(fh, "%.17g," REAL_FMT "," REAL_FMT "," REAL_FMT ",%u", tr->t_s[k],
                 (double)o.force_hat_n, (double)o.z, (double)o.innovation_n, (unsigned)o.status);
@@ -765,6 +766,14 @@ static int export_config(const args_t* a, const out_t* out, const nte_export_sna
     e.relax_branches = a->relax_branches;
     e.tau_fast_s = a->tau_fast_s;
     e.tau_slow_s = a->tau_slow_s;
+    e.n_sets = choice->n_sets;
+    for (size_t k = 0U; k < choice->n_sets; k++) {
+        e.set_start_mm[k] = choice->set_start_mm[k];
+        for (size_t j = 0U; j < NTE_LAYER_SET_VALUES; j++) {
+            e.set_values[k][j] = choice->set_values[k][j];
+            e.set_sd[k][j] = choice->set_sd[k][j];
+        }
+    }
     e.contact = a->contact == 1;
     e.surface_mm = (double)last->surface_mm;
     e.tare_n = (double)last->tare_n;
@@ -998,6 +1007,10 @@ int main(int argc, char** argv)
     cfg.relaxation = a.relaxation != 0;
     cfg.layers = a.layers != 0;
     cfg.direction_memory = a.direction_memory != 0;
+    if (have_fc && (a.model == 3)) {
+        /* the layer sets are Model III's, as the rest of the file's Model III fields */
+        nte_config_file_layer_sets(&fc, &cfg);
+    }
     cfg.estimator = (a.robust != 0) ? nte_estimator_robust : nte_estimator_bank;
     cfg.contact.enabled = (a.contact == 1);
     cfg.contact.surface_mm = (nte_real_t)a.surface;
@@ -1017,15 +1030,17 @@ int main(int argc, char** argv)
     (void)memset(&last, 0, sizeof last);
     last.surface_mm = (nte_real_t)NAN;
     static nte_export_snapshot_t snaps[NTE_EXPORT_CANDIDATES];
+    nte_export_layers_t layers;
+    nte_export_layers_start(&layers);
     nte_verdict_acc_t verdict;
     nte_verdict_start(&verdict);
     int rc = run(&a, &out, &tr, &est, &counts, &last,
-                 (a.export_config != NULL) ? snaps : NULL, &verdict);
+                 (a.export_config != NULL) ? snaps : NULL, &layers, &verdict);
     nte_export_choice_t choice;
     (void)memset(&choice, 0, sizeof choice);
     if ((rc == 0) && (a.export_config != NULL)) {
         static nte_t scratch; /* the replays of the candidates */
-        if (nte_export_choose(&cfg, &tr, snaps, values, a.model, (double)last.surface_mm,
+        if (nte_export_choose(&cfg, &tr, snaps, &layers, values, a.model, (double)last.surface_mm,
                               (double)last.tare_n, &scratch, &choice) != 0) {
             fprintf(stderr, PROG ": error: --export-config: a replay of the estimates was refused "
                             "or memory ran out\n");

@@ -78,9 +78,9 @@
  *
  * MEMORY MODEL
  *   The caller owns every instance (static, stack or pool).  sizeof(nte_t) on x86-64 (gcc):
- *   824 bytes (float) / 1536 (double) with NTE_ROBUST_BUFFER_LEN = 0 (the bank and the
+ *   896 bytes (float) / 1672 (double) with NTE_ROBUST_BUFFER_LEN = 0 (the bank and the
  *   contact front end: its state 52 / 88 bytes, its configuration 36 / 64); with the default
- *   96: 2952 (float, +2128) / 5760 (double, +4224), of which the buffer of
+ *   96: 3024 (float, +2128) / 5896 (double, +4224), of which the buffer of
  *   96 x 4 reals is 1536 / 3072 and the LM workspace (J^T J and J^T r at the current and the
  *   trial point, both parameter vectors) 384 / 768.  The refinement's deepest stack frame
  *   (nte_step -> refinement -> lm -> simulate -> rk3) adds about 1.2 KiB (float) / 1.9 KiB
@@ -219,6 +219,23 @@
  *   gate_reopen_after of them).  Cost in the mode: the bank's predictions without the
  *   updates, less than a normal step.
  *
+ * THE LAYER SETS (Model III, cfg.layer_sets; reference_py/bank.py _enter_layer_sets)
+ *   A single parameter set averages over the layers a needle crosses; sensorless prediction
+ *   needs each layer's own.  cfg.layer_set[k] holds the layer below the first that begins
+ *   start_mm below the surface, with its own sigma0, f1, beta and sigma2 -- what sets a
+ *   layer's force-depth curve (sigma1, the strengths and delta shape dwells and reversals,
+ *   which a record shows at one depth only).  In predict-only mode, at every sample in the
+ *   tissue, the deepest set whose start the tip has reached since it entered replaces those
+ *   four nominal values, their u restart at 0 (so the model runs with the set's values) and
+ *   nte_output_t.layer publishes the set's index; out of the tissue, in any mode, the
+ *   configured nominal values return (u 0 again).  Nothing else changes: z, s and the
+ *   memories carry on through a switch, the covariances are kept.  Outside predict-only mode
+ *   the sets are not entered: the filters identify from the configured start, and a set
+ *   entered before the mode was switched off stays the start of the filters' identification
+ *   until the tip leaves the tissue.  --export-config writes the sets (the depths of the
+ *   tears the rupture detector found in the record's first insertion, the values fitted to
+ *   the record's replay).  Cost: NTE_LAYER_MAX - 1 compares per sample; at a switch 4 exp.
+ *
  * THE DATA'S BOUND (reference_py/bank.py DATA_BOUND)
  *   The published force_hat_n never exceeds NTE_K_BANK_DATA_BOUND (10) times the largest
  *   |force| accepted in the current insertion, this sample's included (at least the noise sd
@@ -294,6 +311,28 @@ typedef enum nte_param_id_t {
 #define NTE_PARAM_COUNT 10
 /** Layers the index counts, 0..NTE_LAYER_MAX - 1 (reference_py/layers.py LAYER_MAX). */
 #define NTE_LAYER_MAX 4U
+/** The values of one layer set (THE LAYER SETS; reference_py/params.py LAYER_SET_NAMES):
+ *  its stiffness sigma0, its cutting level through f1 and beta, its friction slope sigma2;
+ *  index of each in nte_layer_set_t.values. */
+typedef enum nte_layer_value_t {
+    nte_layer_sigma0 = 0, /**< as nte_param_sigma0 */
+    nte_layer_f1 = 1,     /**< as nte_param_f1 */
+    nte_layer_beta = 2,   /**< as nte_param_beta */
+    nte_layer_sigma2 = 3  /**< as nte_param_sigma2 */
+} nte_layer_value_t;
+#define NTE_LAYER_SET_VALUES 4U
+/**
+ * Capacity of cfg.layer_set (THE LAYER SETS), sets, fixed at compile time: 1..NTE_LAYER_MAX - 1
+ * (the default: a set for every layer below the first).  Each costs NTE_LAYER_SET_VALUES + 1
+ * reals in every nte_config_t; the board image, which receives no sets yet (there is no
+ * configuration file on the board and no frame carries them), builds with 1.
+ */
+#ifndef NTE_LAYER_SETS_MAX
+#define NTE_LAYER_SETS_MAX (NTE_LAYER_MAX - 1U)
+#endif
+#if (NTE_LAYER_SETS_MAX < 1) || (NTE_LAYER_SETS_MAX > (NTE_LAYER_MAX - 1U))
+#error "NTE_LAYER_SETS_MAX must be in 1..NTE_LAYER_MAX - 1"
+#endif
 /** At most this many parameters are identified (Model I: six, Model II: five, Model III:
  *  eight). */
 #define NTE_IDENTIFIED_MAX 8
@@ -341,8 +380,12 @@ typedef enum nte_err_t {
                                        while NTE_ROBUST_BUFFER_LEN is 0, or robust with
                                        Model III (not supported) */
     nte_err_bad_robust = -12,     /**< a cfg.robust field is outside its range */
-    nte_err_bad_contact = -13     /**< a cfg.contact field is outside its range (checked
+    nte_err_bad_contact = -13,    /**< a cfg.contact field is outside its range (checked
                                        when cfg.contact.enabled) */
+    nte_err_bad_layer_sets = -14  /**< cfg.layer_sets > NTE_LAYER_SETS_MAX, given outside
+                                       Model III, a start not above the previous one (> 0
+                                       for the first) or beyond depth_max_mm, a value not
+                                       finite, > 0 and <= 1000, or a set's f1 not above -f2 */
 } nte_err_t;
 
 /* Status bits of one sample (same values as reference_py/bank.py STATUS_*). */
@@ -457,6 +500,16 @@ typedef struct nte_contact_config_t {
                                        deviations, > 0, <= 100 */
 } nte_contact_config_t;
 
+/** One layer below the first (Model III, THE LAYER SETS; reference_py/config.py LayerSet). */
+typedef struct nte_layer_set_t {
+    nte_real_t start_mm;                     /**< depth below the surface where the layer
+                                                  begins, mm, above the previous set's (> 0
+                                                  for the first), <= depth_max_mm */
+    nte_real_t values[NTE_LAYER_SET_VALUES]; /**< sigma0, f1, beta, sigma2 (units as
+                                                  nte_param_id_t), finite, > 0, <= 1000;
+                                                  f1 > -nominal f2 when that is < 0 */
+} nte_layer_set_t;
+
 /** q_u entry meaning "use q_u_default" (any negative value means the same). */
 #define NTE_Q_U_USE_DEFAULT (-1)
 
@@ -518,6 +571,10 @@ typedef struct nte_config_t {
                                      identifies delta from the turn-overs */
     nte_real_t tau_fast_s;      /**< [0.3] time constant of the fast branch, s, > 0, <= 3600 */
     nte_real_t tau_slow_s;      /**< [3] time constant of the slow branch, s, > 0, <= 3600 */
+    uint32_t layer_sets;        /**< [0] Model III: layer sets in use, 0..NTE_LAYER_SETS_MAX
+                                     (THE LAYER SETS above; --export-config writes them) */
+    nte_layer_set_t layer_set[NTE_LAYER_SETS_MAX]; /**< [none] the layers below the first,
+                                                        in depth order */
     /** [preset paper-10mms; g_fast 0.15, g_slow 0.25] Nominal (starting) physical values,
      *  nte_param_id_t order, finite, |x| <= 1000.  Model II keeps f2 and alpha fixed at
      *  theirs; Model I ignores nominal beta and uses beta0.  Model III with relaxation: the
@@ -575,7 +632,8 @@ typedef struct nte_output_t {
     nte_contact_state_t contact; /**< air or tissue */
     uint32_t layer;              /**< Model III with cfg.layers: the layer the tip is in,
                                       0..NTE_LAYER_MAX - 1 (0 from the surface to the first
-                                      rupture; 0 again out of the tissue); 0 otherwise */
+                                      rupture; 0 again out of the tissue); in predict-only
+                                      mode with layer sets, the set in use; 0 otherwise */
 } nte_output_t;
 
 /* ---------------------------------------------------------------------------------------- */
@@ -679,6 +737,7 @@ typedef struct nte_t {
 #endif
     nte_contact_t contact;
     nte_layers_t layers;
+    uint32_t set_layer; /**< Model III: the layer set the model runs with (0: the nominal) */
 } nte_t;
 
 /**

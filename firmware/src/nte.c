@@ -111,7 +111,11 @@ nte_err_t nte_step(nte_t* self, const nte_sample_t* sample, nte_output_t* out)
         }
         nte_bank_advance(self, first, dt, fed.depth_mm, v, fed.force_n, &self->last);
         /* the bank ran the rupture detector (nte_layers.c) on this sample before its updates */
-        self->last.layer = ((cfg->model == 3) && cfg->layers) ? self->layers.layer : 0U;
+        if ((cfg->model == 3) && cfg->predict_only && (cfg->layer_sets > 0U)) {
+            self->last.layer = self->set_layer; /* the layer of the set in use */
+        } else {
+            self->last.layer = ((cfg->model == 3) && cfg->layers) ? self->layers.layer : 0U;
+        }
         if (first) {
             self->last.status |= NTE_STATUS_INIT;
         } else {

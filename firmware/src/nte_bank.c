@@ -120,6 +120,15 @@ static void p0(const nte_t* self, const size_t n, nte_mat3_t P)
     p0_with(self, n, P, self->cfg.p0_u);
 }
 
+/* The identified part of the configured nominal f1, f1 - kappa (-f2) (self->kappa set). */
+static nte_real_t configured_ex(const nte_t* self)
+{
+    const nte_config_t* cfg = &self->cfg;
+    return (cfg->f1_excess > NTE_C(0.0))
+               ? cfg->f1_excess
+               : (cfg->nominal[nte_param_f1] - (self->kappa * (-cfg->nominal[nte_param_f2])));
+}
+
 /* The configured nominal (bank.reset restores it: a robust restart re-centres it). */
 static void set_nominal(nte_t* self)
 {
@@ -133,9 +142,7 @@ static void set_nominal(nte_t* self)
     }
     const nte_real_t f2 = cfg->nominal[nte_param_f2];
     self->kappa = (f2 < NTE_C(0.0)) ? NTE_C(1.0) : NTE_C(0.0);
-    self->ex_nominal = (cfg->f1_excess > NTE_C(0.0))
-                           ? cfg->f1_excess
-                           : (cfg->nominal[nte_param_f1] - (self->kappa * (-f2)));
+    self->ex_nominal = configured_ex(self);
     const size_t nr = relax_count(self);
     if (nr > 0U) {
         /* bank._relax_nominal: the strengths g (fractions) as the odds G the filters scale,
@@ -191,6 +198,7 @@ void nte_bank_start(nte_t* self)
     self->t_prev_us = 0;
     self->l_prev = NTE_C(0.0);
     self->y_max = NTE_C(0.0);
+    self->set_layer = 0U;
     self->k_mod3 = 0U;
     self->last.force_hat_n = NTE_C(0.0);
     self->last.z = NTE_C(0.0);
@@ -572,6 +580,43 @@ static uint32_t run_filter(nte_t* self, step_ctx_t* c, const size_t i,
     return status;
 }
 
+/* Model III's layer sets (bank._enter_layer_sets; nte.h THE LAYER SETS): in predict-only
+ * mode the deepest set whose start the tip has reached since it entered replaces the nominal
+ * sigma0, f1, beta, sigma2 (their u restart at 0); out of the tissue the configured ones
+ * return. */
+static void enter_layer_sets(nte_t* self, const nte_real_t l, const bool surface)
+{
+    static const uint8_t ids[NTE_LAYER_SET_VALUES] = {
+        (uint8_t)nte_param_sigma0, (uint8_t)nte_param_f1, (uint8_t)nte_param_beta,
+        (uint8_t)nte_param_sigma2};
+    const nte_config_t* cfg = &self->cfg;
+    uint32_t target = self->set_layer;
+    if (surface) {
+        target = 0U;
+    } else if (cfg->predict_only) {
+        uint32_t reached = 0U;
+        for (uint32_t k = 0U; k < cfg->layer_sets; k++) {
+            reached += (l >= cfg->layer_set[k].start_mm) ? 1U : 0U;
+        }
+        target = (reached > target) ? reached : target;
+    }
+    if (target == self->set_layer) {
+        return;
+    }
+    for (size_t j = 0U; j < NTE_LAYER_SET_VALUES; j++) {
+        self->nominal[ids[j]] = (target == 0U) ? cfg->nominal[ids[j]]
+                                               : cfg->layer_set[target - 1U].values[j];
+        self->u[ids[j]] = NTE_C(0.0);
+    }
+    self->ex_nominal = (target == 0U)
+                           ? configured_ex(self)
+                           : (cfg->layer_set[target - 1U].values[nte_layer_f1] -
+                              (self->kappa * (-cfg->nominal[nte_param_f2])));
+    nte_model_refresh(&self->th, self->nominal, self->ex_nominal, self->kappa, self->u, ids,
+                      NTE_LAYER_SET_VALUES);
+    self->set_layer = target;
+}
+
 void nte_bank_advance(nte_t* self, const bool first, const nte_real_t dt, const nte_real_t l_in,
                     const nte_real_t v, const nte_real_t y, nte_output_t* out)
 {
@@ -585,6 +630,9 @@ void nte_bank_advance(nte_t* self, const bool first, const nte_real_t dt, const 
     c.surface = !(c.l > NTE_C(0.0));
     c.gap = (!first) && (dt > self->cfg.dt_max_s);
     const bool m3 = self->cfg.model == 3;
+    if (m3 && (self->cfg.layer_sets > 0U)) {
+        enter_layer_sets(self, c.l, c.surface);
+    }
     const size_t nr = relax_count(self);
     /* 0 at the surface and at the first sample, like z */
     const bool dir = m3 && self->cfg.direction_memory && !(c.surface || first);

@@ -42,6 +42,13 @@ static void set_common(nte_config_t* cfg, const int32_t model, const nte_schedul
     cfg->presliding_mm = NTE_K_DEF_PRESLIDING_MM;
     cfg->tau_fast_s = NTE_K_DEF_TAU_FAST_S;
     cfg->tau_slow_s = NTE_K_DEF_TAU_SLOW_S;
+    cfg->layer_sets = 0U;
+    for (size_t k = 0U; k < NTE_LAYER_SETS_MAX; k++) {
+        cfg->layer_set[k].start_mm = NTE_C(0.0);
+        for (size_t j = 0U; j < NTE_LAYER_SET_VALUES; j++) {
+            cfg->layer_set[k].values[j] = NTE_C(0.0);
+        }
+    }
     cfg->nominal[nte_param_sigma0] = NTE_K_NOMINAL_SIGMA0;
     cfg->nominal[nte_param_sigma1] = NTE_K_NOMINAL_SIGMA1;
     cfg->nominal[nte_param_sigma2] = NTE_K_NOMINAL_SIGMA2;
@@ -193,6 +200,39 @@ static nte_err_t check_contact(const nte_contact_config_t* cc, const nte_real_t 
     return nte_err_ok;
 }
 
+/* Model III's layer sets (config.py EstimatorConfig._validate_layer_sets; bank.py
+ * _layer_sets for f1, computed as the bank computes the set's excess) */
+static nte_err_t check_layer_sets(const nte_config_t* cfg)
+{
+    if (cfg->layer_sets == 0U) {
+        return nte_err_ok;
+    }
+    if ((cfg->model != 3) || (cfg->layer_sets > NTE_LAYER_SETS_MAX)) {
+        return nte_err_bad_layer_sets;
+    }
+    const nte_real_t f2 = cfg->nominal[nte_param_f2];
+    const nte_real_t kappa = (f2 < NTE_C(0.0)) ? NTE_C(1.0) : NTE_C(0.0);
+    nte_real_t previous = NTE_C(0.0);
+    for (size_t k = 0U; k < cfg->layer_sets; k++) {
+        const nte_layer_set_t* ls = &cfg->layer_set[k];
+        if (!nte_isfinite(ls->start_mm) || !(ls->start_mm > previous) ||
+            (ls->start_mm > cfg->depth_max_mm)) {
+            return nte_err_bad_layer_sets;
+        }
+        previous = ls->start_mm;
+        for (size_t j = 0U; j < NTE_LAYER_SET_VALUES; j++) {
+            const nte_real_t v = ls->values[j];
+            if (!nte_isfinite(v) || !(v > NTE_C(0.0)) || (v > NTE_K_RANGE_NOMINAL_ABS_MAX)) {
+                return nte_err_bad_layer_sets;
+            }
+        }
+        if (!((ls->values[nte_layer_f1] - (kappa * (-f2))) > NTE_C(0.0))) {
+            return nte_err_bad_layer_sets;
+        }
+    }
+    return nte_err_ok;
+}
+
 nte_err_t nte_config_check(const nte_config_t* cfg)
 {
     if (cfg == NULL) {
@@ -280,6 +320,12 @@ nte_err_t nte_config_check(const nte_config_t* cfg)
         const nte_real_t ex = cfg->nominal[nte_param_f1] - (kappa * (-f2));
         if (!(ex > NTE_C(0.0))) {
             return nte_err_bad_f1;
+        }
+    }
+    {
+        const nte_err_t e = check_layer_sets(cfg);
+        if (e != nte_err_ok) {
+            return e;
         }
     }
     if ((cfg->estimator == nte_estimator_robust) && (cfg->model == 3)) {

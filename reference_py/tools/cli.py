@@ -517,6 +517,9 @@ def model3_overrides(a: argparse.Namespace, fc: "FileConfig | None" = None) -> d
         out["layers"] = False
     if getattr(a, "predict_only", False):
         out["predict_only"] = True
+    if a.model != 3:
+        # the layer sets are Model III's, as the rest of the file's Model III fields
+        out.pop("layer_sets", None)
     return out
 
 

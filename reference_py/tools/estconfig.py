@@ -25,7 +25,9 @@ Mapping onto the estimator (every key optional unless marked):
 * ``effects.reversal_presliding.presliding_mm`` (> 0, <= 1000 mm): the turn-over length;
 * ``model3`` (the export's block; wins over ``effects``): ``direction_memory``, ``relaxation``
   (booleans), ``relax_branches`` (1 or 2), ``presliding_mm``, ``tau_fast_s``, ``tau_slow_s``,
-  ``strengths`` {``g_fast``, ``g_slow``} in (0, 1) with a sum < 1.
+  ``strengths`` {``g_fast``, ``g_slow``} in (0, 1) with a sum < 1, ``layer_sets`` (a list of
+  at most LAYER_MAX - 1 objects {``start_mm``, ``sigma0``, ``f1``, ``beta``, ``sigma2``}: the
+  layers below the first in depth order, used in predict-only mode; MODEL.md §3b part 3).
 
 Unknown keys are ignored (the workflow writes its evidence beside the configuration).
 """
@@ -36,8 +38,11 @@ import math
 import os
 from dataclasses import dataclass, field
 
-from ..config import EstimatorConfig
-from ..params import PARAM_NAMES, RELAX_NAMES, RELAX_NOMINAL
+from typing import Callable
+
+from ..config import EstimatorConfig, LayerSet
+from ..layers import LAYER_MAX
+from ..params import LAYER_SET_NAMES, PARAM_NAMES, RELAX_NAMES, RELAX_NOMINAL
 
 CONFIG_SCHEMA = "nte-estimator-config/1"
 #: |x| of every nominal value (config.NOMINAL_ABS_MAX)
@@ -200,6 +205,8 @@ def read_config_file(path: str) -> FileConfig:
             v = number(m3, k, f"model3.{k}", 0.0, hi, True, False)
             if v is not None:
                 out.m3[k] = v
+        if m3.get("layer_sets") is not None:
+            out.m3["layer_sets"] = _layer_sets(m3["layer_sets"], params, fail)
         st = section(m3, "strengths", "model3.strengths")
         if st is not None:
             g = dict(out.strengths)
@@ -216,6 +223,38 @@ def read_config_file(path: str) -> FileConfig:
             raise fail("model3.strengths", "g_fast + g_slow must be < 1")
         out.strengths = g
     return out
+
+
+def _layer_sets(items: object, params: list[float], fail: "Callable[[str, str], Exception]"
+                ) -> tuple[LayerSet, ...]:
+    """``model3.layer_sets``: at most LAYER_MAX - 1 objects in depth order, each with
+    ``start_mm`` (> 0, <= the depth range, above the previous start) and the LAYER_SET_NAMES
+    values (positive, <= PARAM_MAX, g(0) = f1 + f2 > 0 with the file's f2)."""
+    if not isinstance(items, list) or len(items) > LAYER_MAX - 1:
+        raise fail("model3.layer_sets", f"must be a list of at most {LAYER_MAX - 1} objects")
+    f2 = params[PARAM_NAMES.index("f2")]
+    out = []
+    previous = 0.0
+    for k, item in enumerate(items):
+        key = f"model3.layer_sets[{k}]"
+        if not isinstance(item, dict):
+            raise fail(key, "must be an object")
+        start = item.get("start_mm")
+        if not (_is_num(start) and 0 < start <= SURFACE_MAX_MM):  # type: ignore[operator]
+            raise fail(f"{key}.start_mm", f"must be a number > 0 and <= {SURFACE_MAX_MM:g}")
+        if not start > previous:  # type: ignore[operator]
+            raise fail(f"{key}.start_mm", "must be above the previous layer's start_mm")
+        previous = float(start)  # type: ignore[arg-type]
+        values = []
+        for nm in LAYER_SET_NAMES:
+            v = item.get(nm)
+            if not (_is_num(v) and 0 < v <= PARAM_MAX):  # type: ignore[operator]
+                raise fail(f"{key}.{nm}", f"must be a positive number <= {PARAM_MAX:g}")
+            values.append(float(v))  # type: ignore[arg-type]
+        if f2 < 0 and not values[LAYER_SET_NAMES.index("f1")] + f2 > 0:
+            raise fail(f"{key}.f1", "g(0) = f1 + f2 must be > 0")
+        out.append(LayerSet(previous, tuple(values)))
+    return tuple(out)
 
 
 __all__ = ["CONFIG_SCHEMA", "ConfigFileError", "FileConfig", "read_config_file"]

@@ -136,6 +136,12 @@ def export_config(run: EstimateRun, choice: "ReplayChoice") -> dict[str, object]
             "relaxation": cfg.relaxation, "relax_branches": cfg.relax_branches,
             "tau_fast_s": cfg.tau_fast_s, "tau_slow_s": cfg.tau_slow_s,
             "strengths": choice.strengths, "strengths_sd": choice.strengths_sd}
+        if choice.layer_sets:
+            from ..params import LAYER_SET_NAMES
+            out["model3"]["layer_sets"] = [  # type: ignore[index]
+                {"start_mm": start, **dict(zip(LAYER_SET_NAMES, values)),
+                 "sd": {nm: _json_real(x) for nm, x in zip(LAYER_SET_NAMES, sds)}}
+                for start, values, sds in choice.layer_sets]
     if run.contact is not None:
         surface = float(run.contact[0][-1])
         out["surface_mm"] = surface if math.isfinite(surface) else None

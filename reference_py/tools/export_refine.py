@@ -39,7 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..config import EstimatorConfig
-from ..params import PARAM_NAMES
+from ..params import LAYER_SET_NAMES, PARAM_NAMES
 from .csvio import Trial
 from .estconfig import PARAM_MAX
 from .export_replay import replay, sum_in_order
@@ -67,7 +67,7 @@ G0_MARGIN = 1.01
 
 @dataclass(frozen=True)
 class Refined:
-    row: list[float]        # the fitted row (the seven values, then the strengths)
+    row: list[float]        # the fitted row (the seven values, the strengths, the layer sets)
     sd: dict[int, float]    # the fit's sd of each fitted row entry (absent: not computable)
     rmse_n: float           # RMSE of the fitted values' replay, N
     passes: int             # batched replays done
@@ -75,31 +75,38 @@ class Refined:
 
 def fitted_entries(names: tuple[str, ...], row_len: int, model: int) -> list[int]:
     """The row entries the fit moves: the identified values (the seven's identified ones, then
-    every relaxation strength in the row; Model I's beta is its fixed beta0, not a value)."""
+    every relaxation strength and layer set value in the row; Model I's beta is its fixed
+    beta0, not a value)."""
     idx = [PARAM_NAMES.index(nm) for nm in PARAM_NAMES
            if nm in names and not (model == 1 and nm == "beta")]
     idx += [j for j in range(len(PARAM_NAMES), row_len)]
     return idx
 
 
-def readable(row: list[float]) -> list[float]:
+def readable(row: list[float], n_sets: int = 0) -> list[float]:
     """``row`` kept where a reader accepts it: |value| <= PARAM_MAX, the strengths' sum at most
-    STRENGTH_MAX, and g(0) = f1 + f2 > 0 (f1 raised to -f2 * G0_MARGIN when f2 < 0)."""
+    STRENGTH_MAX, and g(0) = f1 + f2 > 0 (f1 raised to -f2 * G0_MARGIN when f2 < 0), for the
+    row's f1 and every layer set's.  The row: the seven, the strengths, then ``n_sets`` layer
+    sets of LAYER_SET_NAMES values (export_replay.py)."""
     out = list(row)
+    end = len(out) - len(LAYER_SET_NAMES) * n_sets   # the strengths end here
     total = 0.0
     for j in range(len(out)):
-        if j >= len(PARAM_NAMES):
+        if len(PARAM_NAMES) <= j < end:
             out[j] = min(out[j], STRENGTH_MAX)
             total = total + out[j]
         else:
             out[j] = max(min(out[j], PARAM_MAX), -PARAM_MAX)
     if total > STRENGTH_MAX:
         scale = STRENGTH_MAX / total
-        for j in range(len(PARAM_NAMES), len(out)):
+        for j in range(len(PARAM_NAMES), end):
             out[j] = out[j] * scale
     f1, f2 = PARAM_NAMES.index("f1"), PARAM_NAMES.index("f2")
-    if out[f2] < 0.0 and not out[f1] + out[f2] > 0.0:
-        out[f1] = -out[f2] * G0_MARGIN
+    f1s = [f1] + [end + k * len(LAYER_SET_NAMES) + LAYER_SET_NAMES.index("f1")
+                  for k in range(n_sets)]
+    for j in f1s:
+        if out[f2] < 0.0 and not out[j] + out[f2] > 0.0:
+            out[j] = -out[f2] * G0_MARGIN
     return out
 
 
@@ -156,7 +163,8 @@ def _normal_equations(res: np.ndarray, steps: list[float]) -> tuple[float, list[
     return sse, A, b
 
 
-def _perturbed(row: list[float], idx: list[int]) -> tuple[list[list[float]], list[float]]:
+def _perturbed(row: list[float], idx: list[int], n_sets: int
+               ) -> tuple[list[list[float]], list[float]]:
     """The rows of one Jacobian: each fitted entry moved by its relative step, forward, or
     backward where forward would leave what a reader accepts; neither: the row itself (the
     column stays 0: the fit cannot move that value)."""
@@ -166,7 +174,7 @@ def _perturbed(row: list[float], idx: list[int]) -> tuple[list[list[float]], lis
         for h in (REFINE_H, -REFINE_H):
             trial_row = list(row)
             trial_row[j] = row[j] * (1.0 + h)
-            if readable(trial_row) == trial_row:
+            if readable(trial_row, n_sets) == trial_row:
                 step, moved = h, trial_row
                 break
         rows.append(moved)
@@ -182,7 +190,7 @@ def _pass(cfg: EstimatorConfig, precision: str, trial: Trial, points: list[list[
     rows: list[list[float]] = []
     steps = []
     for pt in points:
-        moved, st = _perturbed(pt, idx)
+        moved, st = _perturbed(pt, idx, len(cfg.layer_sets))
         rows += [list(pt)] + moved
         steps.append(st)
     rep = replay(cfg, precision, trial, rows, surface_mm, tare_n)
@@ -193,7 +201,7 @@ def _pass(cfg: EstimatorConfig, precision: str, trial: Trial, points: list[list[
 
 
 def _step(row: list[float], idx: list[int], A: list[list[float]], b: list[float],
-          lam: float) -> list[float]:
+          lam: float, n_sets: int) -> list[float]:
     """The values after the damped step solving (A + lam diag(A)) d = -b (diag 0: 1); the
     row itself when the system cannot be solved."""
     P = len(idx)
@@ -210,12 +218,13 @@ def _step(row: list[float], idx: list[int], A: list[list[float]], b: list[float]
     for k, j in enumerate(idx):
         dk = min(max(d[k], STEP_MIN), STEP_MAX)
         moved[j] = row[j] * ((2.0 + dk) / (2.0 - dk))
-    return readable(moved)
+    return readable(moved, n_sets)
 
 
 def refine(cfg: EstimatorConfig, precision: str, trial: Trial, start: list[float],
            names: tuple[str, ...], surface_mm: float, tare_n: float) -> Refined:
-    """Fit the identified entries of ``start`` (a row as a reader builds it) to the record."""
+    """Fit the identified entries of ``start`` (a row as a reader builds it, with the values
+    of cfg.layer_sets after it: export_replay.py) to the record."""
     idx = fitted_entries(names, len(start), cfg.model)
     row = list(start)
     (first,), m = _pass(cfg, precision, trial, [row], idx, surface_mm, tare_n)
@@ -225,8 +234,8 @@ def refine(cfg: EstimatorConfig, precision: str, trial: Trial, start: list[float
     P = len(idx)
     while passes < REFINE_PASSES and P > 0 and math.isfinite(sse) and lam <= LAMBDA_MAX:
         # two damped steps replayed together: lam and LAMBDA_WIDE * lam
-        light = _step(row, idx, A, b, lam)
-        heavy = _step(row, idx, A, b, lam * LAMBDA_WIDE)
+        light = _step(row, idx, A, b, lam, len(cfg.layer_sets))
+        heavy = _step(row, idx, A, b, lam * LAMBDA_WIDE, len(cfg.layer_sets))
         if light == row and heavy == row:
             break
         (r1, r2), _ = _pass(cfg, precision, trial, [light, heavy], idx, surface_mm, tare_n)

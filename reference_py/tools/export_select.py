@@ -26,10 +26,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..config import EstimatorConfig
-from ..params import IDX, PARAM_NAMES, RELAX_NAMES, Preset
+from ..config import EstimatorConfig, LayerSet
+from ..params import IDX, LAYER_SET_NAMES, PARAM_NAMES, RELAX_NAMES, Preset
 from .csvio import Trial
-from .export_refine import refine
+from .export_refine import Refined, refine
 from .export_replay import replay, sum_in_order
 
 #: snapshots replayed per export (the bank is batched over them: one pass over the record)
@@ -52,6 +52,8 @@ class ReplayChoice:
     fit_rmse_n: float = math.nan  # RMSE of the fitted values' replay (export_refine.py), N
     fit_passes: int = 0           # the fit's replays
     presliding_mm: float = math.nan  # Model III's turn-over length replayed and exported, mm
+    #: the layer sets fitted (start mm below the surface, LAYER_SET_NAMES values, their sd)
+    layer_sets: tuple[tuple[float, list[float], list[float]], ...] = ()
 
 
 def candidate_samples(n: int) -> list[int]:
@@ -105,6 +107,25 @@ def choose_export(run, cfg: EstimatorConfig, preset: Preset, trial: Trial) -> Re
     if not counted:
         return ch
     fit = refine(cfg, run.precision, trial, rows[best], run.names, surface, tare)
+    starts = layer_starts(run, trial)
+    sets: tuple[tuple[float, list[float], list[float]], ...] = ()
+    if starts:
+        # the layers below the first, each from its tear's depth with its own LAYER_SET_NAMES
+        # values, all starting at the fitted ones and fitted again with the rest
+        sub = [fit.row[IDX[nm]] for nm in LAYER_SET_NAMES]
+        cfg_l = replace(cfg, layer_sets=tuple(LayerSet(s, tuple(sub)) for s in starts))
+        layered = refine(cfg_l, run.precision, trial, fit.row + sub * len(starts), run.names,
+                         surface, tare)
+        if layered.rmse_n < fit.rmse_n:
+            n, tail = len(LAYER_SET_NAMES), len(LAYER_SET_NAMES) * len(starts)
+            base_len = len(layered.row) - tail
+            sets = tuple((s, layered.row[base_len + k * n:base_len + (k + 1) * n],
+                          [layered.sd.get(base_len + k * n + j, math.nan) for j in range(n)])
+                         for k, s in enumerate(starts))
+            fit = Refined(layered.row[:base_len], layered.sd, layered.rmse_n,
+                          fit.passes + layered.passes)
+        else:
+            fit = replace(fit, passes=fit.passes + layered.passes)
     params = fit.row[:len(PARAM_NAMES)]
     params_sd = [fit.sd.get(j, ch.params_sd[j]) if PARAM_NAMES[j] in run.names
                  else ch.params_sd[j] for j in range(len(PARAM_NAMES))]
@@ -112,7 +133,31 @@ def choose_export(run, cfg: EstimatorConfig, preset: Preset, trial: Trial) -> Re
     strengths_sd = {nm: fit.sd.get(len(PARAM_NAMES) + k, ch.strengths_sd[nm])
                     for k, nm in enumerate(ch.strengths)}
     return replace(ch, params=params, params_sd=params_sd, strengths=strengths,
-                   strengths_sd=strengths_sd, fit_rmse_n=fit.rmse_n, fit_passes=fit.passes)
+                   strengths_sd=strengths_sd, fit_rmse_n=fit.rmse_n, fit_passes=fit.passes,
+                   layer_sets=sets)
+
+
+def layer_starts(run, trial: Trial) -> list[float]:
+    """Where the layers below the first begin, mm below the surface: the depths of the tears
+    the bank's rupture detector found in the record's first insertion (run.layer advanced),
+    the stage position less the surface in use when contact is on; none without the index."""
+    if run.layer is None:
+        return []
+    starts: list[float] = []
+    entered = False
+    for k in range(1, len(run.t_s)):
+        depth = float(trial.depth_mm[k])
+        if run.contact is not None:
+            surface = float(run.contact[0][k])
+            depth = depth - surface if math.isfinite(surface) else 0.0
+        if depth > 0.0:
+            entered = True
+        elif entered:
+            break   # the first insertion ended
+        if int(run.layer[k]) > int(run.layer[k - 1]) and depth > 0.0 and \
+                (not starts or depth > starts[-1]):
+            starts.append(depth)
+    return starts
 
 
 def _row(params: list[float], strengths: dict[str, float]) -> list[float]:

@@ -47,6 +47,53 @@ static void spoil_m3_robust(nte_config_t* c)
     c->model = 3;
     c->estimator = nte_estimator_robust;
 }
+/* Model III's layer sets (THE LAYER SETS): one good set, then each rule broken */
+static void one_layer_set(nte_config_t* c)
+{
+    c->model = 3;
+    c->layer_sets = 1U;
+    c->layer_set[0].start_mm = (nte_real_t)4.0;
+    c->layer_set[0].values[nte_layer_sigma0] = c->nominal[nte_param_sigma0];
+    c->layer_set[0].values[nte_layer_f1] = c->nominal[nte_param_f1];
+    c->layer_set[0].values[nte_layer_beta] = c->nominal[nte_param_beta];
+    c->layer_set[0].values[nte_layer_sigma2] = c->nominal[nte_param_sigma2];
+}
+static void spoil_sets_model2(nte_config_t* c)
+{
+    one_layer_set(c);
+    c->model = 2;
+}
+static void spoil_sets_count(nte_config_t* c)
+{
+    one_layer_set(c);
+    c->layer_sets = NTE_LAYER_SETS_MAX + 1U;
+}
+static void spoil_sets_start0(nte_config_t* c)
+{
+    one_layer_set(c);
+    c->layer_set[0].start_mm = (nte_real_t)0;
+}
+static void spoil_sets_order(nte_config_t* c)
+{
+    one_layer_set(c);
+    c->layer_sets = 2U;
+    c->layer_set[1] = c->layer_set[0]; /* the same start again: not deeper */
+}
+static void spoil_sets_deep(nte_config_t* c)
+{
+    one_layer_set(c);
+    c->layer_set[0].start_mm = c->depth_max_mm * (nte_real_t)1.01;
+}
+static void spoil_sets_value(nte_config_t* c)
+{
+    one_layer_set(c);
+    c->layer_set[0].values[nte_layer_sigma2] = (nte_real_t)NAN;
+}
+static void spoil_sets_g0(nte_config_t* c)
+{
+    one_layer_set(c);
+    c->layer_set[0].values[nte_layer_f1] = -c->nominal[nte_param_f2] * (nte_real_t)0.9;
+}
 static void spoil_model0(nte_config_t* c) { c->model = 0; }
 static void spoil_schedule(nte_config_t* c) { c->schedule = (nte_schedule_t)7; }
 static void spoil_substeps0(nte_config_t* c) { c->substeps = 0; }
@@ -104,6 +151,10 @@ static void test_every_error_code_leaves_instance_untouched(void** state)
         {spoil_tau_big, nte_err_bad_range},       {spoil_tau_nan, nte_err_not_finite},
         {spoil_g_sum, nte_err_bad_nominal},       {spoil_g_zero, nte_err_bad_nominal},
         {spoil_m3_robust, nte_err_bad_estimator},
+        {spoil_sets_model2, nte_err_bad_layer_sets}, {spoil_sets_count, nte_err_bad_layer_sets},
+        {spoil_sets_start0, nte_err_bad_layer_sets}, {spoil_sets_order, nte_err_bad_layer_sets},
+        {spoil_sets_deep, nte_err_bad_layer_sets},   {spoil_sets_value, nte_err_bad_layer_sets},
+        {spoil_sets_g0, nte_err_bad_layer_sets},
     };
     static nte_t est;
     static nte_t snapshot;
@@ -129,6 +180,10 @@ static void test_every_error_code_leaves_instance_untouched(void** state)
     assert_int_equal(nte_step(&est, NULL, NULL), nte_err_null_argument);
     /* the derived f1 excess is accepted when f1 > -f2 */
     cfg.f1_excess = 0;
+    assert_int_equal(nte_init(&est, &cfg), nte_err_ok);
+    /* a good layer set is accepted (Model III) */
+    nte_config_default(&cfg, 3, nte_schedule_all);
+    one_layer_set(&cfg);
     assert_int_equal(nte_init(&est, &cfg), nte_err_ok);
 }
 

@@ -187,6 +187,25 @@ BAD += [
     ("m3sum.json", _doc(model3={"strengths": {"g_fast": 0.6, "g_slow": 0.5}}),
      "key 'model3.strengths': g_fast + g_slow must be < 1"),
 ]
+_SET = {"start_mm": 4.0, "sigma0": 7.9e-3, "f1": 5.59e-2, "beta": 2.55e-2, "sigma2": 4.14e-3}
+BAD += [
+    ("sets_obj.json", _doc(model3={"layer_sets": _SET}),
+     "key 'model3.layer_sets': must be a list of at most 3 objects"),
+    ("sets_four.json", _doc(model3={"layer_sets": [
+        dict(_SET, start_mm=x) for x in (2.0, 4.0, 6.0, 8.0)]}),
+     "key 'model3.layer_sets': must be a list of at most 3 objects"),
+    ("sets_item.json", _doc(model3={"layer_sets": [3]}),
+     "key 'model3.layer_sets[0]': must be an object"),
+    ("sets_start.json", _doc(model3={"layer_sets": [dict(_SET, start_mm=0)]}),
+     "key 'model3.layer_sets[0].start_mm': must be a number > 0 and <= 500"),
+    ("sets_order.json", _doc(model3={"layer_sets": [_SET, dict(_SET, start_mm=3.0)]}),
+     "key 'model3.layer_sets[1].start_mm': must be above the previous layer's start_mm"),
+    ("sets_value.json", _doc(model3={"layer_sets": [
+        {k: v for k, v in _SET.items() if k != "sigma2"}]}),
+     "key 'model3.layer_sets[0].sigma2': must be a positive number <= 1000"),
+    ("sets_g0.json", _doc(model3={"layer_sets": [dict(_SET, f1=0.02)]}),
+     "key 'model3.layer_sets[0].f1': g(0) = f1 + f2 must be > 0"),
+]
 
 
 @pytest.fixture(scope="module")

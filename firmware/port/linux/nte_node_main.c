@@ -440,6 +440,7 @@ int main(int argc, char** argv)
         if (fc.has_surface) {
             c3->contact.surface_mm = (nte_real_t)fc.surface_mm;
         }
+        nte_config_file_layer_sets(&fc, c3);
     }
     /* the port is needed for validation: check the node config with a stand-in first */
     uint32_t ids[3] = {(uint32_t)cfg.base_id + NTE_FRAMES_OFFSET_DEPTH,
