@@ -126,9 +126,11 @@ class FilterBank:
     nine: Model III's relaxation strengths g_fast, g_slow appended; default RELAX_NOMINAL)."""
 
     def __init__(self, R: Real, cfg: EstimatorConfig, nominal: list[list[float]],
-                 layer_values: list[list[list[float]]] | None = None) -> None:
+                 layer_values: list[list[list[float]]] | None = None,
+                 layer_starts: list[list[float]] | None = None) -> None:
         """``layer_values``: per run, the values of each of cfg.layer_sets (LAYER_SET_NAMES
-        order); default: the configuration's own for every run."""
+        order); ``layer_starts``: per run, their starts (mm); default: the configuration's own
+        for every run."""
         cfg.validate()
         check_nominal(nominal)
         self.R, self.cfg = R, cfg
@@ -157,7 +159,7 @@ class FilterBank:
         # Model III's layer index: a rupture detector on filter 1's innovations
         self.layers = (RuptureDetector(R, self.batch, cfg.v_still_mm_s)
                        if self.m3 and cfg.layers else None)
-        self._layer_sets(R, cfg, layer_values)
+        self._layer_sets(R, cfg, layer_values, layer_starts)
         self.reset()
         self.initial_theta = self.th
 
@@ -572,15 +574,20 @@ class FilterBank:
         return (np.abs(h) <= fmax) & (np.abs((self.th.sigma0 * z) * d.l) <= fmax)
 
     def _layer_sets(self, R: Real, cfg: EstimatorConfig,
-                    layer_values: list[list[list[float]]] | None) -> None:
-        """The configured layer sets in the working precision: their start depths, and per set
-        and LAYER_SET_NAMES entry the value of every run (nte.h THE LAYER SETS)."""
+                    layer_values: list[list[list[float]]] | None,
+                    layer_starts: list[list[float]] | None) -> None:
+        """The configured layer sets in the working precision: per set the start depth and per
+        LAYER_SET_NAMES entry the value of every run (nte.h THE LAYER SETS)."""
         sets = cfg.layer_sets
         if layer_values is None:
             layer_values = [[list(ls.values) for ls in sets] for _ in range(self.batch)]
-        if len(layer_values) != self.batch or any(len(v) != len(sets) for v in layer_values):
-            raise ValueError("layer_values: one list of the configured layer sets per run")
-        self.set_starts = [R.c(ls.start_mm) for ls in sets]
+        if layer_starts is None:
+            layer_starts = [[ls.start_mm for ls in sets] for _ in range(self.batch)]
+        for given in (layer_values, layer_starts):
+            if len(given) != self.batch or any(len(v) != len(sets) for v in given):
+                raise ValueError("layer_values, layer_starts: one entry per configured layer "
+                                 "set for every run")
+        self.set_starts = [R.arr([run[k] for run in layer_starts]) for k in range(len(sets))]
         self.set_values = [[R.arr([run[k][j] for run in layer_values])
                             for j in range(len(LAYER_SET_NAMES))] for k in range(len(sets))]
         kappa = self.scaled.kappa

@@ -19,7 +19,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..bank import FilterBank
-from ..config import EstimatorConfig, LayerSet
+from ..config import EstimatorConfig
 from ..fmath import Real, real_for
 from ..params import LAYER_SET_NAMES
 from .csvio import Trial, time_us
@@ -63,21 +63,23 @@ def replay(cfg: EstimatorConfig, precision: str, trial: Trial, rows: list[list[f
     base = [list(r[:len(r) - tail]) for r in rows]
     sets = [[list(r[len(r) - tail + k * n:len(r) - tail + (k + 1) * n])
              for k in range(len(cfg.layer_sets))] for r in rows]
+    reader = reader_config(cfg, surface_mm)
     if not cfg.layer_sets:
-        return _replay_once(R, reader_config(cfg, surface_mm), trial, base, sets, tare_n)
-    parts = []
-    for shift in LAYER_SHIFTS_MM:
-        # the starts moved in the working precision, as the C twin adds them
-        moved = tuple(LayerSet(float(R.c(ls.start_mm) + R.c(shift)), ls.values)
-                      for ls in cfg.layer_sets)
-        parts.append(_replay_once(R, reader_config(replace(cfg, layer_sets=moved), surface_mm),
-                                  trial, base, sets, tare_n))
-    return Replay(np.concatenate([p.residuals for p in parts], axis=1), parts[0].peak_n)
+        return _replay_batch(R, reader, trial, base, sets, None, tare_n)
+    # every row once per shift, in one batch: the starts moved in the working precision, as
+    # the C twin adds them
+    S, K = len(LAYER_SHIFTS_MM), len(rows)
+    starts = [[float(R.c(ls.start_mm) + R.c(shift)) for ls in cfg.layer_sets]
+              for shift in LAYER_SHIFTS_MM for _ in range(K)]
+    rep = _replay_batch(R, reader, trial, base * S, sets * S, starts, tare_n)
+    res = rep.residuals.reshape(S, K, -1).transpose(1, 0, 2).reshape(K, -1)
+    return Replay(res, rep.peak_n)
 
 
-def _replay_once(R: Real, cfg: EstimatorConfig, trial: Trial, base: list[list[float]],
-                 sets: list[list[list[float]]], tare_n: float) -> Replay:
-    bank = FilterBank(R, cfg, base, sets)
+def _replay_batch(R: Real, cfg: EstimatorConfig, trial: Trial, base: list[list[float]],
+                  sets: list[list[list[float]]], starts: list[list[float]] | None,
+                  tare_n: float) -> Replay:
+    bank = FilterBank(R, cfg, base, sets, starts)
     K = len(base)
     t_us = time_us(trial.t_s)
     depth, vel = R.arr(trial.depth_mm), R.arr(trial.velocity_mm_s)
