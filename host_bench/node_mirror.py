@@ -161,6 +161,11 @@ class NodeMirror:
         self.step_t: int | None = None
         self.depth_since_force: int | None = None   # first depth sample after the newest force
         self.predict_counts = {"predict_on": 0, "predict_off": 0, "predict_depth_steps": 0}
+        # the sensor watch (nte_node.h SENSOR WATCH): the last unflagged reading, how many
+        # times in a row it came, the depth when it first came
+        self.watch_force = F32(0.0)
+        self.watch_run = 0
+        self.watch_depth = F32(0.0)
         self._start(self.model)
 
     # ------------------------------------------------------------------ estimator
@@ -424,10 +429,30 @@ class NodeMirror:
                 return
             self.last_force_t = t
             self.depth_since_force = None
-            self.forces.append((t, a, bool(b > F32(0.5))))
+            # a flagged sample's value is not read, nor watched
+            self.forces.append((t, a, bool(b > F32(0.5)) or self._watch(a)))
         self._process()
         if name == "Depth":
             self._depth_predict()
+
+    def _watch(self, force: np.float32) -> bool:
+        """The node's nte_node_watch (nte_node.h SENSOR WATCH): the reading is not to be read
+        -- at the Force frame's limit, or repeated STUCK_SAMPLES times while the needle moved
+        STUCK_TRAVEL_UM in tissue; counted."""
+        depth = self.depth[-1][1] if self.depth else F32(0.0)
+        if self.watch_run > 0 and force == self.watch_force:
+            self.watch_run += 1 if self.watch_run < NODE["STUCK_SAMPLES"] else 0
+        else:
+            self.watch_run, self.watch_force, self.watch_depth = 1, force, depth
+        if abs(force) >= F32(FORCE_MAX_N):
+            self._count("sensor_saturated")
+            return True
+        travel = F32(F32(NODE["STUCK_TRAVEL_UM"]) * F32(0.001))
+        if (self.last.in_tissue and self.watch_run >= NODE["STUCK_SAMPLES"]
+                and abs(F32(depth - self.watch_depth)) >= travel):
+            self._count("sensor_stuck")
+            return True
+        return False
 
     def _resync(self, name: str, t: int) -> None:
         self._count("time_resync")

@@ -7,6 +7,7 @@
  *           [--profile default|paper] [--init-seed K] [--init-factor F] [--schedule all|rotate]
  *           [--precision P] [--presliding-mm MM] [--tau-fast S] [--tau-slow S]
  *           [--relax-branches 1|2] [--no-relaxation] [--no-direction-memory] [--no-layers]
+ *           [--no-layer-sets]
  *           [--contact on|off] [--surface MM] [--config FILE.json] [--predict-only]
  *           [--start NAME=VALUE,...] [--noise N] [--export-config FILE.json]
  *           [--force-unit N|mN] [--time-unit s|ms|us] [--depth-unit mm|m]
@@ -80,6 +81,7 @@ typedef struct args_t {
     int relax_branches;
     int relaxation;
     int layers;
+    int layer_sets; /* --export-config writes layer sets (--no-layer-sets: 0) */
     int direction_memory;
     int contact;    /* the contact front end: -1 not asked, 0 off, 1 on */
     double surface; /* --surface MM, NaN: find it */
@@ -134,7 +136,8 @@ static void help(void)
            "       [--profile default|paper] [--init-seed K] [--init-factor F]\n"
            "       [--schedule all|rotate] [--precision " PRECISION "]\n"
            "       [--presliding-mm MM] [--tau-fast S] [--tau-slow S] [--relax-branches 1|2]\n"
-           "       [--no-relaxation] [--no-direction-memory] [--no-layers] [--contact on|off]\n"
+           "       [--no-relaxation] [--no-direction-memory] [--no-layers] [--no-layer-sets]\n"
+           "       [--contact on|off]\n"
            "       [--surface MM] [--config FILE.json] [--predict-only]\n"
            "       [--start NAME=VALUE,...] [--noise N]\n"
            "       [--export-config FILE.json] [--force-unit %s] [--time-unit %s]\n"
@@ -182,6 +185,8 @@ static void help(void)
            "                         (default: on)\n"
            "  --no-layers            Model III: no layer index (default: on: a rupture\n"
            "                         detector on the innovations; adds the column layer)\n"
+           "  --no-layer-sets        --export-config writes one parameter set, no layer sets\n"
+           "                         (default: a set at each tear of the first insertion)\n"
            "  --contact on|off       the surface and tare front end (default: on for --model 3\n"
            "                         unless --predict-only, off for 1 and 2): depth is\n"
            "                         the stage position, the needle starts in the air; adds\n"
@@ -301,6 +306,7 @@ static int parse_args(int argc, char** argv, args_t* a)
     a->relax_branches = 2;
     a->relaxation = 1;
     a->layers = 1;
+    a->layer_sets = 1;
     a->direction_memory = 1;
     a->contact = -1;
     a->surface = (double)NAN; /* NAN is a float: said explicitly for -Wdouble-promotion */
@@ -347,6 +353,10 @@ static int parse_args(int argc, char** argv, args_t* a)
         }
         if (strcmp(opt, "--no-layers") == 0) {
             a->layers = 0;
+            continue;
+        }
+        if (strcmp(opt, "--no-layer-sets") == 0) {
+            a->layer_sets = 0;
             continue;
         }
         if (strcmp(opt, "--predict-only") == 0) {
@@ -1040,7 +1050,8 @@ int main(int argc, char** argv)
     (void)memset(&choice, 0, sizeof choice);
     if ((rc == 0) && (a.export_config != NULL)) {
         static nte_t scratch; /* the replays of the candidates */
-        if (nte_export_choose(&cfg, &tr, snaps, &layers, values, a.model, (double)last.surface_mm,
+        if (nte_export_choose(&cfg, &tr, snaps, (a.layer_sets != 0) ? &layers : NULL, values,
+                              a.model, (double)last.surface_mm,
                               (double)last.tare_n, &scratch, &choice) != 0) {
             fprintf(stderr, PROG ": error: --export-config: a replay of the estimates was refused "
                             "or memory ran out\n");

@@ -20,7 +20,8 @@ static const char* const nte_node_event_names[NTE_NODE_EVENT_COUNT] = {
     "wrong_dlc",      "unknown_id",    "bad_crc",        "counter_invalid", "counter_repeated",
     "counter_skipped", "out_of_range", "time_backwards", "queue_overflow",  "send_failed",
     "command_refused", "stale",        "receive_error",  "encode_error",    "time_jump_dropped",
-    "time_resync",     "command_stale", "command_rate_limited"};
+    "time_resync",     "command_stale", "command_rate_limited", "sensor_stuck",
+    "sensor_saturated"};
 
 /* Signed difference a - b of two unwrapped tick counts (they wrap modulo 2^32). */
 static int32_t nte_node_tdiff(uint32_t a, uint32_t b)
@@ -573,6 +574,34 @@ static bool nte_node_newest(const nte_node_t* self, uint32_t stream, uint32_t* t
     return self->have_force;
 }
 
+/* SENSOR WATCH (nte_node.h): true when the force reading is not to be read -- pinned at the
+ * frame's limit, or repeated NTE_NODE_STUCK_SAMPLES times while the needle moved in tissue;
+ * counted. */
+static bool nte_node_watch(nte_node_t* self, float force_n)
+{
+    const float depth = (self->depth_count > 0u) ? nte_node_depth_at(self, 0u)->depth_mm : 0.0f;
+    /* exactly the previous reading (decoded from an integer: never NaN) */
+    const bool same = !(force_n < self->watch_force) && !(force_n > self->watch_force);
+    if ((self->watch_run > 0u) && same) {
+        self->watch_run += (self->watch_run < NTE_NODE_STUCK_SAMPLES) ? 1u : 0u;
+    } else {
+        self->watch_run = 1u;
+        self->watch_force = force_n;
+        self->watch_depth_mm = depth;
+    }
+    if (fabsf(force_n) >= NTE_FRAMES_FORCE_MAX_N) {
+        nte_node_count(self, nte_node_ev_sensor_saturated);
+        return true;
+    }
+    const float travel_mm = (float)NTE_NODE_STUCK_TRAVEL_UM * 0.001f;
+    if (self->last.in_tissue && (self->watch_run >= NTE_NODE_STUCK_SAMPLES) &&
+        (fabsf(depth - self->watch_depth_mm) >= travel_mm)) {
+        nte_node_count(self, nte_node_ev_sensor_stuck);
+        return true;
+    }
+    return false;
+}
+
 /* Store an accepted sample of `stream` at unwrapped time t (later than the stream's newest). */
 static void nte_node_store(nte_node_t* self, uint32_t stream, uint32_t t, float a, float b)
 {
@@ -605,7 +634,8 @@ static void nte_node_store(nte_node_t* self, uint32_t stream, uint32_t t, float 
     const uint32_t k = (self->force_head + self->force_count) % (uint32_t)NTE_NODE_FORCE_QUEUE;
     self->force[k].t = t;
     self->force[k].force_n = a;
-    self->force[k].fault = b > 0.5f;
+    /* a flagged sample's value is not read, nor watched */
+    self->force[k].fault = (b > 0.5f) || nte_node_watch(self, a);
     self->force[k].on_depth = false;
     self->force_count++;
     self->counters.rx_accepted[stream]++;

@@ -74,7 +74,7 @@
  * PREDICT-ONLY (the model alone: a force sensor that fails or is switched off; nte.h THE
  * PREDICT-ONLY MODE)
  *   The node runs the estimator in predict-only mode -- the force is not read, the parameters
- *   identified so far are kept, z and the memories go on with the depth -- in three cases:
+ *   identified so far are kept, z and the memories go on with the depth -- in four cases:
  *   (a) commanded: Command.ForceSource 2 (the model) until ForceSource 1 (the sensor); the
  *       command follows the COMMANDS rules (counter, rate limit) and is accepted in tissue, a
  *       failing sensor having to be bridged mid-insertion; it outlives model changes and resets;
@@ -95,10 +95,28 @@
  *       `resync_gap_us` the first returning force sample is a time jump, confirmed by the next
  *       (TIME JUMPS): the depth stream steps on meanwhile, and that first one is published
  *       stale.
+ *   (d) a reading the node does not believe (SENSOR WATCH below): like (b), that sample alone.
  *   In every case the Estimate's Adapting bit is 0 (1 otherwise) and Innovation 0.  Every change
  *   of the mode between two steps is counted (nte_node_counters_t predict_on, predict_off;
  *   predict_depth_steps counts the steps of case (c)).  Switching back resumes identification
  *   from the state reached (nte.h).
+ *
+ * SENSOR WATCH (a force sensor that lies without saying so)
+ *   A sensor stuck at one value, or pinned at a limit, still sends well-formed frames, and an
+ *   estimator fed them learns the fault: a stuck force for 1 s left the error after it at 16
+ *   times the fault-free run's, a saturated one at 13 000 times (the fault table, README).
+ *   The node reads a force sample (without SensorFault) as PREDICT-ONLY (d), counted, when
+ *   (1) saturated: |Force| is at the Force frame's limit (NTE_FRAMES_FORCE_MAX_N): the true
+ *       force is beyond what the frame can say (nte_node_ev_sensor_saturated); or
+ *   (2) stuck: the reading is exactly the previous one's, NTE_NODE_STUCK_SAMPLES readings in
+ *       a row, while the last Estimate said in tissue and the newest depth is at least
+ *       NTE_NODE_STUCK_TRAVEL_UM away from the depth when the first of them came
+ *       (nte_node_ev_sensor_stuck).  A working sensor's noise (7-51 mN measured, against the
+ *       frame's 0.1 mN step) makes five equal readings about as likely as 1e-12, and a
+ *       needle that moves half a millimetre in tissue changes the force; in the air, where a
+ *       coarse sensor may repeat its tare, and in a dwell, the rule does not fire.
+ *   Recovery is automatic: the first reading that differs (or leaves the limit) is read
+ *   again.  The first readings of a stuck run are read before the rule can fire.
  *
  * THE PORT INTERFACE (bring the node to a board by writing these three functions)
  *   nte_node_port_t holds three function pointers and a context pointer passed back to each:
@@ -122,7 +140,7 @@
  *   socket with a timeout of nte_node_next_deadline_us).
  *
  * MEMORY MODEL
- *   The caller owns the instance (sizeof(nte_node_t) is 5032 bytes on x86-64 with the default
+ *   The caller owns the instance (sizeof(nte_node_t) is 5048 bytes on x86-64 with the default
  *   sizes: the estimator nte_t 3024, three estimator configurations 3 x 328, the queues):
  *   no allocation, no global or static mutable state; queues are fixed arrays in the instance
  *   (sizes NTE_NODE_DEPTH_HISTORY and NTE_NODE_FORCE_QUEUE below, compile-time).
@@ -210,10 +228,21 @@ typedef enum nte_node_event_t {
     nte_node_ev_time_resync = 15,     /**< time jump confirmed: the stream resynchronised */
     nte_node_ev_command_stale = 16,   /**< command whose counter is not the successor of the
                                            last command's (replayed or after a loss): ignored */
-    nte_node_ev_command_rate_limited = 17 /**< command within command_interval_us of the last
+    nte_node_ev_command_rate_limited = 17, /**< command within command_interval_us of the last
                                            applied one: ignored */
+    nte_node_ev_sensor_stuck = 18,     /**< force reading judged stuck (SENSOR WATCH): not
+                                           read, predicted from the model */
+    nte_node_ev_sensor_saturated = 19  /**< force reading at the Force frame's limit (SENSOR
+                                           WATCH): not read, predicted from the model */
 } nte_node_event_t;
-#define NTE_NODE_EVENT_COUNT 18
+#define NTE_NODE_EVENT_COUNT 20
+
+/** SENSOR WATCH: a force reading repeated exactly this many times in a row (this one
+ *  included) ... */
+#define NTE_NODE_STUCK_SAMPLES 5u
+/** ... while the depth moved at least this far since the first of them, micrometres, in
+ *  tissue, is a stuck sensor. */
+#define NTE_NODE_STUCK_TRAVEL_UM 500u
 
 /** Counters (monotonic, wrap modulo 2^32); public, the application may clear them. */
 typedef struct nte_node_counters_t {
@@ -327,6 +356,11 @@ typedef struct nte_node_t {
     uint32_t force_head;
     uint32_t force_count;
     bool have_force;
+    /* SENSOR WATCH: the last unflagged force reading, how many times in a row it came, the
+     * depth when it first came */
+    float watch_force;
+    uint32_t watch_run;
+    float watch_depth_mm;
     nte_node_pending_t pending[2]; /* depth, force */
     uint32_t last_force_t;        /* newest accepted force time (queued or processed) */
     nte_frames_estimate_t last;   /* last published estimate values (held when stale) */

@@ -7,6 +7,7 @@
                      [--init-seed K] [--init-factor F] [--precision float64|float32]
                      [--schedule all|rotate] [--profile default|paper] [--presliding-mm MM]
                      [--tau-fast S] [--tau-slow S] [--relax-branches 1|2] [--no-relaxation] [--no-layers]
+                     [--no-layer-sets]
                      [--no-direction-memory] --out EST.csv [--plot EST.png]
     nte-ref plot EST.csv [EST.csv ...] [--label TEXT ...] [--input IN.csv]
                  [--truth TRUTH.json | --truth-preset NAME] [--title TEXT] --out FIG.png
@@ -196,6 +197,9 @@ def build_parser() -> argparse.ArgumentParser:
     m3.add_argument("--no-layers", action="store_true",
                     help="no layer index (default: on: a rupture detector on the "
                          "innovations; adds the column layer)")
+    m3.add_argument("--no-layer-sets", action="store_true",
+                    help="--export-config writes one parameter set, no layer sets "
+                         "(default: a set at each tear of the first insertion)")
     add_unit_arguments(e)
     e.add_argument("--contact", choices=("on", "off"), default=None,
                    help="the surface and tare front end (default: on for --model 3 unless "
@@ -423,7 +427,8 @@ def _estimate(a: argparse.Namespace) -> int:
             import json
             from .estimate import export_config
             from .export_select import choose_export
-            choice = choose_export(run, run.config, preset, trial)
+            choice = choose_export(run, run.config, preset, trial,
+                                   layer_sets=not a.no_layer_sets)
             outs.write_text(exported, json.dumps(export_config(run, choice), indent=2) + "\n")
         outs.commit()
     from .estimate import final_estimates_lines

@@ -77,9 +77,11 @@ def snapshot(names: tuple[str, ...], values: np.ndarray, sds: np.ndarray, preset
     return params, params_sd, strengths, strengths_sd
 
 
-def choose_export(run, cfg: EstimatorConfig, preset: Preset, trial: Trial) -> ReplayChoice:
+def choose_export(run, cfg: EstimatorConfig, preset: Preset, trial: Trial,
+                  layer_sets: bool = True) -> ReplayChoice:
     """Replay every candidate snapshot of ``run`` from depth alone, keep the best and fit it
-    to the record (export_refine.py)."""
+    to the record (export_refine.py); with ``layer_sets``, fit again with a set at each tear
+    of the first insertion (layer_starts) and keep that when it replays closer."""
     n = len(run.t_s)
     if "delta" in run.names:
         # the turn-over length identified by the end of the record (module docstring)
@@ -107,7 +109,7 @@ def choose_export(run, cfg: EstimatorConfig, preset: Preset, trial: Trial) -> Re
     if not counted:
         return ch
     fit = refine(cfg, run.precision, trial, rows[best], run.names, surface, tare)
-    starts = layer_starts(run, trial)
+    starts = layer_starts(run, trial) if layer_sets else []
     sets: tuple[tuple[float, list[float], list[float]], ...] = ()
     if starts:
         # the layers below the first, each from its tear's depth with its own LAYER_SET_NAMES

@@ -405,7 +405,7 @@ struct nte_can_estimate_t {
     uint8_t in_tissue;
 
     /**
-     * 1 = parameters are being adapted from the force sensor; 0 = frozen: the node is in predict-only mode and ForceEst is the model's alone with the parameters identified so far, Innovation 0 (by Command.ForceSource = 2, while Force.SensorFault = 1, or while no Force frame came within the node's depth timeout as Depth frames go on: a lost sensor).
+     * 1 = parameters are being adapted from the force sensor; 0 = frozen: the node is in predict-only mode and ForceEst is the model's alone with the parameters identified so far, Innovation 0 (by Command.ForceSource = 2, while Force.SensorFault = 1, while no Force frame came within the node's depth timeout as Depth frames go on: a lost sensor, or for a Force reading the node does not believe: at the frame's limit, or repeated exactly while the needle moves in tissue, counted as sensor_saturated and sensor_stuck).
      *
      * Range: 0..1 (0..1 -)
      * Scale: 1
