@@ -234,7 +234,8 @@
  *   entered before the mode was switched off stays the start of the filters' identification
  *   until the tip leaves the tissue.  --export-config writes the sets (the depths of the
  *   tears the rupture detector found in the record's first insertion, the values fitted to
- *   the record's replay).  Cost: NTE_LAYER_MAX - 1 compares per sample; at a switch 4 exp.
+ *   the record's replay with those depths moved by -1, 0 and +1 mm: the next trial does not
+ *   tear at the same depth).  Cost: cfg.layer_sets compares per sample; at a switch 4 exp.
  *
  * THE DATA'S BOUND (reference_py/bank.py DATA_BOUND)
  *   The published force_hat_n never exceeds NTE_K_BANK_DATA_BOUND (10) times the largest
