@@ -339,7 +339,8 @@ def test_export_keeps_the_snapshot_that_replays_best_and_fits_it(loop, model):
     force."""
     d = loop["dir"]
     exported = d / f"sel{model}.json"
-    r = ref(str(loop["p2"]), "--model", model, "--contact", "on", "--out",
+    # the single set (Model III's layer sets and their shifted replays: test_layer_sets.py)
+    r = ref(str(loop["p2"]), "--model", model, "--contact", "on", "--no-layer-sets", "--out",
             str(d / f"sel{model}.csv"), "--export-config", str(exported))
     assert r.returncode == 0, r.stderr
     cfg = json.loads(exported.read_text())
@@ -423,7 +424,7 @@ def test_predict_only_needs_a_config_and_a_surface(loop):
 
 @pytest.mark.parametrize("args", [["--model", "2", "--contact", "on"],
                                   ["--model", "3", "--contact", "on", "--tau-slow", "4"],
-                                  ["--model", "3", "--no-relaxation"],
+                                  ["--model", "3", "--no-relaxation", "--no-layer-sets"],
                                   ["--model", "1", "--init-seed", "3"]],
                          ids=["m2-contact", "m3-contact", "m3-norelax", "m1-seed3"])
 def test_export_same_bytes_from_both_twins(loop, args):
