@@ -21,32 +21,17 @@ The runs are nte-run-double's (bit for bit the reference's: test_config_loop.py,
 from __future__ import annotations
 
 import json
-import subprocess
 import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[2]
-C = ROOT / "build" / "host" / "bin" / "nte-run-double"
-VENV = Path(sys.executable).parent
+sys.path.insert(0, str(Path(__file__).parent))
+from config_loop_figures import C, phantom, run, write_record  # noqa: E402
+
 PRESETS = ("skin-on-muscle", "skin", "muscle", "artery-filled", "skin-incision")
 SHIFTS_MM = (-2.0, -1.0, 1.0, 2.0)
-
-
-def run(*args: str) -> None:
-    r = subprocess.run([str(C), *args], capture_output=True, text=True)
-    if r.returncode != 0:
-        raise SystemExit(r.stderr)
-
-
-def phantom(d: Path, preset: str, seed: int) -> Path:
-    f = d / f"{preset}_{seed}.csv"
-    if not f.exists():
-        subprocess.run([str(VENV / "nte-ref"), "phantom", preset, "--seed", str(seed),
-                        "--out", str(f)], check=True, capture_output=True)
-    return f
 
 
 def predict(d: Path, cfg: Path, record: Path, truth: np.ndarray, surface: float | None) -> float:
@@ -91,7 +76,6 @@ def phantom_rows(d: Path, presets: list[str], seeds: list[int]) -> list[list[flo
 
 
 def measured_like_rows(d: Path, seeds: range) -> list[list[float]]:
-    sys.path.insert(0, str(Path(__file__).parent))
     from discrepancy_measured_like import make_trial
     rows = []
     for seed in seeds:
@@ -99,8 +83,7 @@ def measured_like_rows(d: Path, seeds: range) -> list[list[float]]:
         a, b = d / "ml_a.csv", d / "ml_b.csv"
         fresh = truth + np.random.default_rng(1000 + seed).normal(0.0, sigma, len(truth))
         for path, force in ((a, tr.force_n), (b, fresh)):
-            path.write_text("t_s,depth_mm,force_n\n" + "".join(
-                "%.17g,%.17g,%.17g\n" % r for r in zip(tr.t_s, tr.depth_mm, force)))
+            write_record(path, tr.t_s, tr.depth_mm, force)
         rows.append(one_pair(d, a, b, truth - truth[0], None))
         print(f"   measured-like   {seed}: " + _cells(rows[-1]), flush=True)
     return rows
