@@ -19,7 +19,10 @@ find_program(NTE_ARM_NM arm-none-eabi-nm)
 # A bare-metal compiler cannot link a test program without a linker script.
 set(CMAKE_TRY_COMPILE_TARGET_TYPE STATIC_LIBRARY)
 
-set(NTE_M4_FLAGS "-mcpu=cortex-m4 -mthumb -mfpu=fpv4-sp-d16 -mfloat-abi=hard -ffp-contract=off")
+# -fno-math-errno: sqrtf becomes the FPU's VSQRT in place (correctly rounded either way, so
+# no float changes) instead of a call to newlib's wrapper that sets errno, which nothing here
+# reads: 350 B of the 32 KiB flash (the Setting frame's handling needed them) and fewer cycles.
+set(NTE_M4_FLAGS "-mcpu=cortex-m4 -mthumb -mfpu=fpv4-sp-d16 -mfloat-abi=hard -ffp-contract=off -fno-math-errno")
 # -fstack-usage and -fcallgraph-info=su: per-function stack and the call graph of every object
 # (.su, .ci), from which figures.py computes the worst-case stack.
 set(CMAKE_C_FLAGS_INIT

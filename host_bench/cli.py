@@ -7,6 +7,7 @@
     nte-bench check DIR [--model 1|2|3] [--preset NAME]
     nte-bench send FILE.csv [--channel vcan0] [--speed X] [--force-every N]
                    [--record-csv FILE] [--record-log FILE]
+    nte-bench settings FILE.json [--channel vcan0] [--model 1|2|3]
 
 replay sends a scenario (CSV: t_s, depth_mm, force_n, optional velocity_mm_s -- depth frames at
 --depth-rate, linearly interpolated from the CSV, force frames at the CSV's own rate; or a
@@ -27,6 +28,12 @@ comparison and figures where no bus is needed -- on the host, when the bus lives
 virtual machine (host_bench/with-vcan).
 send sends a scenario CSV row by row (one Depth frame per row, a Force frame where force_n is
 given) at its own timestamps and records the whole bus (host_bench.replay).
+settings sends an estimator configuration file (the workflow's estimator_config.json, an
+--export-config file) to the node as one transfer of Setting frames (nte_node.h SETTINGS;
+host_bench.settings_file), the file read and checked by the readers' rules first; the node
+applies it when the needle is out of tissue, as `nte-node --config FILE` would at start, and
+restarts with the file's model (or --model's).  The transfer is not acknowledged by a frame:
+settings then listens to the node's Heartbeat and says which model it runs.
 
 The CSV is read by the tools' one reader (reference_py.tools.csvio). Values outside a signal's DBC range (read from
 firmware/can/nte.dbc) are clipped to the range by replay, with a warning that counts them; send
@@ -410,7 +417,48 @@ def cmd_send(a: argparse.Namespace) -> int:
     return 0
 
 
-def _bus_flags(r: argparse.ArgumentParser, tail_s: float) -> None:
+def cmd_settings(a: argparse.Namespace) -> int:
+    from dataclasses import replace
+    from reference_py.tools.estconfig import ConfigFileError, read_config_file
+    from .settings_file import setting_items, transfer
+    db = NteDatabase(base_id=a.base_id)
+    try:
+        fc = read_config_file(a.file)
+    except ConfigFileError as exc:
+        print(f"nte-bench: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    if a.model is not None:
+        fc = replace(fc, model=a.model)
+    frames = transfer(setting_items(fc, db), db.sender())
+    heartbeat = db.frame_id("Heartbeat")
+    bus = open_bus(a.interface, a.channel, a.bitrate, None, "nte-bench settings")
+    try:
+        for m in frames:
+            bus.send(m)
+        models: list[int] = []
+        deadline = time.monotonic() + a.listen
+        while time.monotonic() < deadline:
+            m = bus.recv(timeout=max(0.0, deadline - time.monotonic()))
+            if m is not None and m.arbitration_id == heartbeat and not m.is_extended_id:
+                models.append(int(db.decode_unchecked("Heartbeat", bytes(m.data))["ActiveModel"]))
+    finally:
+        bus.shutdown()
+    print(f"settings: sent {len(frames)} Setting frames ({len(frames) - 2} items of "
+          f"{a.file}, model {fc.model})")
+    if not models:
+        print(f"settings: no Heartbeat within {a.listen:g} s: is the node on {a.channel}?")
+        return 1
+    running = models[-1] + 1
+    if running != fc.model:
+        print(f"settings: the node runs Model {running}, not {fc.model}: refused (needle in "
+              f"tissue, a lost frame: nte-node --stats counts setting_refused); send it again")
+        return 1
+    print(f"settings: the node runs Model {running}")
+    return 0
+
+
+def _bus_flags(r: argparse.ArgumentParser, tail_s: float | None) -> None:
+    """The bus's flags; with tail_s (not None) the sending's --speed and --tail too."""
     r.add_argument("--channel", default="vcan0",
                    help="socketcan interface name, or slcan serial port / pyserial URL such as "
                         "socket://127.0.0.1:PORT")
@@ -420,6 +468,8 @@ def _bus_flags(r: argparse.ArgumentParser, tail_s: float) -> None:
                    default=500000, help="slcan bit rate")
     r.add_argument("--base-id", type=_base_id, default=None,
                    help="base CAN id, 0x000-0x7F0 (default: the DBC's NteBaseId, 0x200)")
+    if tail_s is None:
+        return
     r.add_argument("--speed", type=bounded(0.0, 100.0), default=1.0,
                    help="time scale: 1 real time, 0.5 half speed, 0 as fast as possible")
     r.add_argument("--tail", type=bounded(0.0, 60.0, " s"), default=tail_s, metavar="S",
@@ -510,6 +560,18 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--record-log", metavar="FILE",
                    help="write all frames in candump -L format (can.CanutilsLogWriter)")
     s.set_defaults(run=cmd_send)
+
+    g = sub.add_parser("settings", help="send an estimator configuration file to the node",
+                       description="Send an estimator configuration file (--config's schema) "
+                                   "to the node as one transfer of Setting frames; the node "
+                                   "applies it out of tissue as nte-node --config would.")
+    g.add_argument("file", help="estimator configuration JSON (nte-estimator-config/1)")
+    _bus_flags(g, None)
+    g.add_argument("--model", type=int, choices=(1, 2, 3), default=None,
+                   help="the model to run (default: the file's)")
+    g.add_argument("--listen", type=bounded(0.0, 10.0, " s", lo_open=True), default=0.5,
+                   metavar="S", help="listen S seconds for the node's Heartbeat after sending")
+    g.set_defaults(run=cmd_settings)
     return p
 
 

@@ -8,13 +8,13 @@
 static const uint16_t nte_frames_offsets[nte_frames_kind_count] = {
     NTE_FRAMES_OFFSET_DEPTH,    NTE_FRAMES_OFFSET_FORCE,  NTE_FRAMES_OFFSET_COMMAND,
     NTE_FRAMES_OFFSET_ESTIMATE, NTE_FRAMES_OFFSET_PARAMS, NTE_FRAMES_OFFSET_HEARTBEAT,
-    NTE_FRAMES_OFFSET_CONTACT,
+    NTE_FRAMES_OFFSET_CONTACT,  NTE_FRAMES_OFFSET_SETTING,
 };
 
 static const uint16_t nte_frames_data_ids[nte_frames_kind_count] = {
     NTE_FRAMES_DATA_ID_DEPTH,    NTE_FRAMES_DATA_ID_FORCE,  NTE_FRAMES_DATA_ID_COMMAND,
     NTE_FRAMES_DATA_ID_ESTIMATE, NTE_FRAMES_DATA_ID_PARAMS, NTE_FRAMES_DATA_ID_HEARTBEAT,
-    NTE_FRAMES_DATA_ID_CONTACT,
+    NTE_FRAMES_DATA_ID_CONTACT,  NTE_FRAMES_DATA_ID_SETTING,
 };
 
 /* Raw value of log10(std) that means std = 0. */
@@ -321,6 +321,59 @@ nte_frames_err_t nte_frames_decode_command(nte_e2e_rx_t* e2e, const uint8_t* dat
     return nte_frames_ok;
 }
 
+/* ----------------------------------------------------------------------------- setting */
+
+static bool nte_frames_setting_ok(uint8_t item)
+{
+    return (item <= (uint8_t)NTE_FRAMES_SETTING_LAST_VALUE) ||
+           (item == (uint8_t)NTE_FRAMES_SETTING_COMMIT);
+}
+
+nte_frames_err_t nte_frames_encode_setting(const nte_frames_setting_t* in, nte_e2e_tx_t* e2e,
+                                           uint8_t* out)
+{
+    struct nte_can_setting_t m;
+    if ((in == NULL) || (e2e == NULL) || (out == NULL)) {
+        return nte_frames_err_null;
+    }
+    if (!nte_frames_setting_ok(in->item)) {
+        return nte_frames_err_selector;
+    }
+    if (!isfinite(in->value)) {
+        return nte_frames_err_not_finite;
+    }
+    (void)nte_can_setting_init(&m);
+    m.item = in->item;
+    m.value = in->value;
+    (void)nte_can_setting_pack(out, &m, NTE_FRAMES_LENGTH);
+    return nte_frames_protect(e2e, nte_frames_kind_setting, out);
+}
+
+nte_frames_err_t nte_frames_decode_setting(nte_e2e_rx_t* e2e, const uint8_t* data,
+                                           size_t length, nte_frames_setting_t* out,
+                                           nte_e2e_result_t* e2e_result, uint8_t* lost)
+{
+    struct nte_can_setting_t m;
+    nte_frames_err_t err;
+    if ((e2e == NULL) || (data == NULL) || (out == NULL)) {
+        return nte_frames_err_null;
+    }
+    err = nte_frames_check(e2e, nte_frames_kind_setting, data, length, e2e_result, lost);
+    if (err != nte_frames_ok) {
+        return err;
+    }
+    (void)nte_can_setting_unpack(&m, data, length);
+    if (!nte_frames_setting_ok(m.item)) {
+        return nte_frames_err_selector;
+    }
+    if (!isfinite(m.value)) {
+        return nte_frames_err_not_finite;
+    }
+    out->item = m.item;
+    out->value = m.value;
+    return nte_frames_ok;
+}
+
 /* ---------------------------------------------------------------------------- estimate */
 
 nte_frames_err_t nte_frames_encode_estimate(const nte_frames_estimate_t* in, nte_e2e_tx_t* e2e,
@@ -502,10 +555,18 @@ nte_frames_err_t nte_frames_encode_heartbeat(const nte_frames_heartbeat_t* in, n
     if (!isfinite(in->uptime_s) || !isfinite(in->step_time_s)) {
         return nte_frames_err_not_finite;
     }
-    if ((in->uptime_s < 0.0f) || (in->step_time_s < 0.0f)) {
+    if ((in->uptime_s < 0.0f) || (in->uptime_s > NTE_FRAMES_UPTIME_MAX_S) ||
+        (in->step_time_s < 0.0f)) {
         return nte_frames_err_range;
     }
-    uptime = fmodf(in->uptime_s, NTE_FRAMES_UPTIME_WRAP_S);
+    /* modulo the wrap without fmodf (600 B of the board's 32 KiB): k whole wraps, exact in
+     * float below 2^24; the subtraction's rounding is below the 0.1 s resolution up to
+     * 2^24 s (194 days; a float uptime is no finer there anyway) */
+    {
+        const float k = (float)(uint32_t)(in->uptime_s / NTE_FRAMES_UPTIME_WRAP_S);
+        uptime = in->uptime_s - (k * NTE_FRAMES_UPTIME_WRAP_S);
+        uptime = (uptime < 0.0f) ? 0.0f : uptime;
+    }
     uptime_raw = nte_can_heartbeat_uptime_encode(uptime);
     if (!nte_can_heartbeat_uptime_is_in_range(uptime_raw)) {
         uptime_raw = 0u; /* rounded up to the wrap value */

@@ -14,7 +14,8 @@
  * error counters (they go out in the heartbeat).
  *
  * CAN ids: id = base + offset, base configurable (default NTE_FRAMES_BASE_ID_DEFAULT = 0x200,
- * the ids written in the DBC); offsets: depth 0x00, force 0x01, command 0x02, estimate 0x10,
+ * the ids written in the DBC); offsets: depth 0x00, force 0x01, command 0x02, setting 0x03,
+ * estimate 0x10,
  * params 0x11, heartbeat 0x12, contact 0x13. Standard 11-bit ids, so base <= 0x7FF - 0x13 = 0x7EC.
  * The DBC attribute
  * NteIdOffset holds the same offsets and NteE2EDataId the data ids below; a test checks that
@@ -49,6 +50,7 @@ extern "C" {
 #define NTE_FRAMES_OFFSET_DEPTH 0x00u
 #define NTE_FRAMES_OFFSET_FORCE 0x01u
 #define NTE_FRAMES_OFFSET_COMMAND 0x02u
+#define NTE_FRAMES_OFFSET_SETTING 0x03u
 #define NTE_FRAMES_OFFSET_ESTIMATE 0x10u
 #define NTE_FRAMES_OFFSET_PARAMS 0x11u
 #define NTE_FRAMES_OFFSET_HEARTBEAT 0x12u
@@ -57,6 +59,7 @@ extern "C" {
 #define NTE_FRAMES_DATA_ID_DEPTH 0x4E00u
 #define NTE_FRAMES_DATA_ID_FORCE 0x4E01u
 #define NTE_FRAMES_DATA_ID_COMMAND 0x4E02u
+#define NTE_FRAMES_DATA_ID_SETTING 0x4E03u
 #define NTE_FRAMES_DATA_ID_ESTIMATE 0x4E10u
 #define NTE_FRAMES_DATA_ID_PARAMS 0x4E11u
 #define NTE_FRAMES_DATA_ID_HEARTBEAT 0x4E12u
@@ -74,6 +77,8 @@ extern "C" {
 #define NTE_FRAMES_Z_MIN (-8.192f)
 #define NTE_FRAMES_Z_MAX 8.1915f
 #define NTE_FRAMES_UPTIME_WRAP_S 52428.8f  /**< 19-bit Uptime at 0.1 s (14.56 h) */
+/** Largest uptime an encoder takes, s: 2^24 wraps (27 000 years). */
+#define NTE_FRAMES_UPTIME_MAX_S (16777216.0f * NTE_FRAMES_UPTIME_WRAP_S)
 #define NTE_FRAMES_SURFACE_MAX_MM 500.0f  /**< |Contact.Surface|, stage position mm */
 #define NTE_FRAMES_STEP_TIME_MAX_S 0.00819f
 /** log10(std) is sent in 0.001 steps in [-32.767, 32.767]; -32.768 means std = 0 (fixed). */
@@ -95,7 +100,7 @@ typedef enum {
     nte_frames_err_wrong_kind = -8   /**< The E2E state passed in belongs to another message. */
 } nte_frames_err_t;
 
-/** The seven messages. */
+/** The eight messages (setting, the last added, keeps the others' numbers). */
 typedef enum {
     nte_frames_kind_depth = 0,
     nte_frames_kind_force = 1,
@@ -104,7 +109,8 @@ typedef enum {
     nte_frames_kind_params = 4,
     nte_frames_kind_heartbeat = 5,
     nte_frames_kind_contact = 6,
-    nte_frames_kind_count = 7
+    nte_frames_kind_setting = 7,
+    nte_frames_kind_count = 8
 } nte_frames_kind_t;
 
 /** Command selectors (0 = keep the current setting). */
@@ -131,6 +137,21 @@ enum {
     NTE_FRAMES_PARAM_F1 = 3, NTE_FRAMES_PARAM_F2 = 4, NTE_FRAMES_PARAM_ALPHA = 5,
     NTE_FRAMES_PARAM_BETA = 6, NTE_FRAMES_PARAM_G_FAST = 7, NTE_FRAMES_PARAM_G_SLOW = 8,
     NTE_FRAMES_PARAM_DELTA = 9, NTE_FRAMES_PARAM_COUNT_MODEL_II = 7, NTE_FRAMES_PARAM_COUNT = 10
+};
+/** Items of the Setting frame (the DBC's Item; a configuration sent item by item, see
+ *  nte_node.h SETTINGS).  Items 2..11 are the nominal of parameter item - 2 (nte.h
+ *  nte_param_id_t; 11, delta, is Model III's presliding_mm); items 20..59 the layer sets:
+ *  NTE_FRAMES_SETTING_LAYER0 + NTE_FRAMES_SETTING_LAYER_FIELDS k + j, set k, field j = 0 its
+ *  start (mm below the surface), 1 + nte_layer_value_t its values. */
+enum {
+    NTE_FRAMES_SETTING_BEGIN = 0, NTE_FRAMES_SETTING_MODEL = 1, NTE_FRAMES_SETTING_PARAM0 = 2,
+    NTE_FRAMES_SETTING_R_N2 = 12, NTE_FRAMES_SETTING_SURFACE_MM = 13,
+    NTE_FRAMES_SETTING_TAU_FAST_S = 14, NTE_FRAMES_SETTING_TAU_SLOW_S = 15,
+    NTE_FRAMES_SETTING_RELAX_BRANCHES = 16, NTE_FRAMES_SETTING_RELAXATION = 17,
+    NTE_FRAMES_SETTING_DIRECTION_MEMORY = 18, NTE_FRAMES_SETTING_LAYER_SETS = 19,
+    NTE_FRAMES_SETTING_LAYER0 = 20, NTE_FRAMES_SETTING_LAYER_FIELDS = 5,
+    NTE_FRAMES_SETTING_LAYER_SETS_MAX = 8, NTE_FRAMES_SETTING_LAST_VALUE = 59,
+    NTE_FRAMES_SETTING_COMMIT = 255
 };
 /** Contact states of the Contact frame. */
 enum { NTE_FRAMES_CONTACT_AIR = 0, NTE_FRAMES_CONTACT_TISSUE = 1 };
@@ -162,6 +183,12 @@ typedef struct {
     uint8_t force_source;   /**< NTE_FRAMES_FORCE_SOURCE_*. */
 } nte_frames_command_t;
 
+/** One configuration item (input, on event). */
+typedef struct {
+    uint8_t item;   /**< NTE_FRAMES_SETTING_*: 0..59 or 255 (an error otherwise). */
+    float value;    /**< Any finite float32 (an error otherwise), in the item's unit. */
+} nte_frames_setting_t;
+
 /** Estimate (output, one per force sample). */
 typedef struct {
     float force_n;       /**< Estimated force, N; clamped to +-50 N, 0.1 mN resolution. */
@@ -189,7 +216,8 @@ typedef struct {
     uint8_t node_state;        /**< NTE_FRAMES_STATE_*. */
     uint8_t active_model;      /**< 0 = Model I, 1 = Model II, 2 = Model III. */
     uint8_t active_estimator;  /**< 0 = bank, 1 = robust. */
-    float uptime_s;            /**< >= 0 s; sent modulo 52428.8 s with 0.1 s resolution. */
+    float uptime_s;            /**< 0 .. NTE_FRAMES_UPTIME_MAX_S s; sent modulo 52428.8 s
+                                    with 0.1 s resolution. */
     uint32_t e2e_errors;       /**< Counter of frames rejected by E2E; sent modulo 256. */
     uint32_t range_errors;     /**< Counter of frames rejected by range checks; modulo 256. */
     float step_time_s;         /**< >= 0 s, longest step since the last heartbeat; clamped to
@@ -239,6 +267,8 @@ nte_frames_err_t nte_frames_encode_force(const nte_frames_force_t* in, nte_e2e_t
                                          uint8_t* out);
 nte_frames_err_t nte_frames_encode_command(const nte_frames_command_t* in, nte_e2e_tx_t* e2e,
                                            uint8_t* out);
+nte_frames_err_t nte_frames_encode_setting(const nte_frames_setting_t* in, nte_e2e_tx_t* e2e,
+                                           uint8_t* out);
 /** Non-finite values are an error (send fault = true with finite values instead). */
 nte_frames_err_t nte_frames_encode_estimate(const nte_frames_estimate_t* in, nte_e2e_tx_t* e2e,
                                             uint8_t* out);
@@ -262,6 +292,9 @@ nte_frames_err_t nte_frames_decode_force(nte_e2e_rx_t* e2e, const uint8_t* data,
                                          uint8_t* lost);
 nte_frames_err_t nte_frames_decode_command(nte_e2e_rx_t* e2e, const uint8_t* data,
                                            size_t length, nte_frames_command_t* out,
+                                           nte_e2e_result_t* e2e_result, uint8_t* lost);
+nte_frames_err_t nte_frames_decode_setting(nte_e2e_rx_t* e2e, const uint8_t* data,
+                                           size_t length, nte_frames_setting_t* out,
                                            nte_e2e_result_t* e2e_result, uint8_t* lost);
 nte_frames_err_t nte_frames_decode_estimate(nte_e2e_rx_t* e2e, const uint8_t* data,
                                             size_t length, nte_frames_estimate_t* out,

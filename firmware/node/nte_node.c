@@ -10,6 +10,8 @@
 #define NTE_NODE_IN_DEPTH 0u
 #define NTE_NODE_IN_FORCE 1u
 #define NTE_NODE_IN_COMMAND 2u
+#define NTE_NODE_IN_SETTING 3u
+#define NTE_NODE_INPUTS 4u
 #define NTE_NODE_OUT_ESTIMATE 0u
 #define NTE_NODE_OUT_PARAMS 1u
 #define NTE_NODE_OUT_HEARTBEAT 2u
@@ -21,7 +23,7 @@ static const char* const nte_node_event_names[NTE_NODE_EVENT_COUNT] = {
     "counter_skipped", "out_of_range", "time_backwards", "queue_overflow",  "send_failed",
     "command_refused", "stale",        "receive_error",  "encode_error",    "time_jump_dropped",
     "time_resync",     "command_stale", "command_rate_limited", "sensor_stuck",
-    "sensor_saturated"};
+    "sensor_saturated", "setting_refused"};
 
 /* Signed difference a - b of two unwrapped tick counts (they wrap modulo 2^32). */
 static int32_t nte_node_tdiff(uint32_t a, uint32_t b)
@@ -43,16 +45,117 @@ void nte_node_config_default(nte_node_config_t* cfg, int32_t model)
     (void)memset(cfg, 0, sizeof *cfg);
     cfg->base_id = NTE_FRAMES_BASE_ID_DEFAULT;
     cfg->model = model;
-    nte_config_default(&cfg->estimator[0], 1, nte_schedule_all);
-    nte_config_default(&cfg->estimator[1], 2, nte_schedule_all);
-    nte_config_default(&cfg->estimator[2], 3, nte_schedule_all);
-    cfg->estimator[2].contact.enabled = true; /* Model III: Depth is the stage position */
+    nte_node_settings_begin(cfg);
     cfg->depth_timeout_us = NTE_NODE_DEFAULT_DEPTH_TIMEOUT_US;
     cfg->heartbeat_period_us = NTE_NODE_DEFAULT_HEARTBEAT_PERIOD_US;
     cfg->params_per_step = NTE_NODE_DEFAULT_PARAMS_PER_STEP;
     cfg->rx_budget = NTE_NODE_DEFAULT_RX_BUDGET;
     cfg->resync_gap_us = NTE_NODE_DEFAULT_RESYNC_GAP_US;
     cfg->command_interval_us = NTE_NODE_DEFAULT_COMMAND_INTERVAL_US;
+}
+
+void nte_node_settings_begin(nte_node_config_t* cfg)
+{
+    for (int32_t m = 0; m < NTE_NODE_MODELS; m++) {
+        nte_config_default(&cfg->estimator[m], m + 1, nte_schedule_all);
+    }
+    cfg->estimator[2].contact.enabled = true; /* Model III: Depth is the stage position */
+}
+
+/* value as a whole number in lo..hi (lo >= 0), or -1 */
+static int32_t nte_node_whole(float value, int32_t lo, int32_t hi)
+{
+    if (!(value >= (float)lo) || !(value <= (float)hi)) {
+        return -1;
+    }
+    const int32_t n = (int32_t)value; /* truncated: (float)n <= value, equal when whole */
+    return ((float)n < value) ? -1 : n;
+}
+
+nte_node_err_t nte_node_setting_apply(nte_node_config_t* cfg, uint32_t item, float value)
+{
+    nte_config_t* c3 = &cfg->estimator[2];
+    const nte_real_t v = (nte_real_t)value;
+    /* unsigned differences: a parameter when j < NTE_PARAM_COUNT, a layer set's field when
+     * l < NTE_FRAMES_SETTING_LAYER_FIELDS * NTE_LAYER_SETS_MAX (both wrap below their base) */
+    const uint32_t j = item - (uint32_t)NTE_FRAMES_SETTING_PARAM0;
+    const uint32_t l = item - (uint32_t)NTE_FRAMES_SETTING_LAYER0;
+    const uint32_t fields = (uint32_t)NTE_FRAMES_SETTING_LAYER_FIELDS;
+    int32_t n = 0;
+    if (!isfinite(value)) {
+        return nte_node_err_bad_config;
+    }
+    if (j < (uint32_t)nte_param_g_fast) {
+        /* the force model's seven values are every model's nominal, as --preset sets them;
+         * f1_excess 0: the library derives f1's identified part from f1 and f2 */
+        for (int32_t m = 0; m < NTE_NODE_MODELS; m++) {
+            nte_config_t* c = &cfg->estimator[m];
+            c->nominal[j] = v;
+            if (j == (uint32_t)nte_param_beta) {
+                c->beta0 = v; /* Model I's fixed beta */
+            }
+            if ((j == (uint32_t)nte_param_f1) || (j == (uint32_t)nte_param_f2)) {
+                c->f1_excess = (nte_real_t)0;
+            }
+        }
+    } else if (j < (uint32_t)nte_param_delta) {
+        c3->nominal[j] = v; /* the relaxation strengths: Model III's alone */
+    } else if (l < (fields * (uint32_t)NTE_LAYER_SETS_MAX)) {
+        nte_layer_set_t* ls = &c3->layer_set[l / fields];
+        if ((l % fields) == 0u) {
+            ls->start_mm = v;
+        } else {
+            ls->values[(l % fields) - 1u] = v;
+        }
+    } else {
+        switch (item) {
+        case NTE_FRAMES_SETTING_PARAM0 + nte_param_delta:
+            c3->presliding_mm = v; /* delta starts at presliding_mm (nte.h) */
+            break;
+        case NTE_FRAMES_SETTING_MODEL:
+            n = nte_node_whole(value, 1, NTE_NODE_MODELS);
+            cfg->model = (n > 0) ? n : cfg->model;
+            break;
+        case NTE_FRAMES_SETTING_R_N2:
+            for (int32_t m = 0; m < NTE_NODE_MODELS; m++) {
+                cfg->estimator[m].r_n2 = v;
+            }
+            break;
+        case NTE_FRAMES_SETTING_SURFACE_MM: c3->contact.surface_mm = v; break;
+        case NTE_FRAMES_SETTING_TAU_FAST_S: c3->tau_fast_s = v; break;
+        case NTE_FRAMES_SETTING_TAU_SLOW_S: c3->tau_slow_s = v; break;
+        case NTE_FRAMES_SETTING_RELAX_BRANCHES:
+            n = nte_node_whole(value, 1, 2);
+            c3->relax_branches = (n > 0) ? n : c3->relax_branches;
+            break;
+        case NTE_FRAMES_SETTING_RELAXATION:
+            n = nte_node_whole(value, 0, 1);
+            c3->relaxation = (n == 1);
+            break;
+        case NTE_FRAMES_SETTING_DIRECTION_MEMORY:
+            n = nte_node_whole(value, 0, 1);
+            c3->direction_memory = (n == 1);
+            break;
+        case NTE_FRAMES_SETTING_LAYER_SETS:
+            n = nte_node_whole(value, 0, (int32_t)NTE_LAYER_SETS_MAX);
+            c3->layer_sets = (n >= 0) ? (uint32_t)n : c3->layer_sets;
+            break;
+        default: n = -1; break; /* BEGIN, COMMIT, a layer set beyond the capacity */
+        }
+    }
+    return (n >= 0) ? nte_node_ok : nte_node_err_bad_config;
+}
+
+/* Every estimator configuration is its model's and passes nte_config_check. */
+static bool nte_node_estimators_ok(const nte_node_config_t* cfg)
+{
+    for (int32_t m = 0; m < NTE_NODE_MODELS; m++) {
+        if ((cfg->estimator[m].model != (m + 1)) ||
+            (nte_config_check(&cfg->estimator[m]) != nte_err_ok)) {
+            return false;
+        }
+    }
+    return true;
 }
 
 static nte_node_err_t nte_node_check(const nte_node_config_t* cfg, const nte_node_port_t* port)
@@ -71,13 +174,7 @@ static nte_node_err_t nte_node_check(const nte_node_config_t* cfg, const nte_nod
         (cfg->resync_gap_us > 3000000u) || (cfg->command_interval_us > 10000000u)) {
         return nte_node_err_bad_config;
     }
-    for (int32_t m = 0; m < NTE_NODE_MODELS; m++) {
-        if ((cfg->estimator[m].model != (m + 1)) ||
-            (nte_config_check(&cfg->estimator[m]) != nte_err_ok)) {
-            return nte_node_err_estimator;
-        }
-    }
-    return nte_node_ok;
+    return nte_node_estimators_ok(cfg) ? nte_node_ok : nte_node_err_estimator;
 }
 
 /* (Re)start the estimator with `model` and `estimator`; on failure the previous one is kept. */
@@ -107,8 +204,9 @@ static uint32_t nte_node_param_count(const nte_node_t* self)
 nte_node_err_t nte_node_init(nte_node_t* self, const nte_node_config_t* cfg,
                              const nte_node_port_t* port)
 {
-    static const nte_frames_kind_t in_kinds[3] = {nte_frames_kind_depth, nte_frames_kind_force,
-                                                  nte_frames_kind_command};
+    static const nte_frames_kind_t in_kinds[NTE_NODE_INPUTS] = {
+        nte_frames_kind_depth, nte_frames_kind_force, nte_frames_kind_command,
+        nte_frames_kind_setting};
     static const nte_frames_kind_t out_kinds[4] = {
         nte_frames_kind_estimate, nte_frames_kind_params, nte_frames_kind_heartbeat,
         nte_frames_kind_contact};
@@ -122,7 +220,7 @@ nte_node_err_t nte_node_init(nte_node_t* self, const nte_node_config_t* cfg,
     (void)memset(self, 0, sizeof *self);
     self->cfg = *cfg;
     self->port = *port;
-    for (uint32_t i = 0u; i < 3u; i++) {
+    for (uint32_t i = 0u; i < NTE_NODE_INPUTS; i++) {
         (void)nte_frames_rx_init(&self->rx[i], in_kinds[i]);
     }
     for (uint32_t i = 0u; i < 4u; i++) {
@@ -139,9 +237,10 @@ nte_node_err_t nte_node_init(nte_node_t* self, const nte_node_config_t* cfg,
 
 uint32_t nte_node_input_id(const nte_node_t* self, uint32_t kind)
 {
-    static const uint32_t offsets[3] = {NTE_FRAMES_OFFSET_DEPTH, NTE_FRAMES_OFFSET_FORCE,
-                                        NTE_FRAMES_OFFSET_COMMAND};
-    return self->cfg.base_id + offsets[(kind < 3u) ? kind : 0u];
+    static const uint32_t offsets[NTE_NODE_INPUTS] = {
+        NTE_FRAMES_OFFSET_DEPTH, NTE_FRAMES_OFFSET_FORCE, NTE_FRAMES_OFFSET_COMMAND,
+        NTE_FRAMES_OFFSET_SETTING};
+    return self->cfg.base_id + offsets[(kind < NTE_NODE_INPUTS) ? kind : 0u];
 }
 
 int32_t nte_node_model(const nte_node_t* self)
@@ -809,7 +908,7 @@ static void nte_node_on_command(nte_node_t* self, const nte_node_frame_t* fr)
     /* freeze: the library has no way to hold the parameters; a restart or reset needs the
      * needle out of tissue (the last estimate's InTissue clear) */
     if ((c.adapt_cmd == NTE_FRAMES_ADAPT_FREEZE) ||
-        ((restart || c.reset) && self->last.in_tissue) ||
+        ((restart || c.reset) && (self->last.in_tissue || self->settings.unapplied)) ||
         (restart && !nte_node_start_model(self, model, estimator))) {
         nte_node_count(self, nte_node_ev_command_refused);
         return;
@@ -830,6 +929,75 @@ static void nte_node_on_command(nte_node_t* self, const nte_node_frame_t* fr)
     self->counters.commands_applied++;
 }
 
+/* A Setting frame refused: the transfer breaks off (nte_node.h, SETTINGS). */
+static void nte_node_setting_refused(nte_node_t* self)
+{
+    self->settings.open = false;
+    nte_node_count(self, nte_node_ev_setting_refused);
+}
+
+/* The end of a transfer: the configurations it wrote run, or nothing changes. */
+static void nte_node_settings_commit(nte_node_t* self, float announced)
+{
+    nte_node_settings_t* st = &self->settings;
+    st->open = false;
+    if ((nte_node_whole(announced, 0, 255) != (int32_t)st->announced) ||
+        (st->received != st->announced) ||
+        ((st->seen & (1ULL << NTE_FRAMES_SETTING_MODEL)) == 0ULL) || self->last.in_tissue ||
+        !nte_node_estimators_ok(&self->cfg) ||
+        !nte_node_start_model(self, self->cfg.model, nte_estimator_bank)) {
+        nte_node_count(self, nte_node_ev_setting_refused);
+        return;
+    }
+    st->unapplied = false;
+    self->counters.settings_applied++;
+}
+
+static void nte_node_on_setting(nte_node_t* self, const nte_node_frame_t* fr)
+{
+    nte_frames_setting_t s;
+    nte_e2e_result_t e2e = nte_e2e_ok;
+    uint8_t lost = 0u;
+    nte_node_settings_t* st = &self->settings;
+    const nte_frames_err_t err = nte_frames_decode_setting(
+        &self->rx[NTE_NODE_IN_SETTING], fr->data, fr->len, &s, &e2e, &lost);
+    if (!nte_node_decoded(self, err, e2e, lost)) {
+        st->open = false; /* an item may be missing: the transfer cannot complete */
+        return;
+    }
+    self->counters.rx_accepted[NTE_NODE_IN_SETTING]++;
+    if (s.item == (uint8_t)NTE_FRAMES_SETTING_BEGIN) {
+        const int32_t n = nte_node_whole(s.value, 1, NTE_FRAMES_SETTING_LAST_VALUE);
+        if ((n < 0) || self->last.in_tissue) {
+            nte_node_setting_refused(self);
+            return;
+        }
+        nte_node_settings_begin(&self->cfg);
+        st->open = true;
+        st->unapplied = true;
+        st->announced = (uint8_t)n;
+        st->received = 0u;
+        st->seen = 0ULL;
+        return;
+    }
+    if (!st->open || (e2e == nte_e2e_skipped)) {
+        nte_node_setting_refused(self);
+        return;
+    }
+    if (s.item == (uint8_t)NTE_FRAMES_SETTING_COMMIT) {
+        nte_node_settings_commit(self, s.value);
+        return;
+    }
+    const uint64_t bit = 1ULL << s.item; /* 1..59: the frame layer refused the rest */
+    if (((st->seen & bit) != 0ULL) || (st->received >= st->announced) ||
+        (nte_node_setting_apply(&self->cfg, s.item, s.value) != nte_node_ok)) {
+        nte_node_setting_refused(self);
+        return;
+    }
+    st->seen |= bit;
+    st->received++;
+}
+
 static void nte_node_on_frame(nte_node_t* self, const nte_node_frame_t* fr)
 {
     if (fr->extended || fr->remote) {
@@ -842,6 +1010,8 @@ static void nte_node_on_frame(nte_node_t* self, const nte_node_frame_t* fr)
         nte_node_on_sample(self, NTE_NODE_IN_FORCE, fr);
     } else if (fr->id == nte_node_input_id(self, NTE_NODE_IN_COMMAND)) {
         nte_node_on_command(self, fr);
+    } else if (fr->id == nte_node_input_id(self, NTE_NODE_IN_SETTING)) {
+        nte_node_on_setting(self, fr);
     } else {
         nte_node_count(self, nte_node_ev_unknown_id);
     }

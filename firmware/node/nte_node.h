@@ -71,6 +71,30 @@
  *   protects integrity (corruption, loss, repetition), not authenticity: any sender on the bus
  *   can compute the CRC and follow the counter.  Protect the bus, or add a MAC, if that matters.
  *
+ * SETTINGS (a configuration sent over the bus: the Setting frame, firmware/can/nte.dbc)
+ *   A board has no file system: what `nte-node --config FILE` reads from a file, a sender
+ *   (`nte-bench settings FILE`) sends as Setting frames, one item per frame (nte_frames.h
+ *   NTE_FRAMES_SETTING_*): BEGIN with the number of value items, the value items (model, the
+ *   nominal parameters, r_n2, a known surface, Model III's constants and layer sets), COMMIT
+ *   with the same number.  BEGIN and COMMIT are taken only while the needle is out of tissue
+ *   (as a model change).  BEGIN sets the three estimator configurations to their defaults
+ *   (nte_node_settings_begin) and each value item is written into them at once
+ *   (nte_node_setting_apply: the same function nte-node --config uses, so a file and its
+ *   transfer configure the node alike, bit for bit); the running estimator keeps its own copy
+ *   and is not touched.  COMMIT checks the configurations (nte_config_check) and restarts the
+ *   estimator (the bank) with the transfer's model: counted in settings_applied.
+ *   The transfer breaks off, counted as setting_refused, at: a value item outside a transfer,
+ *   an item given twice, more items than announced, a value the item cannot take (a model
+ *   not 1..3, a count or switch that is not a whole number in range, a layer set beyond
+ *   NTE_LAYER_SETS_MAX), a lost Setting frame (its E2E counter skipped; a frame that
+ *   fails E2E is counted by its cause and breaks the transfer off too), BEGIN or COMMIT in tissue, a COMMIT whose number differs from the
+ *   announced and received ones or that misses the model, a configuration nte_config_check
+ *   refuses.  Nothing that runs changes then, but the configurations hold a partial
+ *   transfer: until a transfer is applied, model changes and resets are refused
+ *   (command_refused) so that the partial one never runs.  Send the transfer again.
+ *   No rate limit (a transfer is some forty frames), no port clock: a replay is
+ *   deterministic.
+ *
  * PREDICT-ONLY (the model alone: a force sensor that fails or is switched off; nte.h THE
  * PREDICT-ONLY MODE)
  *   The node runs the estimator in predict-only mode -- the force is not read, the parameters
@@ -129,7 +153,7 @@
  *     now_us(ctx)          monotonic clock in microseconds (any epoch, must not go backwards).
  *   A port for a microcontroller's CAN controller reads its RX FIFO in receive(), writes a TX
  *   mailbox in send() and reads a free-running timer in now_us().  The Linux SocketCAN port is
- *   firmware/port/linux/.  Hardware acceptance filters may pass only the node's three input ids
+ *   firmware/port/linux/.  Hardware acceptance filters may pass only the node's four input ids
  *   (nte_node_input_id); nothing else is needed.
  *
  * INTEGRATION
@@ -140,7 +164,7 @@
  *   socket with a timeout of nte_node_next_deadline_us).
  *
  * MEMORY MODEL
- *   The caller owns the instance (sizeof(nte_node_t) is 5048 bytes on x86-64 with the default
+ *   The caller owns the instance (sizeof(nte_node_t) is 5088 bytes on x86-64 with the default
  *   sizes: the estimator nte_t 3024, three estimator configurations 3 x 328, the queues):
  *   no allocation, no global or static mutable state; queues are fixed arrays in the instance
  *   (sizes NTE_NODE_DEPTH_HISTORY and NTE_NODE_FORCE_QUEUE below, compile-time).
@@ -232,10 +256,12 @@ typedef enum nte_node_event_t {
                                            applied one: ignored */
     nte_node_ev_sensor_stuck = 18,     /**< force reading judged stuck (SENSOR WATCH): not
                                            read, predicted from the model */
-    nte_node_ev_sensor_saturated = 19  /**< force reading at the Force frame's limit (SENSOR
+    nte_node_ev_sensor_saturated = 19, /**< force reading at the Force frame's limit (SENSOR
                                            WATCH): not read, predicted from the model */
+    nte_node_ev_setting_refused = 20   /**< Setting frame not taken: the transfer breaks off
+                                           (SETTINGS) */
 } nte_node_event_t;
-#define NTE_NODE_EVENT_COUNT 20
+#define NTE_NODE_EVENT_COUNT 21
 
 /** SENSOR WATCH: a force reading repeated exactly this many times in a row (this one
  *  included) ... */
@@ -248,7 +274,8 @@ typedef enum nte_node_event_t {
 typedef struct nte_node_counters_t {
     uint32_t events[NTE_NODE_EVENT_COUNT]; /**< by nte_node_event_t */
     uint32_t frames_lost;                  /**< frames missed upstream, from counter skips */
-    uint32_t rx_accepted[3];               /**< accepted depth, force, command frames */
+    uint32_t rx_accepted[4];               /**< accepted depth, force, command, setting
+                                                frames */
     uint32_t tx[4];                        /**< sent estimate, params, heartbeat, contact
                                                 frames */
     uint32_t steps;                        /**< estimator steps (non-stale force samples,
@@ -257,6 +284,8 @@ typedef struct nte_node_counters_t {
     uint32_t predict_on;                   /**< steps that entered predict-only mode */
     uint32_t predict_off;                  /**< steps that left it (identifying again) */
     uint32_t predict_depth_steps;          /**< steps on Depth samples, the sensor lost */
+    uint32_t settings_applied;             /**< configurations received and applied
+                                                (SETTINGS) */
 } nte_node_counters_t;
 
 /** Node tuning; fill with nte_node_config_default, then change what you need. */
@@ -337,6 +366,15 @@ typedef struct nte_node_pending_t {
     float b;                   /**< velocity_mm_s (depth); force: 1 = SensorFault, 0 = not */
 } nte_node_pending_t;
 
+/** A configuration transfer in progress (SETTINGS). */
+typedef struct nte_node_settings_t {
+    bool open;          /**< BEGIN taken, no COMMIT or break yet */
+    bool unapplied;     /**< the configurations hold a transfer not applied */
+    uint8_t announced;  /**< value items BEGIN announced */
+    uint8_t received;   /**< value items taken */
+    uint64_t seen;      /**< bit i: item i taken (items 1..59) */
+} nte_node_settings_t;
+
 /** One node.  Every field except `counters` is private. */
 typedef struct nte_node_t {
     nte_node_config_t cfg;
@@ -346,7 +384,7 @@ typedef struct nte_node_t {
     nte_estimator_t estimator;
     bool have_command;
     uint64_t last_command_us;     /* port clock of the last applied command */
-    nte_e2e_rx_t rx[3];           /* depth, force, command */
+    nte_e2e_rx_t rx[4];           /* depth, force, command, setting */
     nte_e2e_tx_t tx[4];           /* estimate, params, heartbeat, contact */
     nte_frames_clock_t clock;
     nte_node_depth_t depth[NTE_NODE_DEPTH_HISTORY];
@@ -379,6 +417,7 @@ typedef struct nte_node_t {
     uint64_t t_start_us;
     uint64_t next_heartbeat_us;
     uint32_t step_time_max_us;
+    nte_node_settings_t settings;
     nte_node_counters_t counters;
 } nte_node_t;
 
@@ -387,6 +426,22 @@ typedef struct nte_node_t {
  *  force), 50 ms depth timeout, 100 ms heartbeat, one Params frame per step, 64 frames
  *  per poll, 20 ms resync gap, 100 ms between commands. */
 void nte_node_config_default(nte_node_config_t* cfg, int32_t model);
+
+/** SETTINGS: the three estimator configurations to their defaults (nte_config_default,
+ *  schedule all, bank; Model III with the contact front end on, the surface found from the
+ *  force): where a transfer, and nte-node --config, start from. */
+void nte_node_settings_begin(nte_node_config_t* cfg);
+
+/** SETTINGS: write one value item (NTE_FRAMES_SETTING_MODEL .. _LAST_VALUE) into cfg: the
+ *  model into cfg->model; a nominal parameter sigma0..beta into the three estimator
+ *  configurations (beta also as Model I's beta0; f1 or f2 make the f1 excess computed from
+ *  the nominal, f1_excess 0), g_fast, g_slow, delta (presliding_mm), the time constants,
+ *  branches, switches, known surface and layer sets into Model III's; r_n2 into all three.
+ *  Returns nte_node_err_bad_config, cfg unchanged, for a non-finite value, an item that is not
+ *  a value item, a model not 1..3, a branch count, switch or set count that is not a whole
+ *  number in range, or a layer set at or beyond NTE_LAYER_SETS_MAX; the ranges of the
+ *  values themselves are nte_config_check's, at COMMIT. */
+nte_node_err_t nte_node_setting_apply(nte_node_config_t* cfg, uint32_t item, float value);
 
 /** Validate cfg and the port, initialise the estimator and every queue; the first heartbeat is
  *  due one period after now_us().  On error self is unspecified.  Cost: one nte_init. */
@@ -402,7 +457,7 @@ int32_t nte_node_poll(nte_node_t* self);
 /** Port clock time of the next heartbeat: sleep at most until then between polls. */
 uint64_t nte_node_next_deadline_us(const nte_node_t* self);
 
-/** CAN id of input `kind` (0 depth, 1 force, 2 command) for the configured base. */
+/** CAN id of input `kind` (0 depth, 1 force, 2 command, 3 setting) for the configured base. */
 uint32_t nte_node_input_id(const nte_node_t* self, uint32_t kind);
 
 /** Active model (1, 2 or 3) and state. */

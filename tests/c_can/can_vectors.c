@@ -81,6 +81,12 @@ static const signal_t command_signals[] = {
     ENTRY(command, estimator_sel, "EstimatorSel"), ENTRY(command, adapt_cmd, "AdaptCmd"),
     ENTRY(command, force_source, "ForceSource")};
 
+MSG(setting)
+SIG(setting, crc) SIG(setting, counter) SIG(setting, item) SIG(setting, value)
+static const signal_t setting_signals[] = {
+    ENTRY(setting, crc, "Crc"), ENTRY(setting, counter, "Counter"),
+    ENTRY(setting, item, "Item"), ENTRY(setting, value, "Value")};
+
 MSG(estimate)
 SIG(estimate, crc) SIG(estimate, counter) SIG(estimate, in_tissue) SIG(estimate, adapting)
 SIG(estimate, saturated) SIG(estimate, fault) SIG(estimate, stale) SIG(estimate, force_est)
@@ -143,6 +149,8 @@ static const message_t messages[] = {
      COUNT(force_signals)},
     {"Command", nte_frames_kind_command, init_command, pack_command, unpack_command,
      command_signals, COUNT(command_signals)},
+    {"Setting", nte_frames_kind_setting, init_setting, pack_setting, unpack_setting,
+     setting_signals, COUNT(setting_signals)},
     {"Estimate", nte_frames_kind_estimate, init_estimate, pack_estimate, unpack_estimate,
      estimate_signals, COUNT(estimate_signals)},
     {"Params", nte_frames_kind_params, init_params, pack_params, unpack_params, params_signals,
@@ -157,6 +165,7 @@ typedef union {
     struct nte_can_depth_t depth;
     struct nte_can_force_t force;
     struct nte_can_command_t command;
+    struct nte_can_setting_t setting;
     struct nte_can_estimate_t estimate;
     struct nte_can_params_t params;
     struct nte_can_heartbeat_t heartbeat;

@@ -32,7 +32,7 @@ static void test_ids(void** state)
     uint32_t id;
     nte_frames_kind_t kind;
     int k;
-    const uint32_t offsets[7] = {0x00, 0x01, 0x02, 0x10, 0x11, 0x12, 0x13};
+    const uint32_t offsets[8] = {0x00, 0x01, 0x02, 0x10, 0x11, 0x12, 0x13, 0x03};
     (void)state;
     for (k = 0; k < (int)nte_frames_kind_count; ++k) {
         assert_int_equal(nte_frames_can_id(0x200u, (nte_frames_kind_t)k, &id), nte_frames_ok);
@@ -48,7 +48,7 @@ static void test_ids(void** state)
     assert_int_equal(nte_frames_can_id(0x7EDu, nte_frames_kind_heartbeat, &id), nte_frames_ok);
     assert_int_equal(nte_frames_can_id(0x200u, nte_frames_kind_count, &id),
                      nte_frames_err_bad_config);
-    assert_int_equal(nte_frames_kind_of(0x200u, 0x203u, &kind), nte_frames_err_unknown_id);
+    assert_int_equal(nte_frames_kind_of(0x200u, 0x204u, &kind), nte_frames_err_unknown_id);
     assert_int_equal(nte_frames_kind_of(0x200u, 0x1FFu, &kind), nte_frames_err_unknown_id);
     assert_int_equal(nte_frames_kind_of(0x200u, 0x214u, &kind), nte_frames_err_unknown_id);
 }

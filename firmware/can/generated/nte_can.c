@@ -672,6 +672,147 @@ bool nte_can_command_force_source_is_in_phys_range(float value)
     return ((value >= 0.0f) && (value <= 2.0f));
 }
 
+int nte_can_setting_pack(
+    uint8_t *dst_p,
+    const struct nte_can_setting_t *src_p,
+    size_t size)
+{
+    uint32_t value;
+
+    if (size < 8u) {
+        return (-EINVAL);
+    }
+
+    memset(&dst_p[0], 0, 8);
+
+    dst_p[0] |= pack_left_shift_u8(src_p->crc, 0u, 0xffu);
+    dst_p[1] |= pack_left_shift_u8(src_p->counter, 0u, 0x0fu);
+    dst_p[2] |= pack_left_shift_u8(src_p->item, 0u, 0xffu);
+    memcpy(&value, &src_p->value, sizeof(value));
+    dst_p[3] |= pack_left_shift_u32(value, 0u, 0xffu);
+    dst_p[4] |= pack_right_shift_u32(value, 8u, 0xffu);
+    dst_p[5] |= pack_right_shift_u32(value, 16u, 0xffu);
+    dst_p[6] |= pack_right_shift_u32(value, 24u, 0xffu);
+
+    return (8);
+}
+
+int nte_can_setting_unpack(
+    struct nte_can_setting_t *dst_p,
+    const uint8_t *src_p,
+    size_t size)
+{
+    uint32_t value;
+
+    if (size < 8u) {
+        return (-EINVAL);
+    }
+
+    dst_p->crc = unpack_right_shift_u8(src_p[0], 0u, 0xffu);
+    dst_p->counter = unpack_right_shift_u8(src_p[1], 0u, 0x0fu);
+    dst_p->item = unpack_right_shift_u8(src_p[2], 0u, 0xffu);
+    value = unpack_right_shift_u32(src_p[3], 0u, 0xffu);
+    value |= unpack_left_shift_u32(src_p[4], 8u, 0xffu);
+    value |= unpack_left_shift_u32(src_p[5], 16u, 0xffu);
+    value |= unpack_left_shift_u32(src_p[6], 24u, 0xffu);
+    memcpy(&dst_p->value, &value, sizeof(dst_p->value));
+
+    return (0);
+}
+
+int nte_can_setting_init(struct nte_can_setting_t *msg_p)
+{
+    if (msg_p == NULL) return -1;
+
+    memset(msg_p, 0, sizeof(struct nte_can_setting_t));
+
+    return 0;
+}
+
+uint8_t nte_can_setting_crc_encode(float value)
+{
+    return (uint8_t)(cantools_unsigned_from_double(roundf(value)));
+}
+
+float nte_can_setting_crc_decode(uint8_t value)
+{
+    return ((float)value);
+}
+
+bool nte_can_setting_crc_is_in_range(uint8_t value)
+{
+    (void)value;
+
+    return (true);
+}
+
+bool nte_can_setting_crc_is_in_phys_range(float value)
+{
+    return ((value >= 0.0f) && (value <= 255.0f));
+}
+
+uint8_t nte_can_setting_counter_encode(float value)
+{
+    return (uint8_t)(cantools_unsigned_from_double(roundf(value)));
+}
+
+float nte_can_setting_counter_decode(uint8_t value)
+{
+    return ((float)value);
+}
+
+bool nte_can_setting_counter_is_in_range(uint8_t value)
+{
+    return (value <= 14u);
+}
+
+bool nte_can_setting_counter_is_in_phys_range(float value)
+{
+    return ((value >= 0.0f) && (value <= 14.0f));
+}
+
+uint8_t nte_can_setting_item_encode(float value)
+{
+    return (uint8_t)(cantools_unsigned_from_double(roundf(value)));
+}
+
+float nte_can_setting_item_decode(uint8_t value)
+{
+    return ((float)value);
+}
+
+bool nte_can_setting_item_is_in_range(uint8_t value)
+{
+    (void)value;
+
+    return (true);
+}
+
+bool nte_can_setting_item_is_in_phys_range(float value)
+{
+    return ((value >= 0.0f) && (value <= 255.0f));
+}
+
+float nte_can_setting_value_encode(float value)
+{
+    return (float)(value);
+}
+
+float nte_can_setting_value_decode(float value)
+{
+    return ((float)value);
+}
+
+bool nte_can_setting_value_is_in_range(float value)
+{
+    return ((value >= -1e+30f) && (value <= 1e+30f));
+}
+
+bool nte_can_setting_value_is_in_phys_range(float value)
+{
+    return ((value >= -1e+30f) && (value <= 1e+30f));
+}
+
 int nte_can_estimate_pack(
     uint8_t *dst_p,
     const struct nte_can_estimate_t *src_p,

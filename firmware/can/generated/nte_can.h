@@ -48,6 +48,7 @@ extern "C" {
 #define NTE_CAN_DEPTH_FRAME_ID (0x200u)
 #define NTE_CAN_FORCE_FRAME_ID (0x201u)
 #define NTE_CAN_COMMAND_FRAME_ID (0x202u)
+#define NTE_CAN_SETTING_FRAME_ID (0x203u)
 #define NTE_CAN_ESTIMATE_FRAME_ID (0x210u)
 #define NTE_CAN_PARAMS_FRAME_ID (0x211u)
 #define NTE_CAN_HEARTBEAT_FRAME_ID (0x212u)
@@ -57,6 +58,7 @@ extern "C" {
 #define NTE_CAN_DEPTH_LENGTH (8u)
 #define NTE_CAN_FORCE_LENGTH (8u)
 #define NTE_CAN_COMMAND_LENGTH (8u)
+#define NTE_CAN_SETTING_LENGTH (8u)
 #define NTE_CAN_ESTIMATE_LENGTH (8u)
 #define NTE_CAN_PARAMS_LENGTH (8u)
 #define NTE_CAN_HEARTBEAT_LENGTH (8u)
@@ -66,6 +68,7 @@ extern "C" {
 #define NTE_CAN_DEPTH_IS_EXTENDED (0)
 #define NTE_CAN_FORCE_IS_EXTENDED (0)
 #define NTE_CAN_COMMAND_IS_EXTENDED (0)
+#define NTE_CAN_SETTING_IS_EXTENDED (0)
 #define NTE_CAN_ESTIMATE_IS_EXTENDED (0)
 #define NTE_CAN_PARAMS_IS_EXTENDED (0)
 #define NTE_CAN_HEARTBEAT_IS_EXTENDED (0)
@@ -97,6 +100,28 @@ extern "C" {
 #define NTE_CAN_COMMAND_FORCE_SOURCE_SENSOR_CHOICE (1u)
 #define NTE_CAN_COMMAND_FORCE_SOURCE_MODEL_CHOICE (2u)
 
+#define NTE_CAN_SETTING_ITEM_BEGIN_CHOICE (0u)
+#define NTE_CAN_SETTING_ITEM_MODEL_CHOICE (1u)
+#define NTE_CAN_SETTING_ITEM_SIGMA0_CHOICE (2u)
+#define NTE_CAN_SETTING_ITEM_SIGMA1_CHOICE (3u)
+#define NTE_CAN_SETTING_ITEM_SIGMA2_CHOICE (4u)
+#define NTE_CAN_SETTING_ITEM_F1_CHOICE (5u)
+#define NTE_CAN_SETTING_ITEM_F2_CHOICE (6u)
+#define NTE_CAN_SETTING_ITEM_ALPHA_CHOICE (7u)
+#define NTE_CAN_SETTING_ITEM_BETA_CHOICE (8u)
+#define NTE_CAN_SETTING_ITEM_G_FAST_CHOICE (9u)
+#define NTE_CAN_SETTING_ITEM_G_SLOW_CHOICE (10u)
+#define NTE_CAN_SETTING_ITEM_DELTA_CHOICE (11u)
+#define NTE_CAN_SETTING_ITEM_R_N2_CHOICE (12u)
+#define NTE_CAN_SETTING_ITEM_SURFACE_MM_CHOICE (13u)
+#define NTE_CAN_SETTING_ITEM_TAU_FAST_S_CHOICE (14u)
+#define NTE_CAN_SETTING_ITEM_TAU_SLOW_S_CHOICE (15u)
+#define NTE_CAN_SETTING_ITEM_RELAX_BRANCHES_CHOICE (16u)
+#define NTE_CAN_SETTING_ITEM_RELAXATION_CHOICE (17u)
+#define NTE_CAN_SETTING_ITEM_DIRECTION_MEMORY_CHOICE (18u)
+#define NTE_CAN_SETTING_ITEM_LAYER_SETS_CHOICE (19u)
+#define NTE_CAN_SETTING_ITEM_COMMIT_CHOICE (255u)
+
 #define NTE_CAN_PARAMS_PARAM_INDEX_SIGMA0_CHOICE (0u)
 #define NTE_CAN_PARAMS_PARAM_INDEX_SIGMA1_CHOICE (1u)
 #define NTE_CAN_PARAMS_PARAM_INDEX_SIGMA2_CHOICE (2u)
@@ -127,6 +152,7 @@ extern "C" {
 #define NTE_CAN_DEPTH_NAME "Depth"
 #define NTE_CAN_FORCE_NAME "Force"
 #define NTE_CAN_COMMAND_NAME "Command"
+#define NTE_CAN_SETTING_NAME "Setting"
 #define NTE_CAN_ESTIMATE_NAME "Estimate"
 #define NTE_CAN_PARAMS_NAME "Params"
 #define NTE_CAN_HEARTBEAT_NAME "Heartbeat"
@@ -150,6 +176,10 @@ extern "C" {
 #define NTE_CAN_COMMAND_ESTIMATOR_SEL_NAME "EstimatorSel"
 #define NTE_CAN_COMMAND_ADAPT_CMD_NAME "AdaptCmd"
 #define NTE_CAN_COMMAND_FORCE_SOURCE_NAME "ForceSource"
+#define NTE_CAN_SETTING_CRC_NAME "Crc"
+#define NTE_CAN_SETTING_COUNTER_NAME "Counter"
+#define NTE_CAN_SETTING_ITEM_NAME "Item"
+#define NTE_CAN_SETTING_VALUE_NAME "Value"
 #define NTE_CAN_ESTIMATE_CRC_NAME "Crc"
 #define NTE_CAN_ESTIMATE_COUNTER_NAME "Counter"
 #define NTE_CAN_ESTIMATE_IN_TISSUE_NAME "InTissue"
@@ -371,6 +401,47 @@ struct nte_can_command_t {
      * Offset: 0
      */
     uint8_t force_source;
+};
+
+/**
+ * Signals in message Setting.
+ *
+ * One item of an estimator configuration sent to the node (on event: a transfer, the estimator_config.json of --config item by item). Id offset 0x03. A transfer is Item 0 (begin, Value = the number of value items that follow), the value items in any order, each at most once, then Item 255 (commit, Value = the same number); the frames of one transfer must have consecutive E2E counters. Begin and commit are accepted only while the needle is out of tissue; at the commit the node starts from its defaults (as nte-node --config does), applies the items, checks the configuration as nte_config_check does and restarts the estimator with it and the model the transfer names. A transfer that is refused or broken off (lost frame, repeated item, value out of range, capacity exceeded) changes nothing that runs; the node then refuses model changes and resets until a transfer completes (nte_node.h, SETTINGS).
+ *
+ * All signal values are as on the CAN bus.
+ */
+struct nte_can_setting_t {
+    /**
+     * Range: 0..255 (0..255 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    uint8_t crc;
+
+    /**
+     * Range: 0..14 (0..14 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    uint8_t counter;
+
+    /**
+     * 0 begin, 1 model (1..3), 2..11 the nominal of parameter Item - 2 (Params.ParamIndex order: sigma0, sigma1, sigma2, f1, f2, alpha, beta, g_fast, g_slow, delta = presliding_mm), 12 r_n2 (N^2), 13 surface_mm (a known surface, stage mm; absent: found from the force), 14 tau_fast_s, 15 tau_slow_s, 16 relax_branches (0..2), 17 relaxation (0/1), 18 direction_memory (0/1), 19 layer_sets (count), 20 + 5 k + j layer set k (0..7): j = 0 start_mm below the surface, 1 sigma0, 2 f1, 3 beta, 4 sigma2; 255 commit.
+     *
+     * Range: 0..255 (0..255 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    uint8_t item;
+
+    /**
+     * The item's value as IEEE-754 float32 in the unit of its configuration key (mm, s, N^2, or the parameter's); counts and switches as whole numbers.
+     *
+     * Range: -1e+30..1e+30 (-1e+30..1e+30 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    float value;
 };
 
 /**
@@ -1599,6 +1670,203 @@ bool nte_can_command_force_source_is_in_range(uint8_t value);
  * @return true if in range, false otherwise.
  */
 bool nte_can_command_force_source_is_in_phys_range(float value);
+
+/**
+ * Pack message Setting.
+ *
+ * @param[out] dst_p Buffer to pack the message into.
+ * @param[in] src_p Data to pack.
+ * @param[in] size Size of dst_p.
+ *
+ * @return Size of packed data, or negative error code.
+ */
+int nte_can_setting_pack(
+    uint8_t *dst_p,
+    const struct nte_can_setting_t *src_p,
+    size_t size);
+
+/**
+ * Unpack message Setting.
+ *
+ * @param[out] dst_p Object to unpack the message into.
+ * @param[in] src_p Message to unpack.
+ * @param[in] size Size of src_p.
+ *
+ * @return zero(0) or negative error code.
+ */
+int nte_can_setting_unpack(
+    struct nte_can_setting_t *dst_p,
+    const uint8_t *src_p,
+    size_t size);
+
+/**
+ * Init message fields to default values from Setting.
+ *
+ * @param[in] msg_p Message to init.
+ *
+ * @return zero(0) on success or (-1) in case of nullptr argument.
+ */
+int nte_can_setting_init(struct nte_can_setting_t *msg_p);
+
+/**
+ * Encode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to encode.
+ *
+ * @return Encoded signal.
+ */
+uint8_t nte_can_setting_crc_encode(float value);
+
+/**
+ * Decode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to decode.
+ *
+ * @return Decoded signal.
+ */
+float nte_can_setting_crc_decode(uint8_t value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_setting_crc_is_in_range(uint8_t value);
+
+/**
+ * Check that given physical value is in allowed range before encoding.
+ *
+ * Use this BEFORE calling _encode() to avoid silent integer overflow:
+ *   encode(-1.0) on a [0,100] signal wraps to 255 and passes is_in_range().
+ *   is_in_phys_range(-1.0) correctly returns false.
+ *
+ * @param[in] value Physical signal value to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_setting_crc_is_in_phys_range(float value);
+
+/**
+ * Encode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to encode.
+ *
+ * @return Encoded signal.
+ */
+uint8_t nte_can_setting_counter_encode(float value);
+
+/**
+ * Decode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to decode.
+ *
+ * @return Decoded signal.
+ */
+float nte_can_setting_counter_decode(uint8_t value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_setting_counter_is_in_range(uint8_t value);
+
+/**
+ * Check that given physical value is in allowed range before encoding.
+ *
+ * Use this BEFORE calling _encode() to avoid silent integer overflow:
+ *   encode(-1.0) on a [0,100] signal wraps to 255 and passes is_in_range().
+ *   is_in_phys_range(-1.0) correctly returns false.
+ *
+ * @param[in] value Physical signal value to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_setting_counter_is_in_phys_range(float value);
+
+/**
+ * Encode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to encode.
+ *
+ * @return Encoded signal.
+ */
+uint8_t nte_can_setting_item_encode(float value);
+
+/**
+ * Decode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to decode.
+ *
+ * @return Decoded signal.
+ */
+float nte_can_setting_item_decode(uint8_t value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_setting_item_is_in_range(uint8_t value);
+
+/**
+ * Check that given physical value is in allowed range before encoding.
+ *
+ * Use this BEFORE calling _encode() to avoid silent integer overflow:
+ *   encode(-1.0) on a [0,100] signal wraps to 255 and passes is_in_range().
+ *   is_in_phys_range(-1.0) correctly returns false.
+ *
+ * @param[in] value Physical signal value to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_setting_item_is_in_phys_range(float value);
+
+/**
+ * Encode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to encode.
+ *
+ * @return Encoded signal.
+ */
+float nte_can_setting_value_encode(float value);
+
+/**
+ * Decode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to decode.
+ *
+ * @return Decoded signal.
+ */
+float nte_can_setting_value_decode(float value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_setting_value_is_in_range(float value);
+
+/**
+ * Check that given physical value is in allowed range before encoding.
+ *
+ * Use this BEFORE calling _encode() to avoid silent integer overflow:
+ *   encode(-1.0) on a [0,100] signal wraps to 255 and passes is_in_range().
+ *   is_in_phys_range(-1.0) correctly returns false.
+ *
+ * @param[in] value Physical signal value to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_setting_value_is_in_phys_range(float value);
 
 /**
  * Pack message Estimate.

@@ -22,6 +22,7 @@
 #include "nte_port_log.h"
 #include "nte_port_socketcan.h"
 #include "nte_presets.h"
+#include "nte_settings_file.h"
 
 #include <errno.h>
 #include <poll.h>
@@ -227,15 +228,17 @@ static void write_stats(const nte_node_t* n, const nte_port_socketcan_t* port, F
     }
     fprintf(f,
             "}, \"frames_lost\": %u, \"rx_accepted\": {\"depth\": %u, \"force\": %u, "
-            "\"command\": %u}, \"tx\": {\"estimate\": %u, \"params\": %u, \"heartbeat\": %u, "
+            "\"command\": %u, \"setting\": %u}, \"tx\": {\"estimate\": %u, \"params\": %u, \"heartbeat\": %u, "
             "\"contact\": %u}, "
             "\"steps\": %u, \"commands_applied\": %u, \"predict_on\": %u, "
-            "\"predict_off\": %u, \"predict_depth_steps\": %u, \"model\": %d, "
+            "\"predict_off\": %u, \"predict_depth_steps\": %u, \"settings_applied\": %u, "
+            "\"model\": %d, "
             "\"state\": %d, \"send_enobufs\": %u, \"last_errno\": %d}\n",
             (unsigned)c->frames_lost, (unsigned)c->rx_accepted[0], (unsigned)c->rx_accepted[1],
-            (unsigned)c->rx_accepted[2], (unsigned)c->tx[0], (unsigned)c->tx[1],
+            (unsigned)c->rx_accepted[2], (unsigned)c->rx_accepted[3], (unsigned)c->tx[0], (unsigned)c->tx[1],
             (unsigned)c->tx[2], (unsigned)c->tx[3], (unsigned)c->steps, (unsigned)c->commands_applied,
             (unsigned)c->predict_on, (unsigned)c->predict_off, (unsigned)c->predict_depth_steps,
+            (unsigned)c->settings_applied,
             (int)nte_node_model(n), (int)nte_node_state(n), (unsigned)port->send_errors_enobufs,
             port->last_errno);
 }
@@ -393,59 +396,47 @@ int main(int argc, char** argv)
     if ((a.config != NULL) && !a.given_model) {
         a.model = fc.model;
     }
-    const double* values = ((a.config != NULL) && !a.given_preset) ? fc.params : p->values;
     nte_node_config_default(&cfg, a.model);
     cfg.base_id = (uint32_t)((a.base_id <= 0x7FFu) ? a.base_id : 0x800u);
     cfg.depth_timeout_us = (uint32_t)((a.timeout_ms <= 3000u) ? a.timeout_ms * 1000u : 0u);
     cfg.heartbeat_period_us = (uint32_t)((a.heartbeat_ms <= 10000u) ? a.heartbeat_ms * 1000u : 0u);
     cfg.params_per_step = (uint32_t)((a.params_per_step <= 7u) ? a.params_per_step : 0u);
     cfg.resync_gap_us = (uint32_t)((a.resync_gap_ms <= 3000u) ? a.resync_gap_ms * 1000u : 0u);
-    if ((estimator_config(&cfg.estimator[0], 1, values) != 0) ||
-        (estimator_config(&cfg.estimator[1], 2, values) != 0) ||
-        (estimator_config(&cfg.estimator[2], 3, values) != 0)) {
-        return usage("preset: f1 must exceed -f2");
-    }
-    /* Model III as nte-run runs it: the contact front end on, the surface found from the
-     * force unless the config gives a single known one */
-    cfg.estimator[2].contact.enabled = true;
-    if (a.config != NULL) {
-        for (size_t m = 0u; m < 3u; m++) {
-            if (fc.has_r_n2) {
-                cfg.estimator[m].r_n2 = (nte_real_t)fc.r_n2;
+    if (a.config == NULL) {
+        if ((estimator_config(&cfg.estimator[0], 1, p->values) != 0) ||
+            (estimator_config(&cfg.estimator[1], 2, p->values) != 0) ||
+            (estimator_config(&cfg.estimator[2], 3, p->values) != 0)) {
+            return usage("preset: f1 must exceed -f2");
+        }
+        /* Model III as nte-run runs it: the contact front end on, the surface found */
+        cfg.estimator[2].contact.enabled = true;
+    } else {
+        /* --config: the file as the Setting items a transfer of it carries, written by the
+         * node's own nte_node_setting_apply (nte_node.h SETTINGS): the file read here and the
+         * file sent by nte-bench settings configure the node alike; --model and --preset
+         * replace the file's model and parameters */
+        nte_frames_setting_t items[NTE_SETTINGS_FILE_MAX];
+        const size_t n = nte_settings_file_items(&fc, items);
+        for (size_t i = 0u; i < n; i++) {
+            const int j = (int)items[i].item - NTE_FRAMES_SETTING_PARAM0;
+            if (items[i].item == (uint8_t)NTE_FRAMES_SETTING_MODEL) {
+                items[i].value = (float)a.model;
+            } else if (a.given_preset && (j >= 0) && (j < 7)) {
+                items[i].value = (float)p->values[j];
+            }
+            if (nte_node_setting_apply(&cfg, items[i].item, items[i].value) != nte_node_ok) {
+                (void)snprintf(msg, sizeof msg, "%s: item %u of the configuration cannot be "
+                               "applied to this node", a.config, (unsigned)items[i].item);
+                fprintf(stderr, PROG ": error: %s\n", msg);
+                return EXIT_USAGE;
             }
         }
-        nte_config_t* c3 = &cfg.estimator[2];
-        if (fc.has_presliding) {
-            c3->presliding_mm = (nte_real_t)fc.presliding_mm;
-        }
-        if (fc.has_tau_fast) {
-            c3->tau_fast_s = (nte_real_t)fc.tau_fast_s;
-        }
-        if (fc.has_tau_slow) {
-            c3->tau_slow_s = (nte_real_t)fc.tau_slow_s;
-        }
-        if (fc.has_relax_branches) {
-            c3->relax_branches = fc.relax_branches;
-        }
-        if (fc.has_relaxation) {
-            c3->relaxation = fc.relaxation != 0;
-        }
-        if (fc.has_direction_memory) {
-            c3->direction_memory = fc.direction_memory != 0;
-        }
-        if (fc.has_strengths) {
-            c3->nominal[nte_param_g_fast] = (nte_real_t)fc.g[0];
-            c3->nominal[nte_param_g_slow] = (nte_real_t)fc.g[1];
-        }
-        if (fc.has_surface) {
-            c3->contact.surface_mm = (nte_real_t)fc.surface_mm;
-        }
-        nte_config_file_layer_sets(&fc, c3);
     }
     /* the port is needed for validation: check the node config with a stand-in first */
-    uint32_t ids[3] = {(uint32_t)cfg.base_id + NTE_FRAMES_OFFSET_DEPTH,
+    uint32_t ids[4] = {(uint32_t)cfg.base_id + NTE_FRAMES_OFFSET_DEPTH,
                        (uint32_t)cfg.base_id + NTE_FRAMES_OFFSET_FORCE,
-                       (uint32_t)cfg.base_id + NTE_FRAMES_OFFSET_COMMAND};
+                       (uint32_t)cfg.base_id + NTE_FRAMES_OFFSET_COMMAND,
+                       (uint32_t)cfg.base_id + NTE_FRAMES_OFFSET_SETTING};
     sock.fd = -1;
     {
         nte_node_port_t probe = nte_port_socketcan_port(&sock);
@@ -462,7 +453,7 @@ int main(int argc, char** argv)
     if (a.replay != NULL) {
         return run_replay(&a, &cfg, &node);
     }
-    const int rc = nte_port_socketcan_open(&sock, a.iface, ids, a.kernel_filter ? 3u : 0u, msg,
+    const int rc = nte_port_socketcan_open(&sock, a.iface, ids, a.kernel_filter ? 4u : 0u, msg,
                                            sizeof msg);
     if (rc != nte_port_ok) {
         fprintf(stderr, PROG ": error: %s\n", msg);
