@@ -152,7 +152,13 @@ class NodeMirror:
         self.pending: dict[str, dict | None] = {"Depth": None, "Force": None}
         self.param_next = 0
         self.last_command_us: int | None = None
-        self._last_cmd_status = "ok"
+        self._last_e2e_status = "ok"
+        # a configuration transfer (nte_node.h SETTINGS): open, the configurations hold one
+        # not applied, the count announced, the items taken
+        self.setting_open = False
+        self.setting_unapplied = False
+        self.setting_announced = 0
+        self.setting_seen: set[int] = set()
         # predict-only (nte_node.h PREDICT-ONLY): commanded, the mode of the last step, whether
         # that step was on the depth stream, its time; and the node's counters of it
         self.force_cmd_model = False
@@ -518,11 +524,11 @@ class NodeMirror:
                               "a": smp[1], "b": smp[2]}
 
     def _e2e(self, name: str, data: bytes) -> dict | None:
-        """E2E check of a Command frame (counted as the node counts it), then its raw signals."""
+        """E2E check of a Command or Setting frame (a failure counted as the node counts it),
+        then its raw signals; the caller calls _taken once their ranges hold (the node counts
+        a skipped counter only for a frame it decoded whole: nte_node_decoded)."""
         status, _ = self.rx.check(name, data)
-        self._last_cmd_status = status
-        if status == "skipped":
-            self._count("counter_skipped")
+        self._last_e2e_status = status
         if status not in ("ok", "skipped"):
             self._count(self._E2E_EVENT[status])
             return None
@@ -534,6 +540,13 @@ class NodeMirror:
         """One frame as the node receives it; t_us = the node's port clock at reception (the
         command rate limit; the timestamps of nte-node's --received / --replay logs)."""
         name = None if (extended or remote) else self.db.name_of(can_id)
+        if name == "Setting":
+            if len(data) != FRAME_LENGTH:
+                self._count("wrong_dlc")
+                self.setting_open = False
+                return
+            self._on_setting(bytes(data))
+            return
         if name not in ("Depth", "Force", "Command"):
             self._count("unknown_id")
             return
@@ -548,6 +561,57 @@ class NodeMirror:
             return
         self._on_command(sig, t_us)
 
+    def _taken(self) -> None:
+        if self._last_e2e_status == "skipped":
+            self._count("counter_skipped")
+
+    def _on_setting(self, data: bytes) -> None:
+        """The node's transfer rules (nte_node.h SETTINGS) as far as a mirror of presets can
+        follow them: every refusal counted as the node counts it; a transfer the node would
+        apply is refused here with ValueError (compare such a run with nte-node --config)."""
+        from .settings_file import FRAME_ITEMS_LAST, item_numbers, value_ok
+        sig = self._e2e("Setting", data)
+        n = item_numbers(self.db)
+        if sig is not None:
+            item, value = int(sig["Item"]), float(sig["Value"])
+            if not ((item <= FRAME_ITEMS_LAST or item == n["commit"]) and np.isfinite(value)):
+                self._count("out_of_range")
+                sig = None
+        if sig is None:
+            self.setting_open = False          # an item may be missing: it cannot complete
+            return
+        self._taken()
+        if item == n["begin"]:
+            if not (_whole(value, 1, FRAME_ITEMS_LAST) and not self.last.in_tissue):
+                self._refuse_setting()
+                return
+            self.setting_open = self.setting_unapplied = True
+            self.setting_announced = int(value)
+            self.setting_seen = set()
+            return
+        if not self.setting_open or self._last_e2e_status == "skipped":
+            self._refuse_setting()
+            return
+        if item == n["commit"]:
+            self.setting_open = False
+            if (_whole(value, 0, 255) and int(value) == self.setting_announced
+                    and len(self.setting_seen) == self.setting_announced
+                    and n["model"] in self.setting_seen and not self.last.in_tissue):
+                raise ValueError("the node mirror does not follow a configuration sent over "
+                                 "the bus (Setting frames): compare such a run with nte-node "
+                                 "--replay --config FILE")
+            self._count("setting_refused")
+            return
+        if (item in self.setting_seen or len(self.setting_seen) >= self.setting_announced
+                or not value_ok(item, value, n)):
+            self._refuse_setting()
+            return
+        self.setting_seen.add(item)
+
+    def _refuse_setting(self) -> None:
+        self.setting_open = False
+        self._count("setting_refused")
+
     def _on_command(self, sig: dict, t_us: int | None) -> None:
         """The node's command rules (nte_node.h, COMMANDS): applied entirely or not at all."""
         if not (0 <= int(sig["ModelSel"]) <= 3
@@ -555,7 +619,8 @@ class NodeMirror:
                         for k in ("EstimatorSel", "AdaptCmd", "ForceSource"))):
             self._count("out_of_range")
             return
-        if self._last_cmd_status == "skipped":
+        self._taken()
+        if self._last_e2e_status == "skipped":
             self._count("command_stale")
             return
         now = 0 if t_us is None else t_us
@@ -568,7 +633,9 @@ class NodeMirror:
         if int(sig["EstimatorSel"]):
             estimator = "robust" if int(sig["EstimatorSel"]) == 2 else "bank"
         restart = (model, estimator) != (self.model, self.estimator)
-        if (int(sig["AdaptCmd"]) == 1 or ((restart or int(sig["Reset"])) and self.last.in_tissue)
+        if (int(sig["AdaptCmd"]) == 1
+                or ((restart or int(sig["Reset"]))
+                    and (self.last.in_tissue or self.setting_unapplied))
                 or (restart and model == 3 and estimator == "robust")):   # nte_init refuses it
             self._count("command_refused")
             return
@@ -591,6 +658,11 @@ class NodeMirror:
             self.feed(m.arbitration_id, bytes(m.data), m.is_extended_id, m.is_remote_frame,
                       int(round(m.timestamp * 1e6)))
         return self
+
+
+def _whole(value: float, lo: int, hi: int) -> bool:
+    """A whole number in lo..hi (nte_node.c nte_node_whole)."""
+    return lo <= value <= hi and float(int(value)) == value
 
 
 def _outputs_raw(db: NteDatabase, messages: Iterable, names: tuple[str, ...],

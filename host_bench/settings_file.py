@@ -14,8 +14,16 @@ import can
 import numpy as np
 
 from reference_py.bus.dbc import E2ESender, NteDatabase
+from reference_py.layers import LAYER_MAX
 from reference_py.params import LAYER_SET_NAMES, PARAM_NAMES, RELAX_NAMES
 from reference_py.tools.estconfig import FileConfig
+
+#: layer sets the Setting frame can address (the DBC's Item comment, set k = 0..7;
+#: nte_frames.h NTE_FRAMES_SETTING_LAYER_SETS_MAX) and the last value item that makes
+FRAME_LAYER_SETS = 8
+FRAME_ITEMS_LAST = 19 + (1 + len(LAYER_SET_NAMES)) * FRAME_LAYER_SETS
+#: layer sets a host node takes (nte.h NTE_LAYER_SETS_MAX, the reference's LAYER_MAX - 1)
+NODE_LAYER_SETS = LAYER_MAX - 1
 
 
 def item_numbers(db: NteDatabase) -> dict[str, int]:
@@ -52,6 +60,19 @@ def setting_items(fc: FileConfig, db: NteDatabase) -> list[tuple[int, float]]:
     return [(item, float(np.float32(v))) for item, v in out]
 
 
+def value_ok(item: int, value: float, n: dict[str, int]) -> bool:
+    """Whether a host node takes a value item (nte_node.c nte_node_setting_apply's refusals:
+    counts and switches whole and in range, a layer set within the capacity)."""
+    def whole(lo: int, hi: int) -> bool:
+        return lo <= value <= hi and float(int(value)) == value
+    fields = 1 + len(LAYER_SET_NAMES)
+    if item > n["layer_sets"]:
+        return (item - n["layer_sets"] - 1) // fields < NODE_LAYER_SETS
+    limits = {n["model"]: (1, 3), n["relax_branches"]: (1, 2), n["relaxation"]: (0, 1),
+              n["direction_memory"]: (0, 1), n["layer_sets"]: (0, NODE_LAYER_SETS)}
+    return whole(*limits[item]) if item in limits else item != n["begin"]
+
+
 def transfer(items: list[tuple[int, float]], sender: E2ESender,
              timestamp: float = 0.0) -> list[can.Message]:
     """BEGIN with the count, the value items, COMMIT with the count: one transfer's frames,
@@ -63,4 +84,5 @@ def transfer(items: list[tuple[int, float]], sender: E2ESender,
             for item, value in frames]
 
 
-__all__ = ["item_numbers", "setting_items", "transfer"]
+__all__ = ["FRAME_ITEMS_LAST", "FRAME_LAYER_SETS", "item_numbers", "setting_items", "transfer",
+           "value_ok"]

@@ -1,13 +1,15 @@
 #!/usr/bin/env bash
 # node_vcan_bus.sh NODE OUT CASE...: the bus half of test_node_vcan.py, run inside the session's
 # kernel by host_bench/with-vcan.  Only what needs AF_CAN runs here -- nte-node, canplayer,
-# candump, cangen -- so a kernel under QEMU's TCG costs seconds; the input logs were written on
+# candump, cangen, nte-bench settings -- so a kernel under QEMU's TCG costs seconds; the input logs were written on
 # the host beforehand (node_vcan_driver.py prepare) and the analysis runs on the host afterwards
 # (node_vcan_driver.py analyse).  Every process is started here and stopped by its PID, also
 # when a case fails.  Each case leaves OUT/<case>.done (or OUT/<case>.failed with the reason).
-# Environment: NTE_ENOBUFS_SHIM = the LD_PRELOAD library of the enobufs case.
+# Environment: NTE_ENOBUFS_SHIM = the LD_PRELOAD library of the enobufs case.  The settings
+# case runs the bench's sender (.venv/bin/nte-bench settings) here too: it sends on vcan0.
 set -uo pipefail
 NODE="$1"; OUT="$2"; shift 2
+BENCH="$(cd "$(dirname "$0")/../.." && pwd)/.venv/bin/nte-bench"
 FRAME_DEPTH=$(cat "$OUT/ids/depth")
 
 pids=()
@@ -163,6 +165,19 @@ case_predict_only() {
     # a lost force sensor in the input log; the mirror is fed the node's own received log
     start_node po --record "$OUT/po.sent.log" --received "$OUT/po.recv.log" || return 1
     play "$OUT/po_in.log" || return 1
+    sleep 0.5
+    stop "$node_pid" >/dev/null
+}
+
+case_settings() {
+    # a Model II node; nte-bench settings sends the export (Setting frames, python-can), then
+    # the phantom's first seconds are played; the node's own logs are analysed on the host
+    start_node settings --record "$OUT/settings.sent.log" \
+        --received "$OUT/settings.recv.log" || return 1
+    "$BENCH" settings "$OUT/settings_m3.json" --channel vcan0 --listen 3 \
+        >"$OUT/settings.bench.out" 2>&1
+    echo $? >"$OUT/settings.bench.exit"
+    play "$OUT/settings_in.log" || return 1
     sleep 0.5
     stop "$node_pid" >/dev/null
 }

@@ -26,7 +26,7 @@ from host_bench.node_mirror import NodeMirror, compare, contact_outputs, node_ou
 DB = NteDatabase()
 INPUT_IDS = {DB.frame_id(n) for n in ("Depth", "Force", "Command")}
 CASES = ("full_rate", "bad_traffic", "cangen", "burst", "enobufs", "no_iface", "model3",
-         "predict_only")
+         "predict_only", "settings")
 #: the model3 case: the first seconds of phantom lab seed 101 (stage moves at 1.0 s, touches the
 #: surface, 6.48 mm, at 4.3 s), a Command selecting Model III at 0.5 s (in the air)
 MODEL3_WINDOW_S = 5.5
@@ -91,6 +91,7 @@ def prepare(out: Path) -> None:
     write_candump(out / "burst_in.log", frames, "vcan0", 1.0)
     write_candump(out / "model3_in.log", model3_frames(out), "vcan0", 1.0)
     write_candump(out / "po_in.log", predict_only_frames(out), "vcan0", 1.0)
+    write_candump(out / "settings_in.log", settings_frames(out), "vcan0", 1.0)
     (out / "burst_report.json").write_text(json.dumps({
         "random": rep.random_frames, "crafted": rep.crafted_forward + rep.crafted_backward,
         "total": rep.total, "sent": len(frames)}))
@@ -109,6 +110,20 @@ def model3_frames(out: Path) -> list:
     cmd = DB.sender().message("Command", {"Reset": 0, "ModelSel": 3, "EstimatorSel": 0,
                                           "AdaptCmd": 0})
     return sorted(frames + [(MODEL3_COMMAND_S, cmd)], key=lambda e: e[0])
+
+
+def settings_frames(out: Path) -> list:
+    """The settings case: nte-run's Model III export of phantom lab seed 101 as
+    OUT/settings_m3.json (layer sets, known surface, Model III's constants), and the phantom's
+    first MODEL3_WINDOW_S seconds, played after nte-bench settings sent the export."""
+    model3_frames(out)                                   # writes lab101.csv
+    nte_run = next(p for p in (ROOT / "build/host/bin/nte-run", ROOT / "build/node/bin/nte-run")
+                   if p.exists())
+    subprocess.run([str(nte_run), str(out / "lab101.csv"), "--model", "3", "--out",
+                    str(out / "settings_e.csv"), "--export-config", str(out / "settings_m3.json")],
+                   check=True, stdout=subprocess.DEVNULL)
+    return [(t, m) for t, m in scenario_frames(str(out / "lab101.csv"), DB, 1000.0)
+            if t <= MODEL3_WINDOW_S]
 
 
 def predict_only_frames(out: Path) -> list:
@@ -361,13 +376,39 @@ def predict_only(out: Path) -> dict:
     return res
 
 
+def settings(out: Path) -> dict:
+    """A configuration sent over the bus: the node's counters, the bench's answer, and the node's
+    outputs against nte-node --replay of the same phantom frames with --config on the file
+    (the node configured at start), Estimate, Params and Contact frames byte for byte."""
+    recv = capture(out / "settings.recv.log")
+    sent = capture(out / "settings.sent.log")
+    res: dict = {"stats": json.loads((out / "settings.stats.json").read_text()),
+                 "bench_exit": int((out / "settings.bench.exit").read_text()),
+                 "bench_out": (out / "settings.bench.out").read_text()}
+    setting_id = DB.frame_id("Setting")
+    res["setting_frames_received"] = sum(1 for m in recv if m.arbitration_id == setting_id)
+    node = next(p for p in (ROOT / "build/host/bin/nte-node", ROOT / "build/node/bin/nte-node")
+                if p.exists())
+    ref = out / "settings.config.sent.log"
+    subprocess.run([str(node), "--replay", str(out / "settings_in.log"), "--record", str(ref),
+                    "--config", str(out / "settings_m3.json")], check=True)
+    ids = {DB.frame_id(n) for n in ("Estimate", "Params", "Contact")}
+    got = [(m.arbitration_id, bytes(m.data)) for m in sent if m.arbitration_id in ids]
+    want = [(m.arbitration_id, bytes(m.data)) for m in capture(ref) if m.arbitration_id in ids]
+    res["outputs"] = len(got)
+    res["outputs_config"] = len(want)
+    res["equal"] = got == want
+    res["contacts"] = sum(1 for m in sent if m.arbitration_id == DB.frame_id("Contact"))
+    return res
+
+
 def no_iface(out: Path) -> dict:
     return {"exit": int((out / "noif.exit").read_text()), "stderr": (out / "noif.err").read_text()}
 
 
 ANALYSE = {"full_rate": full_rate, "bad_traffic": bad_traffic, "cangen": cangen,
            "burst": burst_case, "enobufs": enobufs, "no_iface": no_iface, "model3": model3,
-           "predict_only": predict_only}
+           "predict_only": predict_only, "settings": settings}
 
 
 def analyse(out: Path, case: str) -> dict:

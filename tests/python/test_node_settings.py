@@ -228,3 +228,52 @@ def test_the_header_items_are_the_dbc_items() -> None:
     assert c["layer0"] == n["layer_sets"] + 1
     assert c["layer_fields"] == 1 + len(LAYER_SET_NAMES)
     assert c["last_value"] == c["layer0"] + c["layer_fields"] * c["layer_sets_max"] - 1
+    from host_bench.settings_file import FRAME_ITEMS_LAST, FRAME_LAYER_SETS
+    assert (FRAME_LAYER_SETS, FRAME_ITEMS_LAST) == (c["layer_sets_max"], c["last_value"])
+
+
+def test_the_mirror_counts_broken_transfers_as_the_node(tmp_path: Path,
+                                                        exported: tuple[Path, Path]) -> None:
+    """300 seeded Setting frames (random items and values, a begin now and then, broken CRCs,
+    skipped counters, short frames) amid the phantom's first 4 s: nte-node and the bench's
+    mirror count the same events, refuse the same Command after them and publish the same
+    frames; a transfer the node would apply makes the mirror refuse to go on (it runs
+    presets)."""
+    import random
+    from host_bench.node_mirror import NodeMirror, node_outputs
+    csv, cfg = exported
+    frames = scenario_frames(str(csv), DB, 1000.0)[:4000]
+    n = item_numbers(DB)
+    rng = random.Random(2026)
+    sender = DB.sender()
+    noise = []
+    for k in range(300):
+        roll = rng.random()
+        item = n["begin"] if roll < 0.1 else rng.choice([rng.randrange(0, 256), n["model"],
+                                                         n["relax_branches"], n["layer_sets"],
+                                                         n["commit"], 20 + rng.randrange(40)])
+        value = rng.choice([float(rng.randrange(0, 6)), rng.uniform(-2, 70), 1.5])
+        m = sender.message("Setting", {"Item": item, "Value": value})
+        if roll > 0.95:
+            m.data = bytearray(m.data)
+            m.data[5] ^= 0x10                                 # a broken CRC
+        elif roll > 0.9:
+            sender.encode("Setting", {"Item": 1, "Value": 1.0})   # a frame lost: skip
+        elif roll > 0.88:
+            m.data = bytearray(m.data[:6])
+            m.dlc = 6
+        noise.append(m)
+    t0 = frames[0][0]
+    stream = with_transfer(frames, noise, t0)
+    stream = with_transfer(stream, [_commands(3)], t0 + 0.2)
+    sent, st = replay(tmp_path, stream, "fuzz", ["--model", "2"])
+    mirror = NodeMirror(model=2).feed_all(m for _, m in stream)
+    events = {k: v for k, v in st["events"].items() if v}
+    assert events == mirror.events
+    assert events["setting_refused"] > 50 and events["bad_crc"] > 0
+    assert st["settings_applied"] == 0 and st["events"]["command_refused"] == 1
+    est, par, _ = node_outputs(DB, sent)
+    assert [e.key() for e in est] == [e.key() for e in mirror.estimates]
+    items = setting_items(read_config_file(str(cfg)), DB)
+    with pytest.raises(ValueError, match="does not follow a configuration"):
+        NodeMirror(model=2).feed_all(transfer(items, DB.sender()))

@@ -23,6 +23,10 @@ compares with the reference after, on the host.
 - model3: the first 5.5 s of phantom lab seed 101 (stage position, raw force with its tare) to a
   Model II node, a Command selecting Model III at 0.5 s (in the air): applied; the node's
   Estimate, Params (0..9) and Contact frames equal the mirror's bit for bit.
+- settings: nte-bench settings sends nte-run's Model III export of that phantom (layer sets,
+  known surface) to a Model II node as Setting frames; the phantom's first 5.5 s follow: the
+  node applied it (Model III) and published what a node started with --config on the file
+  publishes, frame for frame.
 """
 from __future__ import annotations
 
@@ -218,6 +222,16 @@ def test_predict_only_on_the_bus_equals_mirror(results: dict) -> None:
     assert {k: st[k] for k in r["mirror_predict"]} == r["mirror_predict"]
     assert st["predict_on"] == st["predict_off"] == 3 and st["predict_depth_steps"] > 50
     assert r["predicted"] > 200 + 100 + 50
+
+
+def test_settings_sent_by_the_bench_configure_the_node(results: dict) -> None:
+    r = _ok(results, "settings")
+    assert r["bench_exit"] == 0, r["bench_out"]
+    assert "the node runs Model 3" in r["bench_out"]
+    st = r["stats"]
+    assert st["settings_applied"] == 1 and st["events"]["setting_refused"] == 0
+    assert st["model"] == 3 and r["setting_frames_received"] == st["rx_accepted"]["setting"]
+    assert r["outputs"] > 500 and r["contacts"] > 0 and r["equal"]
 
 
 def test_absent_interface(results: dict) -> None:
