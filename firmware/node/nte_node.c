@@ -130,11 +130,11 @@ nte_node_err_t nte_node_setting_apply(nte_node_config_t* cfg, uint32_t item, flo
             break;
         case NTE_FRAMES_SETTING_RELAXATION:
             n = nte_node_whole(value, 0, 1);
-            c3->relaxation = (n == 1);
+            c3->relaxation = (n >= 0) ? (n == 1) : c3->relaxation;
             break;
         case NTE_FRAMES_SETTING_DIRECTION_MEMORY:
             n = nte_node_whole(value, 0, 1);
-            c3->direction_memory = (n == 1);
+            c3->direction_memory = (n >= 0) ? (n == 1) : c3->direction_memory;
             break;
         case NTE_FRAMES_SETTING_LAYER_SETS:
             n = nte_node_whole(value, 0, (int32_t)NTE_LAYER_SETS_MAX);

@@ -307,6 +307,58 @@ static void test_command_all_values(void** state)
     }
 }
 
+static void test_setting(void** state)
+{
+    link_t l;
+    nte_frames_setting_t out;
+    static const uint8_t items[] = {0u, 1u, 2u, 11u, 19u, 20u, 59u, 255u};
+    static const float values[] = {0.0f, 1.0f, -0.0211f, 434.90018f, 3.999999e-06f, 1e30f};
+    size_t i;
+    size_t j;
+    (void)state;
+    link_init(&l, nte_frames_kind_setting);
+    for (i = 0; i < sizeof items; ++i) {
+        for (j = 0; j < sizeof values / sizeof values[0]; ++j) {
+            nte_frames_setting_t in = {items[i], values[j]};
+            assert_int_equal(nte_frames_encode_setting(&in, &l.tx, l.frame), nte_frames_ok);
+            assert_int_equal(nte_frames_decode_setting(&l.rx, l.frame, 8, &out, NULL, NULL),
+                             nte_frames_ok);
+            assert_int_equal(out.item, in.item);
+            assert_memory_equal(&out.value, &in.value, sizeof(float)); /* float32 exactly */
+        }
+    }
+    {
+        /* item 60..254 is no item; a value must be finite */
+        nte_frames_setting_t beyond = {60u, 1.0f};
+        nte_frames_setting_t below_commit = {254u, 1.0f};
+        nte_frames_setting_t nan_value = {1u, NAN};
+        nte_frames_setting_t inf_value = {1u, INFINITY};
+        assert_int_equal(nte_frames_encode_setting(&beyond, &l.tx, l.frame),
+                         nte_frames_err_selector);
+        assert_int_equal(nte_frames_encode_setting(&below_commit, &l.tx, l.frame),
+                         nte_frames_err_selector);
+        assert_int_equal(nte_frames_encode_setting(&nan_value, &l.tx, l.frame),
+                         nte_frames_err_not_finite);
+        assert_int_equal(nte_frames_encode_setting(&inf_value, &l.tx, l.frame),
+                         nte_frames_err_not_finite);
+        /* received: the same refusals after a valid E2E check */
+        memset(l.frame, 0, 8);
+        l.frame[2] = 60u;
+        assert_int_equal(nte_e2e_protect(&l.tx, l.frame, 8), nte_e2e_ok);
+        assert_int_equal(nte_frames_decode_setting(&l.rx, l.frame, 8, &out, NULL, NULL),
+                         nte_frames_err_selector);
+        memset(l.frame, 0, 8);
+        l.frame[2] = 1u;
+        l.frame[3] = 0x00u; /* Value bits 24..55: 0x7FC00000, a quiet NaN */
+        l.frame[4] = 0x00u;
+        l.frame[5] = 0xC0u;
+        l.frame[6] = 0x7Fu;
+        assert_int_equal(nte_e2e_protect(&l.tx, l.frame, 8), nte_e2e_ok);
+        assert_int_equal(nte_frames_decode_setting(&l.rx, l.frame, 8, &out, NULL, NULL),
+                         nte_frames_err_not_finite);
+    }
+}
+
 static void test_estimate_clamp_and_flags(void** state)
 {
     link_t l;
@@ -425,8 +477,16 @@ static void test_heartbeat(void** state)
     nte_frames_heartbeat_t bad_model = {0u, 3u, 0u, 0.0f, 0u, 0u, 0.0f};
     nte_frames_heartbeat_t bad_state = {3u, 0u, 0u, 0.0f, 0u, 0u, 0.0f};
     nte_frames_heartbeat_t neg = {0u, 0u, 0u, -1.0f, 0u, 0u, 0.0f};
+    nte_frames_heartbeat_t many = {0u, 0u, 0u, (10.0f * 52428.8f) + 3.0f, 0u, 0u, 0.0f};
+    nte_frames_heartbeat_t beyond = {0u, 0u, 0u, 2.0f * NTE_FRAMES_UPTIME_MAX_S, 0u, 0u, 0.0f};
     (void)state;
     link_init(&l, nte_frames_kind_heartbeat);
+    /* the wrap without fmodf: ten wraps off (float32 at 5e5 s: 0.03 s ulp) */
+    assert_int_equal(nte_frames_encode_heartbeat(&many, &l.tx, l.frame), nte_frames_ok);
+    assert_int_equal(nte_frames_decode_heartbeat(&l.rx, l.frame, 8, &out, NULL, NULL),
+                     nte_frames_ok);
+    assert_near(out.uptime_s, 3.0, 0.05 + 0.07);
+    assert_int_equal(nte_frames_encode_heartbeat(&beyond, &l.tx, l.frame), nte_frames_err_range);
     assert_int_equal(nte_frames_encode_heartbeat(&in, &l.tx, l.frame), nte_frames_ok);
     assert_int_equal(nte_frames_decode_heartbeat(&l.rx, l.frame, 8, &out, NULL, NULL),
                      nte_frames_ok);
@@ -554,6 +614,7 @@ int main(void)
         cmocka_unit_test(test_force_ends),
         cmocka_unit_test(test_command_all_values),
         cmocka_unit_test(test_sensor_fault_and_force_source),
+        cmocka_unit_test(test_setting),
         cmocka_unit_test(test_estimate_clamp_and_flags),
         cmocka_unit_test(test_params),
         cmocka_unit_test(test_heartbeat),

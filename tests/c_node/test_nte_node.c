@@ -275,9 +275,80 @@ static void test_config_errors(void** state)
     assert_int_equal(nte_node_model(&g_node_a), 1);
     assert_int_equal(nte_node_state(&g_node_a), nte_node_state_init);
     assert_int_equal(nte_node_input_id(&g_node_a, 2u), BASE + 2u);
+    assert_int_equal(nte_node_input_id(&g_node_a, 3u), BASE + 3u);
     assert_string_equal(nte_node_event_name(0u), "wrong_dlc");
     assert_string_equal(nte_node_event_name(NTE_NODE_EVENT_COUNT), "?");
     assert_int_equal(nte_node_poll(NULL), nte_node_err_null);
+}
+
+/* the same float32, bit for bit */
+static bool same(float a, float b)
+{
+    return memcmp(&a, &b, sizeof a) == 0;
+}
+
+/* SETTINGS: what each value item writes, and every value it refuses (cfg unchanged then). */
+static void test_setting_apply(void** state)
+{
+    nte_node_config_t cfg;
+    nte_node_config_t before;
+    (void)state;
+    nte_node_config_default(&cfg, 2);
+    /* a force-model parameter: every model's nominal; beta also Model I's beta0; f1 and f2
+     * make the excess computed from the nominal */
+    assert_int_equal(nte_node_setting_apply(&cfg, NTE_FRAMES_SETTING_PARAM0 + nte_param_beta,
+                                            0.0042f), nte_node_ok);
+    assert_int_equal(nte_node_setting_apply(&cfg, NTE_FRAMES_SETTING_PARAM0 + nte_param_f1,
+                                            0.17f), nte_node_ok);
+    for (int m = 0; m < 3; m++) {
+        assert_true(same(cfg.estimator[m].nominal[nte_param_beta], 0.0042f));
+        assert_true(same(cfg.estimator[m].beta0, 0.0042f));
+        assert_true(same(cfg.estimator[m].nominal[nte_param_f1], 0.17f));
+        assert_true(same(cfg.estimator[m].f1_excess, 0.0f));
+    }
+    /* Model III's own: strengths, delta (presliding_mm), time constants, a layer set */
+    assert_int_equal(nte_node_setting_apply(&cfg, NTE_FRAMES_SETTING_PARAM0 + nte_param_g_slow,
+                                            0.08f), nte_node_ok);
+    assert_int_equal(nte_node_setting_apply(&cfg, NTE_FRAMES_SETTING_PARAM0 + nte_param_delta,
+                                            4.0f), nte_node_ok);
+    assert_int_equal(nte_node_setting_apply(&cfg, NTE_FRAMES_SETTING_TAU_SLOW_S, 2.5f),
+                     nte_node_ok);
+    assert_int_equal(nte_node_setting_apply(&cfg, NTE_FRAMES_SETTING_LAYER0 + 5u + 2u, 0.39f),
+                     nte_node_ok); /* set 1, field 2: f1 */
+    assert_true(same(cfg.estimator[2].nominal[nte_param_g_slow], 0.08f));
+    assert_false(same(cfg.estimator[1].nominal[nte_param_g_slow], 0.08f));
+    assert_true(same(cfg.estimator[2].presliding_mm, 4.0f));
+    assert_true(same(cfg.estimator[2].tau_slow_s, 2.5f));
+    assert_true(same(cfg.estimator[2].layer_set[1].values[nte_layer_f1], 0.39f));
+    assert_int_equal(nte_node_setting_apply(&cfg, NTE_FRAMES_SETTING_MODEL, 3.0f), nte_node_ok);
+    assert_int_equal(cfg.model, 3);
+    assert_int_equal(nte_node_setting_apply(&cfg, NTE_FRAMES_SETTING_RELAXATION, 0.0f),
+                     nte_node_ok);
+    assert_false(cfg.estimator[2].relaxation);
+    assert_int_equal(nte_node_setting_apply(&cfg, NTE_FRAMES_SETTING_LAYER_SETS, 2.0f),
+                     nte_node_ok);
+    assert_int_equal((int)cfg.estimator[2].layer_sets, 2);
+    /* refused, nothing written */
+    before = cfg;
+    static const struct {
+        uint32_t item;
+        float value;
+    } bad[] = {{NTE_FRAMES_SETTING_MODEL, 4.0f},        {NTE_FRAMES_SETTING_MODEL, 2.5f},
+               {NTE_FRAMES_SETTING_MODEL, 0.0f},        {NTE_FRAMES_SETTING_RELAX_BRANCHES, 3.0f},
+               {NTE_FRAMES_SETTING_RELAXATION, 0.5f},   {NTE_FRAMES_SETTING_DIRECTION_MEMORY, 2.0f},
+               {NTE_FRAMES_SETTING_LAYER_SETS, 4.0f},   {NTE_FRAMES_SETTING_LAYER_SETS, -1.0f},
+               {NTE_FRAMES_SETTING_LAYER0 + 15u, 1.0f}, /* set 3: beyond NTE_LAYER_SETS_MAX */
+               {NTE_FRAMES_SETTING_BEGIN, 3.0f},        {NTE_FRAMES_SETTING_COMMIT, 3.0f},
+               {NTE_FRAMES_SETTING_R_N2, NAN},          {NTE_FRAMES_SETTING_TAU_FAST_S, INFINITY}};
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        assert_int_equal(nte_node_setting_apply(&cfg, bad[i].item, bad[i].value),
+                         nte_node_err_bad_config);
+        assert_memory_equal(&cfg, &before, sizeof cfg);
+    }
+    /* the node's defaults are where a transfer starts */
+    nte_node_settings_begin(&cfg);
+    nte_node_config_default(&before, 3);
+    assert_memory_equal(&cfg.estimator, &before.estimator, sizeof cfg.estimator);
 }
 
 /* Every estimate equals a directly stepped estimator fed the decoded (quantised) samples,
@@ -1300,6 +1371,7 @@ int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_config_errors),
+        cmocka_unit_test(test_setting_apply),
         cmocka_unit_test(test_estimates_equal_library_with_interpolation),
         cmocka_unit_test(test_independent_of_arrival_order),
         cmocka_unit_test(test_bad_frames_counted_and_harmless),
