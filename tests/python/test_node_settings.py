@@ -131,6 +131,7 @@ def test_transfer_carries_the_layer_sets_to_predict_only(tmp_path: Path,
                          ["--config", str(cfg)])
     assert st_bus["settings_applied"] == 1 and st_bus["predict_on"] >= 1
     assert len(outputs(sent_cfg)) > 4000 and outputs(sent_bus) == outputs(sent_cfg)
+    print(f"\npredict-only over the whole record: {len(outputs(sent_cfg))} frames equal")
     n = item_numbers(DB)
     no_sets = [(i, v) for i, v in items if i < n["layer_sets"]]
     bus0 = with_transfer(frames, transfer(no_sets, DB.sender()) + model_only, t0)
