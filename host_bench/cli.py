@@ -2,6 +2,7 @@
 
     nte-bench replay FILE.csv|FILE.log --channel vcan0 [--interface socketcan|slcan]
                      [--speed X] [--depth-rate HZ] [--player python|canplayer] --out DIR
+                     [--with-node [--node PATH]]
                      [--force-source T:sensor|model ...] [--sensor-fault T0:T1 ...]
                      [--sensor-lost T0:T1 ...]
     nte-bench check DIR [--model 1|2|3] [--preset NAME]
@@ -23,6 +24,9 @@ The force sensor's failures (the node's predict-only mode, nte_node.h PREDICT-ON
 --force-source T:model (or T:sensor) sends a Command with ForceSource at scenario time T s;
 --sensor-fault T0:T1 sets SensorFault on the Force frames in [T0, T1) s (the driver flags them
 bad); --sensor-lost T0:T1 leaves those Force frames out (a lost sensor).  Each may repeat.
+replay --with-node starts nte-node on the channel first (the reference's model, preset, depth
+timeout, Params per step and base id; ready when it says so) and stops it by its process group
+after the replay, also when the replay fails: one command for replay, check and node.
 replay --no-check stops after recording (DIR/record.json added); check DIR then does the
 comparison and figures where no bus is needed -- on the host, when the bus lives in a slower
 virtual machine (host_bench/with-vcan).
@@ -52,7 +56,8 @@ import subprocess
 import sys
 import time
 from pathlib import Path
-from typing import Sequence
+from contextlib import ExitStack
+from typing import TYPE_CHECKING, Sequence
 
 import can
 import numpy as np
@@ -65,6 +70,9 @@ from reference_py.tools.arguments import (EXIT_BAD_INPUT, OneLineParser, add_uni
 from reference_py.tools.safe_write import Outputs
 
 from .node_mirror import NODE, NodeMirror, compare, contact_outputs, node_outputs
+
+if TYPE_CHECKING:
+    from .started_node import StartedNode
 from .replay import paced, read_scenario, scenario_frames, send_retrying
 
 PARAM_LABELS = PARAM_NAMES
@@ -272,27 +280,34 @@ def cmd_replay(a: argparse.Namespace) -> int:
         write_candump(tmp["input.log"], frames, a.channel, a.speed if a.speed > 0 else 1.0)
         collector = _Collect(db, [])
         filters = [{"can_id": i, "can_mask": 0x7FF, "extended": False} for i in collector.ids]
-        bus = open_bus(a.interface, a.channel, a.bitrate, filters, "nte-bench replay")
-        writers: list[can.Listener] = [
-            can.CSVWriter(str(tmp["node.csv"])),
-            can.CanutilsLogWriter(str(tmp["node.log"]), channel=a.channel)]
-        collector.writers = writers
-        notifier = can.Notifier(bus, [collector])
-        t_start = time.monotonic()
-        try:
-            if a.player == "canplayer":
-                _send_canplayer(tmp["input.log"], (frames[-1][0] - frames[0][0]) / a.speed,
-                                not a.no_progress)
-            else:
-                paced(frames, a.speed, lambda m: send_retrying(bus, m), not a.no_progress)
-            time.sleep(a.tail)
-        finally:
-            notifier.stop()
-            bus.shutdown()
-            for w in writers:
-                w.stop()
-        record = {"frames_sent": len(frames), "wall_s": round(time.monotonic() - t_start, 3),
-                  "input_values_clipped": clipped}
+        node = _with_node(a)
+        with ExitStack() as stack:
+            if node is not None:
+                stack.enter_context(node)       # stopped on the way out, whatever happens
+            bus = open_bus(a.interface, a.channel, a.bitrate, filters, "nte-bench replay")
+            writers: list[can.Listener] = [
+                can.CSVWriter(str(tmp["node.csv"])),
+                can.CanutilsLogWriter(str(tmp["node.log"]), channel=a.channel)]
+            collector.writers = writers
+            notifier = can.Notifier(bus, [collector])
+            t_start = time.monotonic()
+            try:
+                if a.player == "canplayer":
+                    _send_canplayer(tmp["input.log"], (frames[-1][0] - frames[0][0]) / a.speed,
+                                    not a.no_progress)
+                else:
+                    paced(frames, a.speed, lambda m: send_retrying(bus, m), not a.no_progress)
+                time.sleep(a.tail)
+            finally:
+                notifier.stop()
+                bus.shutdown()
+                for w in writers:
+                    w.stop()
+            record = {"frames_sent": len(frames),
+                      "wall_s": round(time.monotonic() - t_start, 3),
+                      "input_values_clipped": clipped}
+            if node is not None:
+                record["node_exit_status"] = node.stop()
         outs.write_lines(tmp["record.json"], [json.dumps(record, indent=2)])
         if not a.no_check:
             res = check_against_reference(a, db, frames, collector.messages, record, tmp,
@@ -304,6 +319,18 @@ def cmd_replay(a: argparse.Namespace) -> int:
         print(f"recorded in {a.out}; compare with the reference: nte-bench check {a.out}")
         return 0
     return report(res)
+
+
+def _with_node(a: argparse.Namespace) -> "StartedNode | None":
+    """--with-node: the node to start on the replay's interface (not yet started)."""
+    if not a.with_node:
+        return None
+    if a.interface != "socketcan":
+        raise ValueError("--with-node starts nte-node on a SocketCAN interface; with "
+                         "--interface slcan the node is the board")
+    from .started_node import StartedNode, node_arguments, node_program
+    return StartedNode(node_program(a.node), node_arguments(
+        a.channel, a.model, a.preset, a.depth_timeout_ms, a.params_per_step, a.base_id))
 
 
 def check_against_reference(a: argparse.Namespace, db: NteDatabase,
@@ -526,6 +553,13 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--sensor-lost", type=_span, action="append", default=[], metavar="T0:T1",
                    help="leave out the Force frames in [T0, T1) s (a lost sensor); may repeat")
     r.add_argument("--no-plot", action="store_true", help="do not draw force.png, params.png")
+    r.add_argument("--with-node", action="store_true",
+                   help="start nte-node on --channel with the reference's settings (--model, "
+                        "--preset, --depth-timeout-ms, --params-per-step, --base-id) before the "
+                        "replay and stop it after (SocketCAN only)")
+    r.add_argument("--node", metavar="PATH", default=None,
+                   help="the nte-node program for --with-node (default: the repository's "
+                        "build/host/bin/nte-node, else nte-node on PATH)")
     r.add_argument("--no-check", action="store_true",
                    help="send and record only (input.log, node.log, node.csv, record.json); "
                         "compare later, outside the bus's kernel, with nte-bench check DIR")

@@ -243,6 +243,16 @@ BENCH_CASES = [
      "nte-bench: error: --player canplayer needs --speed > 0"),
     (["--interface", "slcan", "--channel", "/nonexistent/tty"],
      "nte-bench: error: --channel /nonexistent/tty: cannot open the slcan bus: "),
+    (["--with-node", "--interface", "slcan"],
+     "nte-bench: error: --with-node starts nte-node on a SocketCAN interface; with "
+     "--interface slcan the node is the board"),
+    (["--with-node", "--depth-timeout-ms", "2.5"],
+     "nte-bench: error: --with-node: nte-node takes --depth-timeout-ms in whole milliseconds, "
+     "1..3000 (got 2.5)"),
+    (["--with-node", "--node", "/nonexistent/nte-node"],
+     "nte-bench: error: --node /nonexistent/nte-node: not an executable file"),
+    (["--with-node", "--channel", "nte_absent0"],
+     "nte-bench: error: --with-node: nte-node exited with status "),
 ]
 
 
@@ -432,3 +442,27 @@ def test_check_model3_against_the_node(tmp_path, capsys):
                                           "beta", "g_fast", "g_slow", "delta"}
     assert main(["check", str(d), "--model", "2", "--no-plot"]) == 1
     capsys.readouterr()
+
+
+def test_replay_with_node_on_vcan(tmp_path: Path, vcan_env: dict) -> None:
+    """nte-bench replay --with-node: one command starts nte-node on vcan0 (the reference's
+    settings), replays a paper insertion, checks every Estimate and Params frame against the
+    reference and stops the node (by its process group: exit status 0 after SIGTERM)."""
+    import json
+    scen = tmp_path / "paper.csv"
+    subprocess.run([str(ROOT / ".venv/bin/nte-ref"), "simulate", "--preset", "paper-10mms",
+                    "--depth", "8", "--dwell", "0.2", "--seed", "3", "--out", str(scen)],
+                   check=True, cwd=ROOT, stdout=subprocess.DEVNULL)
+    out = tmp_path / "run"
+    env = dict(vcan_env, TMPDIR=str(tmp_path), WITH_VCAN_TIMEOUT="600")
+    r = subprocess.run([str(ROOT / "host_bench" / "with-vcan"), str(ROOT / ".venv/bin/nte-bench"),
+                        "replay", str(scen), "--channel", "vcan0", "--with-node", "--out",
+                        str(out), "--no-plot", "--no-progress"], cwd=ROOT, env=env,
+                       capture_output=True, text=True, timeout=3600)
+    assert r.returncode == 0, r.stdout + r.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    record = json.loads((out / "record.json").read_text())
+    print("\n" + r.stdout.strip().splitlines()[-1])
+    assert record["node_exit_status"] == 0
+    assert summary["estimate_mismatches"] == 0 and summary["param_value_mismatches"] == 0
+    assert summary["estimates_node"] == summary["estimates_reference"] > 100
