@@ -126,7 +126,8 @@ static nte_real_t configured_ex(const nte_t* self)
     const nte_config_t* cfg = &self->cfg;
     return (cfg->f1_excess > NTE_C(0.0))
                ? cfg->f1_excess
-               : (cfg->nominal[nte_param_f1] - (self->kappa * (-cfg->nominal[nte_param_f2])));
+               : nte_model_f1_excess(cfg->nominal[nte_param_f1], cfg->nominal[nte_param_f2],
+                                     self->kappa);
 }
 
 /* The configured nominal (bank.reset restores it: a robust restart re-centres it). */
@@ -140,8 +141,7 @@ static void set_nominal(nte_t* self)
         /* Model I: beta is the fixed normalising constant beta0 */
         self->nominal[nte_param_beta] = cfg->beta0;
     }
-    const nte_real_t f2 = cfg->nominal[nte_param_f2];
-    self->kappa = (f2 < NTE_C(0.0)) ? NTE_C(1.0) : NTE_C(0.0);
+    self->kappa = nte_model_f1_kappa(cfg->nominal[nte_param_f2]);
     self->ex_nominal = configured_ex(self);
     const size_t nr = relax_count(self);
     if (nr > 0U) {
@@ -166,7 +166,7 @@ void nte_bank_restart_from(nte_t* self, const nte_real_t theta[NTE_PARAM_COUNT],
     for (size_t j = 0U; j < NTE_PARAM_COUNT; j++) {
         self->nominal[j] = theta[j];
     }
-    self->ex_nominal = theta[nte_param_f1] - (self->kappa * (-theta[nte_param_f2]));
+    self->ex_nominal = nte_model_f1_excess(theta[nte_param_f1], theta[nte_param_f2], self->kappa);
     for (size_t j = 0U; j < NTE_PARAM_COUNT; j++) {
         self->u[j] = NTE_C(0.0);
     }
@@ -610,8 +610,8 @@ static void enter_layer_sets(nte_t* self, const nte_real_t l, const bool surface
     }
     self->ex_nominal = (target == 0U)
                            ? configured_ex(self)
-                           : (cfg->layer_set[target - 1U].values[nte_layer_f1] -
-                              (self->kappa * (-cfg->nominal[nte_param_f2])));
+                           : nte_model_f1_excess(cfg->layer_set[target - 1U].values[nte_layer_f1],
+                                                 cfg->nominal[nte_param_f2], self->kappa);
     nte_model_refresh(&self->th, self->nominal, self->ex_nominal, self->kappa, self->u, ids,
                       NTE_LAYER_SET_VALUES);
     self->set_layer = target;

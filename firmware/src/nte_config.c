@@ -3,6 +3,7 @@
  * Every default comes from nte_constants.h, generated from the reference, so each field holds
  * exactly the reference's value rounded to nte_real_t.
  */
+#include "nte_model.h"
 #include "nte_real.h"
 
 static void set_common(nte_config_t* cfg, const int32_t model, const nte_schedule_t schedule)
@@ -211,7 +212,7 @@ static nte_err_t check_layer_sets(const nte_config_t* cfg)
         return nte_err_bad_layer_sets;
     }
     const nte_real_t f2 = cfg->nominal[nte_param_f2];
-    const nte_real_t kappa = (f2 < NTE_C(0.0)) ? NTE_C(1.0) : NTE_C(0.0);
+    const nte_real_t kappa = nte_model_f1_kappa(f2);
     nte_real_t previous = NTE_C(0.0);
     for (size_t k = 0U; k < cfg->layer_sets; k++) {
         const nte_layer_set_t* ls = &cfg->layer_set[k];
@@ -226,7 +227,7 @@ static nte_err_t check_layer_sets(const nte_config_t* cfg)
                 return nte_err_bad_layer_sets;
             }
         }
-        if (!((ls->values[nte_layer_f1] - (kappa * (-f2))) > NTE_C(0.0))) {
+        if (!(nte_model_f1_excess(ls->values[nte_layer_f1], f2, kappa) > NTE_C(0.0))) {
             return nte_err_bad_layer_sets;
         }
     }
@@ -316,8 +317,8 @@ nte_err_t nte_config_check(const nte_config_t* cfg)
     }
     if (!(cfg->f1_excess > NTE_C(0.0))) {
         const nte_real_t f2 = cfg->nominal[nte_param_f2];
-        const nte_real_t kappa = (f2 < NTE_C(0.0)) ? NTE_C(1.0) : NTE_C(0.0);
-        const nte_real_t ex = cfg->nominal[nte_param_f1] - (kappa * (-f2));
+        const nte_real_t ex =
+            nte_model_f1_excess(cfg->nominal[nte_param_f1], f2, nte_model_f1_kappa(f2));
         if (!(ex > NTE_C(0.0))) {
             return nte_err_bad_f1;
         }

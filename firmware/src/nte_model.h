@@ -33,6 +33,20 @@ typedef struct nte_rk3_result_t {
     nte_real_t dz_du[NTE_PARAM_COUNT]; /**< indexed by nte_param_id_t; only requested ones set */
 } nte_rk3_result_t;
 
+/** f1's split, written once (reference_py/params.py f1_kappa, f1_excess): kappa = 1 when
+ *  f2 < 0, else 0 -- with f2 < 0, f1 follows f2 (d f1 / d u_f2 = -kappa f2) so that
+ *  g(0) = f1 + f2 stays positive -- and the identified part of f1, its excess over kappa (-f2),
+ *  which must be > 0.  kappa is the configured f2's: a log-parametrised f2 keeps its sign. */
+static inline nte_real_t nte_model_f1_kappa(nte_real_t f2)
+{
+    return (f2 < NTE_C(0.0)) ? NTE_C(1.0) : NTE_C(0.0);
+}
+
+static inline nte_real_t nte_model_f1_excess(nte_real_t f1, nte_real_t f2, nte_real_t kappa)
+{
+    return f1 - (kappa * (-f2));
+}
+
 /** theta from the seven log-ratios (ScaledParams.theta). */
 void nte_model_theta(nte_theta_t* th, const nte_real_t nominal[NTE_PARAM_COUNT],
                      nte_real_t ex_nominal, nte_real_t kappa, const nte_real_t u[NTE_PARAM_COUNT]);

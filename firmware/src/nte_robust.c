@@ -222,7 +222,7 @@ static nte_real_t lm(nte_t* self, const nte_real_t theta0[NTE_PARAM_COUNT],
         nominal[j] = theta0[j];
     }
     const nte_real_t f2 = theta0[nte_param_f2];
-    const nte_real_t ex_nominal = theta0[nte_param_f1] - (self->kappa * (-f2));
+    const nte_real_t ex_nominal = nte_model_f1_excess(theta0[nte_param_f1], f2, self->kappa);
     for (size_t a = 0U; a < n; a++) {
         rb->v[a] = NTE_C(0.0);
     }
