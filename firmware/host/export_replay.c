@@ -2,12 +2,13 @@
  * A reader's replay of an exported parameter set.  Twin: reference_py/tools/export_replay.py.
  */
 #include "export_replay.h"
+#include "nte_preset_config.h"
 #include "starts.h"
 
 #include <math.h>
 
 /* The configuration a reader of the exported file builds (nte_run.c main): the values as the
- * nominal (nte_set_nominal, as main does), the strengths as given, the layer sets' values at
+ * nominal (nte_preset_nominal, as main does), the strengths as given, the layer sets' values at
  * the run's starts, predict-only, the known surface when the front end is on. */
 static int reader_config(const nte_config_t* run_cfg, const double* row, size_t row_len,
                          double surface_mm, nte_config_t* cfg)
@@ -15,7 +16,7 @@ static int reader_config(const nte_config_t* run_cfg, const double* row, size_t 
     *cfg = *run_cfg;
     const size_t tail = NTE_LAYER_SET_VALUES * (size_t)run_cfg->layer_sets;
     if ((row_len < (7U + tail)) || (row_len > NTE_EXPORT_ROW_MAX) ||
-        (nte_set_nominal(cfg, row) != 0)) {
+        (nte_preset_nominal(cfg, row) != 0)) {
         return -1;
     }
     const size_t base_len = row_len - tail;

@@ -39,6 +39,7 @@
 #include "nte_presets.h"
 #include "nte_units.h"
 #include "start_flag.h"
+#include "nte_preset_config.h"
 #include "starts.h"
 #include "units_check.h"
 #include "verdict.h"
@@ -994,7 +995,7 @@ int main(int argc, char** argv)
     cfg.beta0 = (nte_real_t)values[6];
     /* the seven force-model parameters; Model III's relaxation strengths keep the
      * configuration's nominal values (the starts move only the seven) */
-    if (nte_set_nominal(&cfg, start) != 0) {
+    if (nte_preset_nominal(&cfg, start) != 0) {
         nte_trial_free(&tr);
         return bad("nominal f1 must exceed -f2 (g(0) = f1 + f2 must be positive)");
     }

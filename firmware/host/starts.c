@@ -42,17 +42,3 @@ int nte_start_values(const double values[7], const uint64_t seed, const double f
     out[3] = (kappa * (-out[4])) + (excess * mult[3]);
     return 0;
 }
-
-int nte_set_nominal(nte_config_t* cfg, const double values[7])
-{
-    for (size_t j = 0U; j < 7U; j++) {
-        cfg->nominal[j] = (nte_real_t)values[j];
-    }
-    const double kappa = (values[4] < 0.0) ? 1.0 : 0.0;
-    const double excess = values[3] - (kappa * (-values[4]));
-    if (!(excess > 0.0)) {
-        return -1;
-    }
-    cfg->f1_excess = (nte_real_t)excess;
-    return 0;
-}

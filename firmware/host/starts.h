@@ -17,10 +17,4 @@ uint64_t nte_splitmix64(uint64_t* state);
 int nte_start_values(const double values[7], uint64_t seed, double factor, int model,
                      double out[7]);
 
-/** The seven force-model values as cfg's nominal (starting) values, each rounded once to
- *  nte_real_t, and the identified part of f1 computed in double as the reference does
- *  (f1 - kappa (-f2), kappa = 1 when f2 < 0), then rounded.  Returns -1 (cfg's f1_excess
- *  untouched) when that part is not positive (g(0) = f1 + f2 must be). */
-int nte_set_nominal(nte_config_t* cfg, const double values[7]);
-
 #endif /* NTE_STARTS_H */

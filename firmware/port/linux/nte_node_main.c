@@ -22,6 +22,7 @@
 #include "nte_port_log.h"
 #include "nte_port_socketcan.h"
 #include "nte_presets.h"
+#include "nte_preset_config.h"
 #include "nte_settings_file.h"
 
 #include <errno.h>
@@ -199,24 +200,14 @@ static const nte_preset_t* find_preset(const char* name)
     return NULL;
 }
 
-/* The estimator configuration nte-run uses: default profile, schedule all, nominal = preset,
- * Model I's beta0 = the preset's beta, f1 excess computed in double. */
+/* The estimator configuration nte-run uses: default profile, schedule all, nominal = preset
+ * (nte_preset_nominal, nte-run's: each value rounded once, f1's excess in double), Model I's
+ * beta0 = the preset's beta. */
 static int estimator_config(nte_config_t* cfg, int32_t model, const double values[7])
 {
     nte_config_default(cfg, model, nte_schedule_all);
     cfg->beta0 = (nte_real_t)values[6];
-    /* a preset (or --config's params) holds the seven force-model parameters; Model III's
-     * relaxation strengths keep the configuration's nominal values */
-    for (size_t j = 0u; j < 7u; j++) {
-        cfg->nominal[j] = (nte_real_t)values[j];
-    }
-    const double kappa = (values[4] < 0.0) ? 1.0 : 0.0;
-    const double excess = values[3] - (kappa * (-values[4]));
-    if (!(excess > 0.0)) {
-        return -1;
-    }
-    cfg->f1_excess = (nte_real_t)excess;
-    return 0;
+    return nte_preset_nominal(cfg, values);
 }
 
 static void write_stats(const nte_node_t* n, const nte_port_socketcan_t* port, FILE* f)
