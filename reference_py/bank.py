@@ -24,15 +24,14 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .config import EstimatorConfig, check_nominal
-from .layers import RuptureDetector
 from .contact import ContactFrontEnd
 from .ekf import Matrix, joseph_update, positive_definite, predict_covariance
 from .fmath import Array, Real
+from .identified import dynamic, filter_subsets, identified_names, relax_count
+from .layers import LayerSets, RuptureDetector, tear_prior
 from .model import (DepthTerms, Theta, ScaledParams, clamp_depth, depth_terms, exact_sign, output,
                     output_du, output_dz, smooth_sign, steady_state_z)
-from .params import (ALL_NAMES, DIR_NAMES, FILTER_SUBSETS, IDX, LAYER_SET_NAMES, MODEL_PARAMS,
-                     PARAM_NAMES,
-                     RELAX_NAMES, RELAX_NOMINAL)
+from .params import ALL_NAMES, IDX, PARAM_NAMES, RELAX_NAMES, RELAX_NOMINAL
 from .rk3 import Rk3Result, rk3_step
 
 # Status bits of one sample (the C library uses the same values)
@@ -86,41 +85,6 @@ class StepOutput:
     layer: Array | None = None
 
 
-def relax_count(cfg: EstimatorConfig) -> int:
-    """Model III's relaxation branches in use (0 when relaxation is off or for Models I, II)."""
-    return cfg.relax_branches if (cfg.model == 3 and cfg.relaxation) else 0
-
-
-def identifies_delta(cfg: EstimatorConfig) -> bool:
-    """Model III identifies its turn-over length delta whenever the direction memory is on."""
-    return cfg.model == 3 and cfg.direction_memory
-
-
-def identified_names(cfg: EstimatorConfig) -> tuple[str, ...]:
-    """The parameters a configuration identifies, in CSV column order (Model III: Model II's,
-    the strengths of the branches in use, and delta with the direction memory on)."""
-    if cfg.model != 3:
-        return MODEL_PARAMS[cfg.model]
-    return (MODEL_PARAMS[3][:len(MODEL_PARAMS[2]) + relax_count(cfg)] +
-            (DIR_NAMES if identifies_delta(cfg) else ()))
-
-
-def filter_subsets(cfg: EstimatorConfig) -> tuple[tuple[str, ...], ...]:
-    """Table I for a configuration: Model III's filter 1 takes the strengths in use, filter 2
-    delta when the direction memory is on."""
-    subsets = FILTER_SUBSETS[cfg.model]
-    if cfg.model != 3:
-        return subsets
-    second = subsets[1] if identifies_delta(cfg) else subsets[1][:2]
-    return (subsets[0][:1 + relax_count(cfg)], second, subsets[2])
-
-
-def _dynamic(names: tuple[str, ...]) -> tuple[str, ...]:
-    """The parameters of the state equation among names (the relaxation strengths act on the
-    output only: dz/du_g = 0)."""
-    return tuple(nm for nm in names if nm in PARAM_NAMES)
-
-
 class FilterBank:
     """The bank for a batch of runs.  ``nominal``: per-run list of the seven start values (or
     nine: Model III's relaxation strengths g_fast, g_slow appended; default RELAX_NOMINAL)."""
@@ -159,7 +123,10 @@ class FilterBank:
         # Model III's layer index: a rupture detector on filter 1's innovations
         self.layers = (RuptureDetector(R, self.batch, cfg.v_still_mm_s)
                        if self.m3 and cfg.layers else None)
-        self._layer_sets(R, cfg, layer_values, layer_starts)
+        # Model III's layer sets (layers.py): the values the model switches to in predict-only
+        # mode below each set's start (no sets: nothing switches)
+        self.layer_sets = LayerSets(R, self.batch, cfg.layer_sets, layer_values, layer_starts,
+                                    self._nominal0, self.scaled.kappa)
         self.reset()
         self.initial_theta = self.th
 
@@ -195,8 +162,7 @@ class FilterBank:
             self.contact.reset()
         if self.layers is not None:
             self.layers.reset()
-        # Model III's layer sets: the set whose values the model runs with (0: the nominal)
-        self.set_layer = np.zeros(B, dtype=np.uint32)
+        self.layer_sets.reset()
         self.last = StepOutput(R.full(B, 0.0), R.full(B, 0.0), R.full(B, 0.0), R.full(B, 0.0),
                                np.zeros(B, dtype=np.uint32),
                                R.arr(np.zeros((len(self.identified), B))),
@@ -292,8 +258,8 @@ class FilterBank:
         else:
             out.surface_mm, out.tare_n = R.full(self.batch, 0.0), R.full(self.batch, 0.0)
             out.contact = np.zeros(self.batch, dtype=np.uint32)
-        if po and self.set_starts:
-            out.layer = self.set_layer.copy()   # predict-only: the layer of the set in use
+        if po and self.layer_sets.starts:
+            out.layer = self.layer_sets.layer.copy()   # predict-only: the layer of the set in use
         elif self.layers is not None:
             out.layer = self.layers.layer.copy()
         else:
@@ -315,8 +281,9 @@ class FilterBank:
         l_prev = clamp_depth(R, self.l_prev)
         surface = ~(l > R.c(0.0))
         gap = run & (dt > c.dt_max)
-        if self.set_starts:
-            self._enter_layer_sets(run | first, l, surface)
+        if self.layer_sets.starts:
+            self.th = self.layer_sets.enter(cfg.predict_only, run | first, l, surface,
+                                            self.scaled, self.u, self.th)
         if self.m3 and cfg.direction_memory:
             s, s_du, turned = self._direction(l, l_prev, surface | first)
         else:
@@ -336,14 +303,14 @@ class FilterBank:
         if rotate:
             # one prediction, with every identified parameter's sensitivity, serves all three
             shared_pred = rk3_step(R, self.th, z_prev, l_prev, l, dt, cfg.substeps,
-                                   _dynamic(self.identified))
+                                   dynamic(self.identified))
         for i, names in enumerate(self.subsets):
             if rotate:
                 pred = shared_pred
                 active = run & ((self.k % 3) == i)
             else:
                 pred = rk3_step(R, self.th, z_prev, l_prev, l, dt, cfg.substeps,
-                                _dynamic(names))
+                                dynamic(names))
                 active = run
             if cfg.predict_only:
                 # the model alone: no filter updates (z is filter 0's prior, below)
@@ -354,7 +321,11 @@ class FilterBank:
                                                                   y, active)
             status |= st
             if i == 0 and self.layers is not None:
-                tear = self._watch_layers(first, run, l, v, innovation, in_range)
+                # the innovation in units of the sensor noise: the front end's, or sqrt(r_n2)
+                sigma = (self.contact.noise_sigma() if self.contact is not None
+                         else np.sqrt(R.full(B, 0.0) + c.r))
+                tear = self.layers.watch(first, run, l, v, innovation, in_range, sigma,
+                                         cfg.predict_only)
                 status |= np.where(tear, np.uint32(STATUS_RUPTURE), np.uint32(0))
             u_delta = self.u[IDX["delta"]]
             z_i, nis, st = self._update_and_guard(i, names, x, P_pred, hrow, innovation, r_eff,
@@ -464,7 +435,7 @@ class FilterBank:
         status = np.zeros(self.batch, dtype=np.uint32)
         o = output(self.th, d, zp, s)
         hrow = [output_dz(self.th, d, o)] + [output_du(self.th, d, zp, o, nm)
-                                             for nm in _dynamic(names)]
+                                             for nm in dynamic(names)]
         if "delta" in names:
             # the elastic force's s l fr moves with s: dfe/du_delta = l fr ds/du_delta
             hrow.append((d.l * o.fr) * s_du)
@@ -573,79 +544,6 @@ class FilterBank:
         fmax = self.c.force_max
         return (np.abs(h) <= fmax) & (np.abs((self.th.sigma0 * z) * d.l) <= fmax)
 
-    def _layer_sets(self, R: Real, cfg: EstimatorConfig,
-                    layer_values: list[list[list[float]]] | None,
-                    layer_starts: list[list[float]] | None) -> None:
-        """The configured layer sets in the working precision: per set the start depth and per
-        LAYER_SET_NAMES entry the value of every run (nte.h THE LAYER SETS)."""
-        sets = cfg.layer_sets
-        if layer_values is None:
-            layer_values = [[list(ls.values) for ls in sets] for _ in range(self.batch)]
-        if layer_starts is None:
-            layer_starts = [[ls.start_mm for ls in sets] for _ in range(self.batch)]
-        for given in (layer_values, layer_starts):
-            if len(given) != self.batch or any(len(v) != len(sets) for v in given):
-                raise ValueError("layer_values, layer_starts: one entry per configured layer "
-                                 "set for every run")
-        self.set_starts = [R.arr([run[k] for run in layer_starts]) for k in range(len(sets))]
-        self.set_values = [[R.arr([run[k][j] for run in layer_values])
-                            for j in range(len(LAYER_SET_NAMES))] for k in range(len(sets))]
-        kappa = self.scaled.kappa
-        f2 = self.scaled.nominal[IDX["f2"]]
-        f1 = LAYER_SET_NAMES.index("f1")
-        # the part of each set's f1 the filters scale, as restart_from computes it
-        self.set_ex = [v[f1] - kappa * (-f2) for v in self.set_values]
-        if any(np.any(~(ex > R.c(0.0))) for ex in self.set_ex):
-            raise ValueError("layer_sets: every f1 must exceed -f2 (g(0) = f1 + f2 must be "
-                             "positive)")
-
-    def _enter_layer_sets(self, fed: Array, l: Array, surface: Array) -> None:
-        """Model III's layer sets (nte.h THE LAYER SETS): in predict-only mode the deepest set
-        whose start the tip has reached since it entered the tissue replaces the nominal values
-        of LAYER_SET_NAMES (their u restarts at 0, so the model runs with the set's values);
-        out of the tissue, in any mode, the configured nominal values return."""
-        R = self.R
-        reached = np.zeros(self.batch, dtype=np.uint32)
-        for start in self.set_starts:
-            reached = reached + (l >= start).astype(np.uint32)
-        deeper = np.where(reached > self.set_layer, reached, self.set_layer)
-        target = self.set_layer
-        if self.cfg.predict_only:
-            target = deeper
-        target = np.where(surface, np.uint32(0), target).astype(np.uint32)
-        change = fed & (target != self.set_layer)
-        if not np.any(change):
-            return
-        nominal0, ex0 = self._nominal0
-        for j, nm in enumerate(LAYER_SET_NAMES):
-            value = nominal0[IDX[nm]]
-            for k, vals in enumerate(self.set_values):
-                value = np.where(target == k + 1, vals[j], value)
-            self.scaled.nominal[IDX[nm]] = np.where(change, value, self.scaled.nominal[IDX[nm]])
-            self.u[IDX[nm]] = np.where(change, R.c(0.0), self.u[IDX[nm]])
-        ex = ex0
-        for k, ex_k in enumerate(self.set_ex):
-            ex = np.where(target == k + 1, ex_k, ex)
-        self.scaled.ex_nominal = np.where(change, ex, self.scaled.ex_nominal)
-        fresh = self.scaled.refresh(self.th, self.u, LAYER_SET_NAMES)
-        self.th = Theta(*(np.where(change, getattr(fresh, f), getattr(self.th, f))
-                          for f in Theta.__dataclass_fields__))
-        self.set_layer = np.where(change, target, self.set_layer).astype(np.uint32)
-
-    def _watch_layers(self, first: Array, run: Array, l: Array, v: Array,
-                      innovation: Array, in_range: Array) -> Array:
-        """Model III's rupture detector (layers.py) on filter 1's prior innovation of this
-        sample, before any filter's update, at the depth l in the tissue (mm, >= 0); returns
-        where a layer tore."""
-        R = self.R
-        zero = R.c(0.0)
-        sigma = (self.contact.noise_sigma() if self.contact is not None
-                 else np.sqrt(R.full(self.batch, 0.0) + self.c.r))
-        watched = run & ~np.bool_(self.cfg.predict_only) & in_range
-        nu = np.where(watched, innovation, zero)
-        _, rupture = self.layers.step(run | first, run, l, v, nu, sigma)
-        return rupture
-
     def _update_and_guard(self, i: int, names: tuple[str, ...], x: list[Array], P_pred: Matrix,
                           hrow: list[Array], innovation: Array, r_eff: Array, active: Array,
                           run: Array, in_range: Array, z_ss: Array, tear: Array | None = None
@@ -660,8 +558,8 @@ class FilterBank:
         # good (its collapsed covariance never admits the data again): open it once
         open_gate = self.gated_run[i] >= cfg.gate_reopen_after
         if tear is not None:
-            # a layer tore: the drop is the tissue's, not the parameters' (_tear_prior)
-            P_pred, hrow = self._tear_prior(P_pred, hrow, tear)
+            # a layer tore: the drop is the tissue's, not the parameters' (layers.tear_prior)
+            P_pred, hrow = tear_prior(R, P_pred, hrow, tear, self._p0(len(hrow)))
             open_gate = open_gate | tear
         upd = joseph_update(R, x, P_pred, hrow, innovation, r_eff, c.gate2, open_gate)
         gated = active & ~upd.accepted
@@ -682,35 +580,13 @@ class FilterBank:
                      for a in range(len(x))]
         for a, nm in enumerate(names):
             self.u[IDX[nm]] = np.where(run, newx[a + 1], self.u[IDX[nm]])
-        self.th = self.scaled.refresh(self.th, self.u, _dynamic(names))
+        self.th = self.scaled.refresh(self.th, self.u, dynamic(names))
         for k, nm in enumerate(RELAX_NAMES[:self.n_relax]):
             if nm in names:
                 self.G[k] = self.scaled.nominal[IDX[nm]] * R.exp(self.u[IDX[nm]])
         if "delta" in names:
             self.delta = self.scaled.nominal[IDX["delta"]] * R.exp(self.u[IDX["delta"]])
         return newx[0], upd.nis, status
-
-    def _tear_prior(self, P: Matrix, hrow: list[Array], tear: Array
-                    ) -> tuple[Matrix, list[Array]]:
-        """At a tear the needle meets new tissue: the filter's covariance restarts at P0
-        (the estimates carry over as the new layer's start, with a start's uncertainty), and
-        the tear's own sample updates z alone (its row on the parameters 0, the gate open).
-
-        Why: the drop (50-500 noise sd in one sample) is no evidence about the torn layer's
-        parameters, yet a converged filter whose gate had just reopened took it at full gain
-        and drove a relaxation strength or sigma0 to its clip, after which the one-step
-        prediction stayed 1-3 N off for the rest of the insertion (measured-like seed 19:
-        insertion innovation 59x the noise, 4x with this).  Tried and dropped on the same
-        development seeds: z alone with the parameters' covariance kept (a catastrophic
-        seed, 38 -> 151x), the whole covariance restarted with a full update (median 11x
-        against 10x), the reopened gate's step bounded to the gate's size (worse
-        everywhere)."""
-        zero = self.R.c(0.0)
-        n = len(hrow)
-        P0 = self._p0(n)
-        P = [[np.where(tear, P0[a][b], P[a][b]) for b in range(n)] for a in range(n)]
-        hrow = [hrow[0]] + [np.where(tear, zero, hrow[a]) for a in range(1, n)]
-        return P, hrow
 
     def _guard(self, x: list[Array], P: Matrix, x_prior: list[Array], prior_ok: Array,
                diverged: Array, z_ss: Array) -> tuple[list[Array], Matrix, Array]:

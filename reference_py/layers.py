@@ -1,5 +1,6 @@
 """Model III's layer index: a rupture detector on the bank's innovations (issue "Model III on
-the board", part 3).  C twin: firmware/src/nte_layers.c.
+the board", part 3).  C twin: firmware/src/nte_layers.c (tear_prior and LayerSets, at the end:
+firmware/src/nte_bank.c).
 
 Why.  A needle crosses layers: each membrane is tented until it tears, and the force drops by
 0.5-3 N within a few samples (MODEL.md §9: 1-5 ruptures per insertion in measured records).
@@ -28,18 +29,29 @@ depth, no false alarm, for drift 1 and thresholds 20-40) and checked on records 
 `lab` tissues (seeds 201-210, 0-3 ruptures each) and the five presets (seeds 111-112):
 tests/python/test_layers.py measures the index (its figures in the README).
 
-The bank (bank._watch_layers) runs the detector on filter 1's prior innovation of every
+The bank runs the detector (RuptureDetector.watch) on filter 1's prior innovation of every
 accepted sample, before any filter's update, and treats the sample of a rupture as a tear
-(bank._tear_prior): every filter's covariance restarts at P0 — the torn layer's estimates are
-the next layer's start — and that sample updates z alone.  --export-config writes a layer set
-(MODEL.md §3b part 3, bank._enter_layer_sets) at each tear the detector found in a record's
-first insertion, for predict-only mode.
+(tear_prior): every filter's covariance restarts at P0 — the torn layer's estimates are the next
+layer's start — and that sample updates z alone.  --export-config writes a layer set (MODEL.md
+§3b part 3, LayerSets) at each tear the detector found in a record's first insertion, for
+predict-only mode.
+
+This module is Model III's layers as the bank sees them: the index (RuptureDetector), what a
+tear does to a filter (tear_prior) and the sets the model switches to below each start
+(LayerSets).  The last two are the bank's code in C (nte_bank.c tear_prior, enter_layer_sets):
+here they sit with the index so that bank.py keeps to the filters.
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import Any
+
 import numpy as np
 
+from .ekf import Matrix
 from .fmath import Array, Real
+from .model import ScaledParams, Theta
+from .params import IDX, LAYER_SET_NAMES
 
 #: layers counted, index 0..LAYER_MAX - 1 (the C build's NTE_LAYER_MAX; static memory)
 LAYER_MAX = 4
@@ -95,5 +107,128 @@ class RuptureDetector:
         self.layer = np.where(valid, layer, self.layer).astype(np.uint32)
         return self.layer, rupture & valid
 
+    def watch(self, first: Array, run: Array, depth: Array, velocity: Array, innovation: Array,
+              in_range: Array, sigma: Array, predict_only: bool) -> Array:
+        """The bank's call, once per sample on filter 1's prior innovation, before any filter's
+        update (so that the sample of a rupture is updated as a tear: tear_prior); returns
+        where a layer tore.  C twin: the call of nte_layers_watch in nte_bank.c.
 
-__all__ = ["LAYER_MAX", "DRIFT_SIGMA", "THRESHOLD_SIGMA", "HOLDOFF_MM", "RuptureDetector"]
+        Only running samples whose prior is in range feed the CUSUM (a diverged prior's
+        innovation may not be finite), and none in predict-only mode (no force is read)."""
+        zero = self.R.c(0.0)
+        watched = run & ~np.bool_(predict_only) & in_range
+        nu = np.where(watched, innovation, zero)
+        _, rupture = self.step(run | first, run, depth, velocity, nu, sigma)
+        return rupture
+
+
+def tear_prior(R: Real, P: Matrix, hrow: list[Array], tear: Array, P0: Matrix
+               ) -> tuple[Matrix, list[Array]]:
+    """A filter's prior at a tear, where ``tear``: the needle meets new tissue, so the
+    covariance restarts at P0 (the estimates carry over as the new layer's start, with a
+    start's uncertainty), and the tear's own sample updates z alone (its row on the parameters
+    0; the bank opens the gate).  C twin: nte_bank.c tear_prior.
+
+    Why: the drop (50-500 noise sd in one sample) is no evidence about the torn layer's
+    parameters, yet a converged filter whose gate had just reopened took it at full gain
+    and drove a relaxation strength or sigma0 to its clip, after which the one-step
+    prediction stayed 1-3 N off for the rest of the insertion (measured-like seed 19:
+    insertion innovation 59x the noise, 4x with this).  Tried and dropped on the same
+    development seeds: z alone with the parameters' covariance kept (a catastrophic
+    seed, 38 -> 151x), the whole covariance restarted with a full update (median 11x
+    against 10x), the reopened gate's step bounded to the gate's size (worse
+    everywhere)."""
+    zero = R.c(0.0)
+    n = len(hrow)
+    P = [[np.where(tear, P0[a][b], P[a][b]) for b in range(n)] for a in range(n)]
+    hrow = [hrow[0]] + [np.where(tear, zero, hrow[a]) for a in range(1, n)]
+    return P, hrow
+
+
+class LayerSets:
+    """Model III's layer sets for a batch (nte.h THE LAYER SETS, MODEL.md §3b part 3): per set
+    its start depth below the surface and, per LAYER_SET_NAMES entry, the value of every run,
+    in the working precision; and the set each run's model runs with (0: the nominal).
+
+    C twin: nte_bank.c enter_layer_sets.  The C library keeps the sets in its configuration
+    and the set in use in nte_t, so its code lives in the bank's file; here the bank owns one
+    LayerSets (FilterBank.layer_sets) and calls enter() at the start of every sample."""
+
+    def __init__(self, R: Real, batch: int, sets: Sequence[Any],
+                 layer_values: list[list[list[float]]] | None,
+                 layer_starts: list[list[float]] | None,
+                 nominal0: tuple[list[Array], Array], kappa: Any) -> None:
+        """``sets``: the configuration's (config.LayerSet: start_mm, values; config.py imports
+        this module, so the type is not named here).  ``layer_values``: per run, the values of
+        each set (LAYER_SET_NAMES order); ``layer_starts``: per run, their starts (mm); default:
+        the configuration's own for every run (the export's replays shift them per run).
+        ``nominal0``: the bank's configured scaled nominal values and f1 excess, which return
+        out of the tissue; ``kappa``: its f1 kappa."""
+        self.R, self.batch = R, batch
+        if layer_values is None:
+            layer_values = [[list(ls.values) for ls in sets] for _ in range(batch)]
+        if layer_starts is None:
+            layer_starts = [[ls.start_mm for ls in sets] for _ in range(batch)]
+        for given in (layer_values, layer_starts):
+            if len(given) != batch or any(len(v) != len(sets) for v in given):
+                raise ValueError("layer_values, layer_starts: one entry per configured layer "
+                                 "set for every run")
+        self.starts = [R.arr([run[k] for run in layer_starts]) for k in range(len(sets))]
+        self.values = [[R.arr([run[k][j] for run in layer_values])
+                        for j in range(len(LAYER_SET_NAMES))] for k in range(len(sets))]
+        nominal, self.ex0 = nominal0
+        self.nominal0 = [nominal[IDX[nm]] for nm in LAYER_SET_NAMES]
+        f2 = nominal[IDX["f2"]]
+        f1 = LAYER_SET_NAMES.index("f1")
+        # the part of each set's f1 the filters scale, as FilterBank.restart_from computes it
+        self.ex = [v[f1] - kappa * (-f2) for v in self.values]
+        if any(np.any(~(ex > R.c(0.0))) for ex in self.ex):
+            raise ValueError("layer_sets: every f1 must exceed -f2 (g(0) = f1 + f2 must be "
+                             "positive)")
+        self.reset()
+
+    def reset(self) -> None:
+        """Every run back on the nominal values (the bank's reset restores those)."""
+        self.layer = np.zeros(self.batch, dtype=np.uint32)
+
+    def enter(self, predict_only: bool, fed: Array, l: Array, surface: Array,
+              scaled: ScaledParams, u: list[Array], th: Theta) -> Theta:
+        """One sample's switch, before the filters run, where ``fed`` (the bank's samples that
+        run or start it), at the depth l below the surface (mm, >= 0): in predict-only mode the
+        deepest set whose start the tip has reached since it entered the tissue replaces the
+        nominal values of LAYER_SET_NAMES in ``scaled`` and their ``u`` restart at 0 (so the
+        model runs with the set's values); out of the tissue, in any mode, the configured
+        nominal values return.  Writes scaled and u in place; returns the refreshed theta.
+
+        Why only predict-only mode: the filters identify one set as the needle goes; the sets
+        are what an export found, for running the model alone on a later insertion."""
+        R = self.R
+        reached = np.zeros(self.batch, dtype=np.uint32)
+        for start in self.starts:
+            reached = reached + (l >= start).astype(np.uint32)
+        deeper = np.where(reached > self.layer, reached, self.layer)
+        target = self.layer
+        if predict_only:
+            target = deeper
+        target = np.where(surface, np.uint32(0), target).astype(np.uint32)
+        change = fed & (target != self.layer)
+        if not np.any(change):
+            return th
+        for j, nm in enumerate(LAYER_SET_NAMES):
+            value = self.nominal0[j]
+            for k, vals in enumerate(self.values):
+                value = np.where(target == k + 1, vals[j], value)
+            scaled.nominal[IDX[nm]] = np.where(change, value, scaled.nominal[IDX[nm]])
+            u[IDX[nm]] = np.where(change, R.c(0.0), u[IDX[nm]])
+        ex = self.ex0
+        for k, ex_k in enumerate(self.ex):
+            ex = np.where(target == k + 1, ex_k, ex)
+        scaled.ex_nominal = np.where(change, ex, scaled.ex_nominal)
+        fresh = scaled.refresh(th, u, LAYER_SET_NAMES)
+        self.layer = np.where(change, target, self.layer).astype(np.uint32)
+        return Theta(*(np.where(change, getattr(fresh, f), getattr(th, f))
+                       for f in Theta.__dataclass_fields__))
+
+
+__all__ = ["LAYER_MAX", "DRIFT_SIGMA", "THRESHOLD_SIGMA", "HOLDOFF_MM", "RuptureDetector",
+           "tear_prior", "LayerSets"]
