@@ -34,6 +34,8 @@ from reference_py.tools.estimate import make_config
 from reference_py.fmath import real_for
 from reference_py.params import ALL_NAMES, PRESETS, RELAX_NOMINAL
 
+from .setting_transfer import SettingTransfer
+
 F32 = np.float32
 TICK_US = 100
 #: the envelope (EstimatorConfig's accepted ranges), which the DBC's signals span exactly
@@ -153,12 +155,8 @@ class NodeMirror:
         self.param_next = 0
         self.last_command_us: int | None = None
         self._last_e2e_status = "ok"
-        # a configuration transfer (nte_node.h SETTINGS): open, the configurations hold one
-        # not applied, the count announced, the items taken
-        self.setting_open = False
-        self.setting_unapplied = False
-        self.setting_announced = 0
-        self.setting_seen: set[int] = set()
+        # a configuration transfer (nte_node.h SETTINGS)
+        self.transfer = SettingTransfer(self.db)
         # predict-only (nte_node.h PREDICT-ONLY): commanded, the mode of the last step, whether
         # that step was on the depth stream, its time; and the node's counters of it
         self.force_cmd_model = False
@@ -543,7 +541,7 @@ class NodeMirror:
         if name == "Setting":
             if len(data) != FRAME_LENGTH:
                 self._count("wrong_dlc")
-                self.setting_open = False
+                self.transfer.lost()
                 return
             self._on_setting(bytes(data))
             return
@@ -566,51 +564,19 @@ class NodeMirror:
             self._count("counter_skipped")
 
     def _on_setting(self, data: bytes) -> None:
-        """The node's transfer rules (nte_node.h SETTINGS) as far as a mirror of presets can
-        follow them: every refusal counted as the node counts it; a transfer the node would
-        apply is refused here with ValueError (compare such a run with nte-node --config)."""
-        from .settings_file import FRAME_ITEMS_LAST, item_numbers, value_ok
+        """A Setting frame: its checks counted as the node counts them, then the transfer's
+        rules (host_bench.setting_transfer)."""
         sig = self._e2e("Setting", data)
-        n = item_numbers(self.db)
-        if sig is not None:
-            item, value = int(sig["Item"]), float(sig["Value"])
-            if not ((item <= FRAME_ITEMS_LAST or item == n["commit"]) and np.isfinite(value)):
-                self._count("out_of_range")
-                sig = None
+        if sig is not None and not self.transfer.frame_ok(int(sig["Item"]), float(sig["Value"])):
+            self._count("out_of_range")
+            sig = None
         if sig is None:
-            self.setting_open = False          # an item may be missing: it cannot complete
+            self.transfer.lost()
             return
         self._taken()
-        if item == n["begin"]:
-            if not (_whole(value, 1, FRAME_ITEMS_LAST) and not self.last.in_tissue):
-                self._refuse_setting()
-                return
-            self.setting_open = self.setting_unapplied = True
-            self.setting_announced = int(value)
-            self.setting_seen = set()
-            return
-        if not self.setting_open or self._last_e2e_status == "skipped":
-            self._refuse_setting()
-            return
-        if item == n["commit"]:
-            self.setting_open = False
-            if (_whole(value, 0, 255) and int(value) == self.setting_announced
-                    and len(self.setting_seen) == self.setting_announced
-                    and n["model"] in self.setting_seen and not self.last.in_tissue):
-                raise ValueError("the node mirror does not follow a configuration sent over "
-                                 "the bus (Setting frames): compare such a run with nte-node "
-                                 "--replay --config FILE")
+        if not self.transfer.take(int(sig["Item"]), float(sig["Value"]),
+                                  self._last_e2e_status == "skipped", bool(self.last.in_tissue)):
             self._count("setting_refused")
-            return
-        if (item in self.setting_seen or len(self.setting_seen) >= self.setting_announced
-                or not value_ok(item, value, n)):
-            self._refuse_setting()
-            return
-        self.setting_seen.add(item)
-
-    def _refuse_setting(self) -> None:
-        self.setting_open = False
-        self._count("setting_refused")
 
     def _on_command(self, sig: dict, t_us: int | None) -> None:
         """The node's command rules (nte_node.h, COMMANDS): applied entirely or not at all."""
@@ -635,7 +601,7 @@ class NodeMirror:
         restart = (model, estimator) != (self.model, self.estimator)
         if (int(sig["AdaptCmd"]) == 1
                 or ((restart or int(sig["Reset"]))
-                    and (self.last.in_tissue or self.setting_unapplied))
+                    and (self.last.in_tissue or self.transfer.unapplied))
                 or (restart and model == 3 and estimator == "robust")):   # nte_init refuses it
             self._count("command_refused")
             return
@@ -658,11 +624,6 @@ class NodeMirror:
             self.feed(m.arbitration_id, bytes(m.data), m.is_extended_id, m.is_remote_frame,
                       int(round(m.timestamp * 1e6)))
         return self
-
-
-def _whole(value: float, lo: int, hi: int) -> bool:
-    """A whole number in lo..hi (nte_node.c nte_node_whole)."""
-    return lo <= value <= hi and float(int(value)) == value
 
 
 def _outputs_raw(db: NteDatabase, messages: Iterable, names: tuple[str, ...],

@@ -125,7 +125,7 @@ class ContactConfig:
 class LayerSet:
     """One layer below the first for Model III's predict-only mode (nte.h nte_layer_set_t):
     from ``start_mm`` below the surface on, the model runs with ``values`` (LAYER_SET_NAMES
-    order: sigma0, f1, beta, sigma2) in place of the nominal ones (bank._enter_layer_sets)."""
+    order: sigma0, f1, beta, sigma2) in place of the nominal ones (layers.LayerSets.enter)."""
     start_mm: float                    # depth below the surface where the layer begins, mm
     values: tuple[float, ...]          # LAYER_SET_NAMES order, each finite, > 0, <= 1000
 

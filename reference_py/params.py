@@ -40,7 +40,7 @@ LAYER_SET_NAMES: tuple[str, ...] = ("sigma0", "f1", "beta", "sigma2")
 RELAX_NOMINAL: dict[str, float] = {"g_fast": 0.15, "g_slow": 0.25}
 
 #: parameters each model identifies, in CSV column order (Model III: with both relaxation
-#: branches; bank.identified_names drops the strengths a configuration switches off)
+#: branches; identified.identified_names drops the strengths a configuration switches off)
 MODEL_PARAMS: dict[int, tuple[str, ...]] = {
     1: ("sigma0", "sigma1", "sigma2", "f1", "f2", "alpha"),
     2: ("sigma0", "sigma1", "sigma2", "f1", "beta"),

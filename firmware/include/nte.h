@@ -57,8 +57,9 @@
  *                       predict, measure,         _measure, _update_and_guard, _guard;
  *                       update_and_guard, guard;  Model III: _direction, _relax_terms,
  *                       Model III's direction     _relax_output, _relax_fractions,
- *                       state, relaxation, tear   _relax_nominal, _watch_layers,
- *                                                 _tear_prior)
+ *                       state, relaxation, tear   _relax_nominal; layers.py
+ *                                                 RuptureDetector.watch, tear_prior,
+ *                                                 LayerSets; identified.py the subsets)
  *   src/nte_layers.c/.h the layer index           layers.py RuptureDetector
  *   src/nte_robust.c/.h the robust estimator      robust.py RobustEstimator, ldlt_solve
  *   src/nte_contact.c/.h the surface and tare     contact.py ContactFrontEnd
@@ -219,7 +220,7 @@
  *   gate_reopen_after of them).  Cost in the mode: the bank's predictions without the
  *   updates, less than a normal step.
  *
- * THE LAYER SETS (Model III, cfg.layer_sets; reference_py/bank.py _enter_layer_sets)
+ * THE LAYER SETS (Model III, cfg.layer_sets; reference_py/layers.py LayerSets.enter)
  *   A single parameter set averages over the layers a needle crosses; sensorless prediction
  *   needs each layer's own.  cfg.layer_set[k] holds the layer below the first that begins
  *   start_mm below the surface, with its own sigma0, f1, beta and sigma2 -- what sets a
@@ -780,7 +781,7 @@ bool nte_predict_only(const nte_t* self);
 /**
  * The identified parameters (Model I: sigma0, sigma1, sigma2, f1, f2, alpha; Model II: sigma0,
  * sigma1, sigma2, f1, beta; Model III: Model II's, then g_fast and g_slow for the relaxation
- * branches in use — reference bank.identified_names order) with their standard deviations
+ * branches in use — reference identified.identified_names order) with their standard deviations
  * (the strengths as fractions g, sd |g (1 - g)| sd(u)).
  * Writes at most `capacity` entries and returns how many the model identifies.  Before the
  * first accepted sample every value and sd is 0 (as the reference reports).  Cost: one sqrt

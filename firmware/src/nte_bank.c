@@ -23,7 +23,7 @@ static const uint8_t subsets[3][NTE_FILTER_COUNT][3] = {
     {{nte_param_sigma0, nte_param_g_fast, nte_param_g_slow},
      {nte_param_f1, nte_param_sigma1, nte_param_delta}, {nte_param_beta, nte_param_sigma2, 0U}}};
 /* reference MODEL_PARAMS: the identified parameters in output order; Model III's by its
- * relaxation branches in use (0, 1, 2), delta last (bank.identified_names) */
+ * relaxation branches in use (0, 1, 2), delta last (identified.identified_names) */
 static const uint8_t identified_len[3] = {6U, 5U, 5U};
 static const uint8_t identified[2][NTE_IDENTIFIED_MAX] = {
     {nte_param_sigma0, nte_param_sigma1, nte_param_sigma2, nte_param_f1, nte_param_f2,
@@ -43,7 +43,7 @@ static size_t model_index(const nte_t* self)
     return (self->cfg.model == 1) ? 0U : ((self->cfg.model == 2) ? 1U : 2U);
 }
 
-/* bank.relax_count: Model III's relaxation branches in use (0 for Models I and II). */
+/* identified.relax_count: Model III's relaxation branches in use (0 for Models I and II). */
 static size_t relax_count(const nte_t* self)
 {
     /* 1 or 2 (nte_config_check) */
@@ -52,14 +52,14 @@ static size_t relax_count(const nte_t* self)
                : 0U;
 }
 
-/* bank.identifies_delta: Model III identifies its turn-over length with the direction
+/* identified.identifies_delta: Model III identifies its turn-over length with the direction
  * memory on. */
 static bool identifies_delta(const nte_t* self)
 {
     return (self->cfg.model == 3) && self->cfg.direction_memory;
 }
 
-/* The parameter count of filter i (bank.filter_subsets). */
+/* The parameter count of filter i (identified.filter_subsets). */
 static size_t subset_count(const nte_t* self, const size_t i)
 {
     const size_t mi = model_index(self);
@@ -72,7 +72,7 @@ static size_t subset_count(const nte_t* self, const size_t i)
     return (size_t)subset_len[mi][i];
 }
 
-/* The identified parameters in output order (bank.identified_names); returns their count. */
+/* The identified parameters in output order (identified.identified_names); returns their count. */
 static size_t identified_ids(const nte_t* self, const uint8_t** ids)
 {
     const size_t mi = model_index(self);
@@ -465,7 +465,7 @@ static uint32_t measure(const nte_t* self, const step_ctx_t* c, const nte_depth_
     return status;
 }
 
-/* bank._tear_prior: at a tear the needle meets new tissue.  The filter's covariance restarts
+/* layers.tear_prior: at a tear the needle meets new tissue.  The filter's covariance restarts
  * at P0 (the estimates carry over as the new layer's start, with the uncertainty of a start),
  * and the tear's own sample updates z alone (its row on the parameters 0): the drop is the
  * tissue's, which no parameter of the torn layer explains. */
@@ -565,7 +565,7 @@ static uint32_t run_filter(nte_t* self, step_ctx_t* c, const size_t i,
     predict(self, c, i, pred, &d, &w);
     uint32_t status = measure(self, c, &d, fo->active, &w);
     if ((i == 0U) && (self->cfg.model == 3) && self->cfg.layers) {
-        /* bank._watch_layers: the rupture detector on filter 1's prior innovation, before any
+        /* layers.RuptureDetector.watch: the rupture detector on filter 1's prior innovation, before any
          * update of this sample, so that a tear's sample is treated as one (tear_prior); the
          * filters run on running samples only (at the first one the detector is at its start,
          * where the reference's call leaves it) */
@@ -580,7 +580,7 @@ static uint32_t run_filter(nte_t* self, step_ctx_t* c, const size_t i,
     return status;
 }
 
-/* Model III's layer sets (bank._enter_layer_sets; nte.h THE LAYER SETS): in predict-only
+/* Model III's layer sets (layers.LayerSets.enter; nte.h THE LAYER SETS): in predict-only
  * mode the deepest set whose start the tip has reached since it entered replaces the nominal
  * sigma0, f1, beta, sigma2 (their u restart at 0); out of the tissue the configured ones
  * return. */

@@ -201,8 +201,8 @@ static nte_err_t check_contact(const nte_contact_config_t* cc, const nte_real_t 
     return nte_err_ok;
 }
 
-/* Model III's layer sets (config.py EstimatorConfig._validate_layer_sets; bank.py
- * _layer_sets for f1, computed as the bank computes the set's excess) */
+/* Model III's layer sets (config.py EstimatorConfig._validate_layer_sets; layers.py
+ * LayerSets for f1, computed as the bank computes the set's excess) */
 static nte_err_t check_layer_sets(const nte_config_t* cfg)
 {
     if (cfg->layer_sets == 0U) {

@@ -307,6 +307,33 @@ def test_no_import_cycle_in_the_product():
     assert find_cycle(top_level_graph(graph)) is None
 
 
+#: the longest a product module may be (issue 25): one job per file; a module that grows past it
+#: is doing two
+MODULE_LINES_MAX = 700
+
+
+def _long_modules(roots: list[Path], base: Path = ROOT) -> list[tuple[str, int]]:
+    out = []
+    for root in roots:
+        for f in sorted(root.rglob("*.py")):
+            n = len(f.read_text().splitlines())
+            if n > MODULE_LINES_MAX:
+                out.append((str(f.relative_to(base)), n))
+    return out
+
+
+def test_no_product_module_longer_than_the_limit():
+    assert _long_modules([ROOT / "reference_py", ROOT / "host_bench"]) == []
+
+
+def test_the_length_rule_flags_a_long_module(tmp_path):
+    pkg = tmp_path / "pkg"
+    pkg.mkdir()
+    (pkg / "long.py").write_text("x = 1\n" * (MODULE_LINES_MAX + 1))
+    (pkg / "short.py").write_text("x = 1\n" * MODULE_LINES_MAX)
+    assert _long_modules([pkg], tmp_path) == [("pkg/long.py", MODULE_LINES_MAX + 1)]
+
+
 def test_no_include_cycle_in_firmware_src():
     graph = include_graph()
     assert "include/nte.h" in graph and "src/nte_real.h" in graph

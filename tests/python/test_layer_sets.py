@@ -1,4 +1,4 @@
-"""Model III's layer sets (nte.h THE LAYER SETS; reference_py/bank.py _enter_layer_sets): in
+"""Model III's layer sets (nte.h THE LAYER SETS; reference_py/layers.py LayerSets.enter): in
 predict-only mode each layer below the first runs with its own sigma0, f1, beta, sigma2 from its
 start depth on; --export-config writes them at the depths of the tears it found, fitted to the
 record's replay with the starts moved by -1, 0 and +1 mm (export_replay.LAYER_SHIFTS_MM).
