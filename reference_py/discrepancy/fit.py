@@ -42,53 +42,23 @@ def bounds_of(labels: list[str]) -> tuple[Array, Array]:
     return np.array(lo, dtype=float), np.array(hi, dtype=float)
 
 
-def _normal(m: Array, y: Array) -> tuple[Array, Array, Array]:
-    """The normal equations of the unit-scaled columns: (scale, G, r), scale = 1 / the column
-    norms (0 for an all-zero column), G = S m'm S and r = S m'y with S = diag(scale).
-
-    One product with the samples x k matrix for each of G and r, no scaled copy of it: the
-    fits solve thousands of these, and copies of the tall matrix were a fifth of their time.
-    """
-    gram = m.T @ m
-    d = np.diag(gram)
-    if not (np.all(np.isfinite(gram)) and np.all((d == 0) | ((d > 1e-200) & (d < 1e200)))):
-        # a column whose square over- or underflows (a parameter far out during a search):
-        # scale the columns first, as the product of the squares cannot be trusted
-        norms = np.sqrt(np.einsum("ij,ij->j", m, m))
-        scale = np.where(norms > 0, 1.0 / np.where(norms > 0, norms, 1.0), 0.0)
-        ms = m * scale
-        return scale, ms.T @ ms, ms.T @ y
-    norms = np.sqrt(np.diag(gram))
-    scale = np.where(norms > 0, 1.0 / np.where(norms > 0, norms, 1.0), 0.0)
-    return scale, gram * np.outer(scale, scale), (m.T @ y) * scale
-
-
 def solve_bounded(m: Array, y: Array, labels: list[str], rcond: float = 1e-12) -> Array:
     """Least squares with the documented coefficient bounds (effects.LIN_BOUNDS).
 
     The free solution is used when it satisfies them (the common case, fast); otherwise a
     bounded least-squares solve (scipy lsq_linear, BVLS) on the unit-scaled columns.
     """
-    scale, gram, rhs = _normal(m, y)
-    c = np.linalg.lstsq(gram, rhs, rcond=rcond)[0] * scale
+    c = solve_linear(m, y, rcond)
     lo, hi = bounds_of(labels)
     if np.all((c >= lo - 1e-12) & (c <= hi + 1e-12)):
         return c
-    used = scale > 0
-    norms = 1.0 / scale[used]
-    # The same minimiser on a k x k system, so that BVLS iterates on it instead of on the
-    # samples x k matrix (its least-squares solves there were half the workflow's time): with
-    # G = V diag(w) V', |ms c - y|^2 = |diag(sqrt w) V'c - diag(1/sqrt w) V'r|^2 + a constant
-    # (ms the unit-scaled columns, r = ms'y).  Directions with w ~ 0 (collinear columns) carry
-    # no data (r has no part along them): dropped, as the free solution's cut-off drops them.
-    w, v = np.linalg.eigh(gram[np.ix_(used, used)])
-    keep = w > rcond * max(float(w.max()), 1e-300)
-    root = np.sqrt(w[keep])
-    res = lsq_linear(root[:, None] * v[:, keep].T, (v[:, keep].T @ rhs[used]) / root,
-                     bounds=(lo[used] * norms, hi[used] * norms), method="bvls",
-                     lsmr_tol=None)
+    norms = np.sqrt(np.einsum("ij,ij->j", m, m))
+    used = norms > 0
+    ms = m[:, used] / norms[used]
+    res = lsq_linear(ms, y, bounds=(lo[used] * norms[used], hi[used] * norms[used]),
+                     method="bvls", lsmr_tol=None)
     out = np.zeros(m.shape[1])
-    out[used] = res.x / norms
+    out[used] = res.x / norms[used]
     return out
 
 
@@ -99,8 +69,12 @@ def solve_linear(m: Array, y: Array, rcond: float = 1e-12) -> Array:
     is 40x slower here when OpenBLAS spreads a 3000 x 15 problem over threads, and the fits call
     this thousands of times.  Near-collinear columns are handled by the pseudo-inverse cut-off.
     """
-    scale, gram, rhs = _normal(m, y)
-    return np.linalg.lstsq(gram, rhs, rcond=rcond)[0] * scale
+    norms = np.sqrt(np.einsum("ij,ij->j", m, m))
+    scale = np.where(norms > 0, 1.0 / np.where(norms > 0, norms, 1.0), 0.0)
+    ms = m * scale
+    gram = ms.T @ ms
+    coef, *_ = np.linalg.lstsq(gram, ms.T @ y, rcond=rcond)
+    return coef * scale
 
 
 def _slots(specs: list[NLParam], free: set[str], n_tr: int) -> list[tuple[NLParam, int | None]]:
