@@ -55,8 +55,8 @@ import shutil
 import subprocess
 import sys
 import time
-from pathlib import Path
 from contextlib import ExitStack
+from pathlib import Path
 from typing import TYPE_CHECKING, Sequence
 
 import can
@@ -70,10 +70,10 @@ from reference_py.tools.arguments import (EXIT_BAD_INPUT, OneLineParser, add_uni
 from reference_py.tools.safe_write import Outputs
 
 from .node_mirror import NODE, NodeMirror, compare, contact_outputs, node_outputs
+from .replay import paced, read_scenario, scenario_frames, send_retrying
 
 if TYPE_CHECKING:
     from .started_node import StartedNode
-from .replay import paced, read_scenario, scenario_frames, send_retrying
 
 PARAM_LABELS = PARAM_NAMES
 
@@ -446,14 +446,10 @@ def cmd_send(a: argparse.Namespace) -> int:
 
 def cmd_settings(a: argparse.Namespace) -> int:
     from dataclasses import replace
-    from reference_py.tools.estconfig import ConfigFileError, read_config_file
+    from reference_py.tools.estconfig import read_config_file
     from .settings_file import setting_items, transfer
     db = NteDatabase(base_id=a.base_id)
-    try:
-        fc = read_config_file(a.file)
-    except ConfigFileError as exc:
-        print(f"nte-bench: error: {exc}", file=sys.stderr)
-        return EXIT_BAD_INPUT
+    fc = read_config_file(a.file)        # a ConfigFileError is main's one line, exit 2
     if a.model is not None:
         fc = replace(fc, model=a.model)
     frames = transfer(setting_items(fc, db), db.sender())

@@ -139,7 +139,7 @@ def test_transfer_carries_the_layer_sets_to_predict_only(tmp_path: Path,
     assert outputs(sent0) != outputs(sent_bus)
 
 
-def _commands(model: int) -> can.Message:
+def _model_command(model: int) -> can.Message:
     return DB.sender().message("Command", {"ModelSel": model})
 
 
@@ -173,7 +173,7 @@ def test_a_transfer_that_breaks_off_changes_nothing_that_runs(
     else:
         bad = transfer(items, sender)
     in_tissue = 4.0 if spoil == "in_tissue" else t0           # lab-101 touches at ~1 s
-    command = _commands(3)
+    command = _model_command(3)
     stream = with_transfer(frames, bad, in_tissue)
     stream = with_transfer(stream, [command], in_tissue + 0.2)
     sent, st = replay(tmp_path, stream, spoil, ["--model", "2"])
@@ -184,7 +184,7 @@ def test_a_transfer_that_breaks_off_changes_nothing_that_runs(
     assert st["events"]["command_refused"] == 1 and st["commands_applied"] == 0
     if spoil != "in_tissue":
         # the control: without the broken transfer the same command is taken (out of tissue)
-        _, st_c = replay(tmp_path, with_transfer(frames, [_commands(3)], in_tissue + 0.2),
+        _, st_c = replay(tmp_path, with_transfer(frames, [_model_command(3)], in_tissue + 0.2),
                          spoil + "-control", ["--model", "2"])
         assert st_c["commands_applied"] == 1 and st_c["model"] == 3
     sent_m2, _ = replay(tmp_path, frames, "m2", ["--model", "2"])
@@ -266,7 +266,7 @@ def test_the_mirror_counts_broken_transfers_as_the_node(tmp_path: Path,
         noise.append(m)
     t0 = frames[0][0]
     stream = with_transfer(frames, noise, t0)
-    stream = with_transfer(stream, [_commands(3)], t0 + 0.2)
+    stream = with_transfer(stream, [_model_command(3)], t0 + 0.2)
     sent, st = replay(tmp_path, stream, "fuzz", ["--model", "2"])
     mirror = NodeMirror(model=2).feed_all(m for _, m in stream)
     events = {k: v for k, v in st["events"].items() if v}
