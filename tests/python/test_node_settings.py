@@ -16,31 +16,13 @@ sys.path.insert(0, str(ROOT))
 
 from host_bench.replay import scenario_frames  # noqa: E402
 from host_bench.settings_file import item_numbers, setting_items, transfer  # noqa: E402
-from reference_py.bus.candump import write_candump  # noqa: E402
 from reference_py.bus.dbc import NteDatabase  # noqa: E402
 from reference_py.tools.estconfig import read_config_file  # noqa: E402
+from test_node_port import node_binary  # noqa: E402
+from test_node_port import replay_node_args as replay  # noqa: E402
 
 DB = NteDatabase()
 OUTPUTS = ("Estimate", "Params", "Contact")
-
-
-def node_binary() -> Path:
-    for c in (ROOT / "build/host/bin/nte-node", ROOT / "build/node/bin/nte-node"):
-        if c.exists():
-            return c
-    pytest.skip("nte-node not built (make build)")
-
-
-def replay(tmp_path: Path, frames: list, tag: str, args: list[str]) -> tuple[list, dict]:
-    """nte-node --replay on `frames` ((t, message) pairs): (frames it sent, its counters)."""
-    log, rec, stats = (tmp_path / f"{tag}.in.log", tmp_path / f"{tag}.out.log",
-                       tmp_path / f"{tag}.stats.json")
-    write_candump(log, frames, "vcan0", 1.0)
-    r = subprocess.run([str(node_binary()), "--replay", str(log), "--record", str(rec),
-                        "--stats", str(stats), *args], capture_output=True, text=True,
-                       timeout=300)
-    assert r.returncode == 0, r.stderr
-    return list(can.CanutilsLogReader(str(rec))), json.loads(stats.read_text())
 
 
 def outputs(sent: list) -> list[tuple[int, bytes]]:
