@@ -17,7 +17,7 @@ APT_PACKAGES := python3 python3-venv python3-dev gcc make cmake libcmocka-dev li
                 user-mode-linux kmod can-utils iproute2 \
                 qemu-system-x86 linux-image-amd64 busybox-static cpio \
                 gcc-arm-none-eabi libnewlib-arm-none-eabi qemu-system-arm \
-                clang clang-tidy libclang-rt-14-dev
+                clang clang-tidy clang-format libclang-rt-14-dev
 
 .PHONY: all build board board-figures products clang demo test deps venv clean
 

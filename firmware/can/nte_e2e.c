@@ -31,10 +31,7 @@ uint8_t nte_e2e_frame_crc(uint16_t data_id, const uint8_t* frame, size_t length)
     return nte_e2e_crc8(&frame[1], length - 1u, crc);
 }
 
-uint8_t nte_e2e_counter_of(const uint8_t* frame)
-{
-    return (uint8_t)(frame[1] & 0x0Fu);
-}
+uint8_t nte_e2e_counter_of(const uint8_t* frame) { return (uint8_t)(frame[1] & 0x0Fu); }
 
 static bool nte_e2e_length_ok(uint8_t length)
 {

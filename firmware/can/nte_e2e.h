@@ -40,33 +40,33 @@ extern "C" {
 /** Outcome of a protect or a check. 0 = accepted, positive = accepted with a note, negative =
  *  the frame must be discarded. */
 typedef enum {
-    nte_e2e_ok = 0,                  /**< CRC right, counter is the previous one + 1 (or the first
-                                          frame since init/reset). */
-    nte_e2e_skipped = 1,             /**< CRC right, the counter jumped: frames were lost (how many
-                                          is reported through `lost`); the frame is accepted. */
-    nte_e2e_err_null = -1,           /**< A pointer argument was NULL. */
-    nte_e2e_err_wrong_length = -2,   /**< The frame length is not the one configured. */
-    nte_e2e_err_bad_crc = -3,        /**< The CRC does not match payload and data id. */
-    nte_e2e_err_repeated = -4,       /**< CRC right, same counter as the previous accepted frame
-                                          (a repeat -- or exactly 15 frames lost, which is
-                                          indistinguishable). */
-    nte_e2e_err_bad_counter = -5,    /**< The counter is 15, which is never sent. */
-    nte_e2e_err_bad_config = -6      /**< Length outside 2..8 at init. */
+    nte_e2e_ok = 0,                /**< CRC right, counter is the previous one + 1 (or the first
+                                        frame since init/reset). */
+    nte_e2e_skipped = 1,           /**< CRC right, the counter jumped: frames were lost (how many
+                                        is reported through `lost`); the frame is accepted. */
+    nte_e2e_err_null = -1,         /**< A pointer argument was NULL. */
+    nte_e2e_err_wrong_length = -2, /**< The frame length is not the one configured. */
+    nte_e2e_err_bad_crc = -3,      /**< The CRC does not match payload and data id. */
+    nte_e2e_err_repeated = -4,     /**< CRC right, same counter as the previous accepted frame
+                                        (a repeat -- or exactly 15 frames lost, which is
+                                        indistinguishable). */
+    nte_e2e_err_bad_counter = -5,  /**< The counter is 15, which is never sent. */
+    nte_e2e_err_bad_config = -6    /**< Length outside 2..8 at init. */
 } nte_e2e_result_t;
 
 /** Sender state for one message. */
 typedef struct {
-    uint16_t data_id;  /**< The message's E2E data id (NteE2EDataId in the DBC). */
-    uint8_t length;    /**< Frame length in bytes, 2..8. */
-    uint8_t counter;   /**< Counter the next protected frame gets, 0..14. */
+    uint16_t data_id; /**< The message's E2E data id (NteE2EDataId in the DBC). */
+    uint8_t length;   /**< Frame length in bytes, 2..8. */
+    uint8_t counter;  /**< Counter the next protected frame gets, 0..14. */
 } nte_e2e_tx_t;
 
 /** Receiver state for one message. */
 typedef struct {
-    uint16_t data_id;      /**< Expected data id. */
-    uint8_t length;        /**< Expected frame length in bytes, 2..8. */
-    uint8_t last_counter;  /**< Counter of the last accepted frame (valid when synced). */
-    bool synced;           /**< False until the first frame is accepted (after init or reset). */
+    uint16_t data_id;     /**< Expected data id. */
+    uint8_t length;       /**< Expected frame length in bytes, 2..8. */
+    uint8_t last_counter; /**< Counter of the last accepted frame (valid when synced). */
+    bool synced;          /**< False until the first frame is accepted (after init or reset). */
 } nte_e2e_rx_t;
 
 /** CRC-8 SAE J1850 polynomial 0x1D, no reflection, continued from `crc` (pass 0x00 to start a

@@ -6,14 +6,14 @@
 #include "generated/nte_can.h"
 
 static const uint16_t nte_frames_offsets[nte_frames_kind_count] = {
-    NTE_FRAMES_OFFSET_DEPTH,    NTE_FRAMES_OFFSET_FORCE,  NTE_FRAMES_OFFSET_COMMAND,
-    NTE_FRAMES_OFFSET_ESTIMATE, NTE_FRAMES_OFFSET_PARAMS, NTE_FRAMES_OFFSET_HEARTBEAT,
+    NTE_FRAMES_OFFSET_DEPTH,    NTE_FRAMES_OFFSET_FORCE,   NTE_FRAMES_OFFSET_COMMAND,
+    NTE_FRAMES_OFFSET_ESTIMATE, NTE_FRAMES_OFFSET_PARAMS,  NTE_FRAMES_OFFSET_HEARTBEAT,
     NTE_FRAMES_OFFSET_CONTACT,  NTE_FRAMES_OFFSET_SETTING,
 };
 
 static const uint16_t nte_frames_data_ids[nte_frames_kind_count] = {
-    NTE_FRAMES_DATA_ID_DEPTH,    NTE_FRAMES_DATA_ID_FORCE,  NTE_FRAMES_DATA_ID_COMMAND,
-    NTE_FRAMES_DATA_ID_ESTIMATE, NTE_FRAMES_DATA_ID_PARAMS, NTE_FRAMES_DATA_ID_HEARTBEAT,
+    NTE_FRAMES_DATA_ID_DEPTH,    NTE_FRAMES_DATA_ID_FORCE,   NTE_FRAMES_DATA_ID_COMMAND,
+    NTE_FRAMES_DATA_ID_ESTIMATE, NTE_FRAMES_DATA_ID_PARAMS,  NTE_FRAMES_DATA_ID_HEARTBEAT,
     NTE_FRAMES_DATA_ID_CONTACT,  NTE_FRAMES_DATA_ID_SETTING,
 };
 
@@ -129,8 +129,7 @@ nte_frames_err_t nte_frames_rx_init(nte_e2e_rx_t* e2e, nte_frames_kind_t kind)
 }
 
 /* Common tail of every encoder: protect the packed frame. */
-static nte_frames_err_t nte_frames_protect(nte_e2e_tx_t* e2e, nte_frames_kind_t kind,
-                                           uint8_t* out)
+static nte_frames_err_t nte_frames_protect(nte_e2e_tx_t* e2e, nte_frames_kind_t kind, uint8_t* out)
 {
     if (e2e->data_id != nte_frames_data_ids[kind]) {
         return nte_frames_err_wrong_kind;
@@ -282,8 +281,7 @@ nte_frames_err_t nte_frames_encode_command(const nte_frames_command_t* in, nte_e
     if ((in == NULL) || (e2e == NULL) || (out == NULL)) {
         return nte_frames_err_null;
     }
-    if (!nte_frames_command_ok(in->model_sel, in->estimator_sel, in->adapt_cmd,
-                               in->force_source)) {
+    if (!nte_frames_command_ok(in->model_sel, in->estimator_sel, in->adapt_cmd, in->force_source)) {
         return nte_frames_err_selector;
     }
     (void)nte_can_command_init(&m);
@@ -296,9 +294,9 @@ nte_frames_err_t nte_frames_encode_command(const nte_frames_command_t* in, nte_e
     return nte_frames_protect(e2e, nte_frames_kind_command, out);
 }
 
-nte_frames_err_t nte_frames_decode_command(nte_e2e_rx_t* e2e, const uint8_t* data,
-                                           size_t length, nte_frames_command_t* out,
-                                           nte_e2e_result_t* e2e_result, uint8_t* lost)
+nte_frames_err_t nte_frames_decode_command(nte_e2e_rx_t* e2e, const uint8_t* data, size_t length,
+                                           nte_frames_command_t* out, nte_e2e_result_t* e2e_result,
+                                           uint8_t* lost)
 {
     struct nte_can_command_t m;
     nte_frames_err_t err;
@@ -349,9 +347,9 @@ nte_frames_err_t nte_frames_encode_setting(const nte_frames_setting_t* in, nte_e
     return nte_frames_protect(e2e, nte_frames_kind_setting, out);
 }
 
-nte_frames_err_t nte_frames_decode_setting(nte_e2e_rx_t* e2e, const uint8_t* data,
-                                           size_t length, nte_frames_setting_t* out,
-                                           nte_e2e_result_t* e2e_result, uint8_t* lost)
+nte_frames_err_t nte_frames_decode_setting(nte_e2e_rx_t* e2e, const uint8_t* data, size_t length,
+                                           nte_frames_setting_t* out, nte_e2e_result_t* e2e_result,
+                                           uint8_t* lost)
 {
     struct nte_can_setting_t m;
     nte_frames_err_t err;
@@ -388,8 +386,8 @@ nte_frames_err_t nte_frames_encode_estimate(const nte_frames_estimate_t* in, nte
         return nte_frames_err_not_finite;
     }
     (void)nte_can_estimate_init(&m);
-    m.force_est = nte_can_estimate_force_est_encode(nte_frames_clamp(
-        in->force_n, -NTE_FRAMES_FORCE_MAX_N, NTE_FRAMES_FORCE_MAX_N, &clamped));
+    m.force_est = nte_can_estimate_force_est_encode(
+        nte_frames_clamp(in->force_n, -NTE_FRAMES_FORCE_MAX_N, NTE_FRAMES_FORCE_MAX_N, &clamped));
     m.innovation = nte_can_estimate_innovation_encode(nte_frames_clamp(
         in->innovation_n, NTE_FRAMES_INNOVATION_MIN_N, NTE_FRAMES_INNOVATION_MAX_N, &clamped));
     m.z = nte_can_estimate_z_encode(
@@ -403,8 +401,8 @@ nte_frames_err_t nte_frames_encode_estimate(const nte_frames_estimate_t* in, nte
     return nte_frames_protect(e2e, nte_frames_kind_estimate, out);
 }
 
-nte_frames_err_t nte_frames_decode_estimate(nte_e2e_rx_t* e2e, const uint8_t* data,
-                                            size_t length, nte_frames_estimate_t* out,
+nte_frames_err_t nte_frames_decode_estimate(nte_e2e_rx_t* e2e, const uint8_t* data, size_t length,
+                                            nte_frames_estimate_t* out,
                                             nte_e2e_result_t* e2e_result, uint8_t* lost)
 {
     struct nte_can_estimate_t m;
@@ -440,16 +438,46 @@ static void nte_frames_param_set(struct nte_can_params_t* m, uint8_t index, floa
                                  int16_t std_raw)
 {
     switch (index) {
-    case NTE_FRAMES_PARAM_SIGMA0: m->sigma0 = value; m->sigma0_std_log10 = std_raw; break;
-    case NTE_FRAMES_PARAM_SIGMA1: m->sigma1 = value; m->sigma1_std_log10 = std_raw; break;
-    case NTE_FRAMES_PARAM_SIGMA2: m->sigma2 = value; m->sigma2_std_log10 = std_raw; break;
-    case NTE_FRAMES_PARAM_F1: m->f1 = value; m->f1_std_log10 = std_raw; break;
-    case NTE_FRAMES_PARAM_F2: m->f2 = value; m->f2_std_log10 = std_raw; break;
-    case NTE_FRAMES_PARAM_ALPHA: m->alpha = value; m->alpha_std_log10 = std_raw; break;
-    case NTE_FRAMES_PARAM_BETA: m->beta = value; m->beta_std_log10 = std_raw; break;
-    case NTE_FRAMES_PARAM_G_FAST: m->g_fast = value; m->g_fast_std_log10 = std_raw; break;
-    case NTE_FRAMES_PARAM_G_SLOW: m->g_slow = value; m->g_slow_std_log10 = std_raw; break;
-    default: m->delta = value; m->delta_std_log10 = std_raw; break;
+    case NTE_FRAMES_PARAM_SIGMA0:
+        m->sigma0 = value;
+        m->sigma0_std_log10 = std_raw;
+        break;
+    case NTE_FRAMES_PARAM_SIGMA1:
+        m->sigma1 = value;
+        m->sigma1_std_log10 = std_raw;
+        break;
+    case NTE_FRAMES_PARAM_SIGMA2:
+        m->sigma2 = value;
+        m->sigma2_std_log10 = std_raw;
+        break;
+    case NTE_FRAMES_PARAM_F1:
+        m->f1 = value;
+        m->f1_std_log10 = std_raw;
+        break;
+    case NTE_FRAMES_PARAM_F2:
+        m->f2 = value;
+        m->f2_std_log10 = std_raw;
+        break;
+    case NTE_FRAMES_PARAM_ALPHA:
+        m->alpha = value;
+        m->alpha_std_log10 = std_raw;
+        break;
+    case NTE_FRAMES_PARAM_BETA:
+        m->beta = value;
+        m->beta_std_log10 = std_raw;
+        break;
+    case NTE_FRAMES_PARAM_G_FAST:
+        m->g_fast = value;
+        m->g_fast_std_log10 = std_raw;
+        break;
+    case NTE_FRAMES_PARAM_G_SLOW:
+        m->g_slow = value;
+        m->g_slow_std_log10 = std_raw;
+        break;
+    default:
+        m->delta = value;
+        m->delta_std_log10 = std_raw;
+        break;
     }
 }
 
@@ -457,16 +485,46 @@ static void nte_frames_param_get(const struct nte_can_params_t* m, uint8_t index
                                  int16_t* std_raw)
 {
     switch (index) {
-    case NTE_FRAMES_PARAM_SIGMA0: *value = m->sigma0; *std_raw = m->sigma0_std_log10; break;
-    case NTE_FRAMES_PARAM_SIGMA1: *value = m->sigma1; *std_raw = m->sigma1_std_log10; break;
-    case NTE_FRAMES_PARAM_SIGMA2: *value = m->sigma2; *std_raw = m->sigma2_std_log10; break;
-    case NTE_FRAMES_PARAM_F1: *value = m->f1; *std_raw = m->f1_std_log10; break;
-    case NTE_FRAMES_PARAM_F2: *value = m->f2; *std_raw = m->f2_std_log10; break;
-    case NTE_FRAMES_PARAM_ALPHA: *value = m->alpha; *std_raw = m->alpha_std_log10; break;
-    case NTE_FRAMES_PARAM_BETA: *value = m->beta; *std_raw = m->beta_std_log10; break;
-    case NTE_FRAMES_PARAM_G_FAST: *value = m->g_fast; *std_raw = m->g_fast_std_log10; break;
-    case NTE_FRAMES_PARAM_G_SLOW: *value = m->g_slow; *std_raw = m->g_slow_std_log10; break;
-    default: *value = m->delta; *std_raw = m->delta_std_log10; break;
+    case NTE_FRAMES_PARAM_SIGMA0:
+        *value = m->sigma0;
+        *std_raw = m->sigma0_std_log10;
+        break;
+    case NTE_FRAMES_PARAM_SIGMA1:
+        *value = m->sigma1;
+        *std_raw = m->sigma1_std_log10;
+        break;
+    case NTE_FRAMES_PARAM_SIGMA2:
+        *value = m->sigma2;
+        *std_raw = m->sigma2_std_log10;
+        break;
+    case NTE_FRAMES_PARAM_F1:
+        *value = m->f1;
+        *std_raw = m->f1_std_log10;
+        break;
+    case NTE_FRAMES_PARAM_F2:
+        *value = m->f2;
+        *std_raw = m->f2_std_log10;
+        break;
+    case NTE_FRAMES_PARAM_ALPHA:
+        *value = m->alpha;
+        *std_raw = m->alpha_std_log10;
+        break;
+    case NTE_FRAMES_PARAM_BETA:
+        *value = m->beta;
+        *std_raw = m->beta_std_log10;
+        break;
+    case NTE_FRAMES_PARAM_G_FAST:
+        *value = m->g_fast;
+        *std_raw = m->g_fast_std_log10;
+        break;
+    case NTE_FRAMES_PARAM_G_SLOW:
+        *value = m->g_slow;
+        *std_raw = m->g_slow_std_log10;
+        break;
+    default:
+        *value = m->delta;
+        *std_raw = m->delta_std_log10;
+        break;
     }
 }
 
@@ -587,8 +645,8 @@ nte_frames_err_t nte_frames_encode_heartbeat(const nte_frames_heartbeat_t* in, n
     return nte_frames_protect(e2e, nte_frames_kind_heartbeat, out);
 }
 
-nte_frames_err_t nte_frames_decode_heartbeat(nte_e2e_rx_t* e2e, const uint8_t* data,
-                                             size_t length, nte_frames_heartbeat_t* out,
+nte_frames_err_t nte_frames_decode_heartbeat(nte_e2e_rx_t* e2e, const uint8_t* data, size_t length,
+                                             nte_frames_heartbeat_t* out,
                                              nte_e2e_result_t* e2e_result, uint8_t* lost)
 {
     struct nte_can_heartbeat_t m;
@@ -637,9 +695,8 @@ nte_frames_err_t nte_frames_encode_contact(const nte_frames_contact_t* in, nte_e
     if (!isfinite(in->tare_n) || (in->surface_valid && !isfinite(in->surface_mm))) {
         return nte_frames_err_not_finite;
     }
-    if (in->surface_valid &&
-        !nte_frames_within(in->surface_mm, -NTE_FRAMES_SURFACE_MAX_MM, NTE_FRAMES_SURFACE_MAX_MM,
-                           0.0005f)) {
+    if (in->surface_valid && !nte_frames_within(in->surface_mm, -NTE_FRAMES_SURFACE_MAX_MM,
+                                                NTE_FRAMES_SURFACE_MAX_MM, 0.0005f)) {
         return nte_frames_err_range;
     }
     (void)nte_can_contact_init(&m);
@@ -657,9 +714,9 @@ nte_frames_err_t nte_frames_encode_contact(const nte_frames_contact_t* in, nte_e
     return nte_frames_protect(e2e, nte_frames_kind_contact, out);
 }
 
-nte_frames_err_t nte_frames_decode_contact(nte_e2e_rx_t* e2e, const uint8_t* data,
-                                           size_t length, nte_frames_contact_t* out,
-                                           nte_e2e_result_t* e2e_result, uint8_t* lost)
+nte_frames_err_t nte_frames_decode_contact(nte_e2e_rx_t* e2e, const uint8_t* data, size_t length,
+                                           nte_frames_contact_t* out, nte_e2e_result_t* e2e_result,
+                                           uint8_t* lost)
 {
     struct nte_can_contact_t m;
     nte_frames_err_t err;

@@ -43,8 +43,8 @@
 extern "C" {
 #endif
 
-#define NTE_FRAMES_LENGTH 8u                 /**< Every frame is a classic 8-byte frame. */
-#define NTE_FRAMES_BASE_ID_DEFAULT 0x200u    /**< Base id the DBC is written for. */
+#define NTE_FRAMES_LENGTH 8u              /**< Every frame is a classic 8-byte frame. */
+#define NTE_FRAMES_BASE_ID_DEFAULT 0x200u /**< Base id the DBC is written for. */
 #define NTE_FRAMES_MAX_STD_ID 0x7FFu
 
 #define NTE_FRAMES_OFFSET_DEPTH 0x00u
@@ -76,10 +76,10 @@ extern "C" {
 #define NTE_FRAMES_INNOVATION_MAX_N 0.8188f
 #define NTE_FRAMES_Z_MIN (-8.192f)
 #define NTE_FRAMES_Z_MAX 8.1915f
-#define NTE_FRAMES_UPTIME_WRAP_S 52428.8f  /**< 19-bit Uptime at 0.1 s (14.56 h) */
+#define NTE_FRAMES_UPTIME_WRAP_S 52428.8f /**< 19-bit Uptime at 0.1 s (14.56 h) */
 /** Largest uptime an encoder takes, s: 2^24 wraps (27 000 years). */
 #define NTE_FRAMES_UPTIME_MAX_S (16777216.0f * NTE_FRAMES_UPTIME_WRAP_S)
-#define NTE_FRAMES_SURFACE_MAX_MM 500.0f  /**< |Contact.Surface|, stage position mm */
+#define NTE_FRAMES_SURFACE_MAX_MM 500.0f /**< |Contact.Surface|, stage position mm */
 #define NTE_FRAMES_STEP_TIME_MAX_S 0.00819f
 /** log10(std) is sent in 0.001 steps in [-32.767, 32.767]; -32.768 means std = 0 (fixed). */
 #define NTE_FRAMES_STD_LOG10_MIN (-32.767f)
@@ -88,16 +88,16 @@ extern "C" {
 /** Result of every function here: 0 success, negative error. */
 typedef enum {
     nte_frames_ok = 0,
-    nte_frames_err_null = -1,        /**< A pointer argument was NULL. */
-    nte_frames_err_e2e = -2,         /**< E2E check failed (length, CRC, repeated or invalid
-                                          counter): see the nte_e2e_result_t reported. */
-    nte_frames_err_range = -3,       /**< A value is outside its range. */
-    nte_frames_err_not_finite = -4,  /**< A float is NaN or infinite. */
-    nte_frames_err_selector = -5,    /**< An enumerated field (command selector, parameter
-                                          index, node state) has an undefined value. */
-    nte_frames_err_unknown_id = -6,  /**< The CAN id is none of the node's. */
-    nte_frames_err_bad_config = -7,  /**< Base id too large, or bad kind. */
-    nte_frames_err_wrong_kind = -8   /**< The E2E state passed in belongs to another message. */
+    nte_frames_err_null = -1,       /**< A pointer argument was NULL. */
+    nte_frames_err_e2e = -2,        /**< E2E check failed (length, CRC, repeated or invalid
+                                         counter): see the nte_e2e_result_t reported. */
+    nte_frames_err_range = -3,      /**< A value is outside its range. */
+    nte_frames_err_not_finite = -4, /**< A float is NaN or infinite. */
+    nte_frames_err_selector = -5,   /**< An enumerated field (command selector, parameter
+                                         index, node state) has an undefined value. */
+    nte_frames_err_unknown_id = -6, /**< The CAN id is none of the node's. */
+    nte_frames_err_bad_config = -7, /**< Base id too large, or bad kind. */
+    nte_frames_err_wrong_kind = -8  /**< The E2E state passed in belongs to another message. */
 } nte_frames_err_t;
 
 /** The eight messages (setting, the last added, keeps the others' numbers). */
@@ -115,28 +115,39 @@ typedef enum {
 
 /** Command selectors (0 = keep the current setting). */
 enum {
-    NTE_FRAMES_MODEL_KEEP = 0, NTE_FRAMES_MODEL_I = 1, NTE_FRAMES_MODEL_II = 2,
+    NTE_FRAMES_MODEL_KEEP = 0,
+    NTE_FRAMES_MODEL_I = 1,
+    NTE_FRAMES_MODEL_II = 2,
     NTE_FRAMES_MODEL_III = 3
 };
 enum {
-    NTE_FRAMES_ESTIMATOR_KEEP = 0, NTE_FRAMES_ESTIMATOR_BANK = 1, NTE_FRAMES_ESTIMATOR_ROBUST = 2
+    NTE_FRAMES_ESTIMATOR_KEEP = 0,
+    NTE_FRAMES_ESTIMATOR_BANK = 1,
+    NTE_FRAMES_ESTIMATOR_ROBUST = 2
 };
-enum {
-    NTE_FRAMES_ADAPT_KEEP = 0, NTE_FRAMES_ADAPT_FREEZE = 1, NTE_FRAMES_ADAPT_RESUME = 2
-};
+enum { NTE_FRAMES_ADAPT_KEEP = 0, NTE_FRAMES_ADAPT_FREEZE = 1, NTE_FRAMES_ADAPT_RESUME = 2 };
 /** Command.ForceSource: 1 = identify from the force sensor, 2 = predict from the model alone
  *  (predict-only). */
 enum {
-    NTE_FRAMES_FORCE_SOURCE_KEEP = 0, NTE_FRAMES_FORCE_SOURCE_SENSOR = 1,
+    NTE_FRAMES_FORCE_SOURCE_KEEP = 0,
+    NTE_FRAMES_FORCE_SOURCE_SENSOR = 1,
     NTE_FRAMES_FORCE_SOURCE_MODEL = 2
 };
 /** Parameter indices of the Params frame (nte.h nte_param_id_t order).  Models I and II
  *  publish 0..6 (NTE_FRAMES_PARAM_COUNT_MODEL_II), Model III 0..9 (NTE_FRAMES_PARAM_COUNT). */
 enum {
-    NTE_FRAMES_PARAM_SIGMA0 = 0, NTE_FRAMES_PARAM_SIGMA1 = 1, NTE_FRAMES_PARAM_SIGMA2 = 2,
-    NTE_FRAMES_PARAM_F1 = 3, NTE_FRAMES_PARAM_F2 = 4, NTE_FRAMES_PARAM_ALPHA = 5,
-    NTE_FRAMES_PARAM_BETA = 6, NTE_FRAMES_PARAM_G_FAST = 7, NTE_FRAMES_PARAM_G_SLOW = 8,
-    NTE_FRAMES_PARAM_DELTA = 9, NTE_FRAMES_PARAM_COUNT_MODEL_II = 7, NTE_FRAMES_PARAM_COUNT = 10
+    NTE_FRAMES_PARAM_SIGMA0 = 0,
+    NTE_FRAMES_PARAM_SIGMA1 = 1,
+    NTE_FRAMES_PARAM_SIGMA2 = 2,
+    NTE_FRAMES_PARAM_F1 = 3,
+    NTE_FRAMES_PARAM_F2 = 4,
+    NTE_FRAMES_PARAM_ALPHA = 5,
+    NTE_FRAMES_PARAM_BETA = 6,
+    NTE_FRAMES_PARAM_G_FAST = 7,
+    NTE_FRAMES_PARAM_G_SLOW = 8,
+    NTE_FRAMES_PARAM_DELTA = 9,
+    NTE_FRAMES_PARAM_COUNT_MODEL_II = 7,
+    NTE_FRAMES_PARAM_COUNT = 10
 };
 /** Items of the Setting frame (the DBC's Item; a configuration sent item by item, see
  *  nte_node.h SETTINGS).  Items 2..11 are the nominal of parameter item - 2 (nte.h
@@ -144,13 +155,21 @@ enum {
  *  NTE_FRAMES_SETTING_LAYER0 + NTE_FRAMES_SETTING_LAYER_FIELDS k + j, set k, field j = 0 its
  *  start (mm below the surface), 1 + nte_layer_value_t its values. */
 enum {
-    NTE_FRAMES_SETTING_BEGIN = 0, NTE_FRAMES_SETTING_MODEL = 1, NTE_FRAMES_SETTING_PARAM0 = 2,
-    NTE_FRAMES_SETTING_R_N2 = 12, NTE_FRAMES_SETTING_SURFACE_MM = 13,
-    NTE_FRAMES_SETTING_TAU_FAST_S = 14, NTE_FRAMES_SETTING_TAU_SLOW_S = 15,
-    NTE_FRAMES_SETTING_RELAX_BRANCHES = 16, NTE_FRAMES_SETTING_RELAXATION = 17,
-    NTE_FRAMES_SETTING_DIRECTION_MEMORY = 18, NTE_FRAMES_SETTING_LAYER_SETS = 19,
-    NTE_FRAMES_SETTING_LAYER0 = 20, NTE_FRAMES_SETTING_LAYER_FIELDS = 5,
-    NTE_FRAMES_SETTING_LAYER_SETS_MAX = 8, NTE_FRAMES_SETTING_LAST_VALUE = 59,
+    NTE_FRAMES_SETTING_BEGIN = 0,
+    NTE_FRAMES_SETTING_MODEL = 1,
+    NTE_FRAMES_SETTING_PARAM0 = 2,
+    NTE_FRAMES_SETTING_R_N2 = 12,
+    NTE_FRAMES_SETTING_SURFACE_MM = 13,
+    NTE_FRAMES_SETTING_TAU_FAST_S = 14,
+    NTE_FRAMES_SETTING_TAU_SLOW_S = 15,
+    NTE_FRAMES_SETTING_RELAX_BRANCHES = 16,
+    NTE_FRAMES_SETTING_RELAXATION = 17,
+    NTE_FRAMES_SETTING_DIRECTION_MEMORY = 18,
+    NTE_FRAMES_SETTING_LAYER_SETS = 19,
+    NTE_FRAMES_SETTING_LAYER0 = 20,
+    NTE_FRAMES_SETTING_LAYER_FIELDS = 5,
+    NTE_FRAMES_SETTING_LAYER_SETS_MAX = 8,
+    NTE_FRAMES_SETTING_LAST_VALUE = 59,
     NTE_FRAMES_SETTING_COMMIT = 255
 };
 /** Contact states of the Contact frame. */
@@ -160,80 +179,80 @@ enum { NTE_FRAMES_STATE_INIT = 0, NTE_FRAMES_STATE_RUNNING = 1, NTE_FRAMES_STATE
 
 /** Depth sample (input). */
 typedef struct {
-    float depth_mm;        /**< 0 .. 500 mm, sent with 0.001 mm resolution. */
-    float velocity_mm_s;   /**< -500 .. 500 mm/s, 0.01 mm/s resolution. */
-    uint16_t time_ticks;   /**< Sender clock, 100 us ticks, wrapping. */
+    float depth_mm;      /**< 0 .. 500 mm, sent with 0.001 mm resolution. */
+    float velocity_mm_s; /**< -500 .. 500 mm/s, 0.01 mm/s resolution. */
+    uint16_t time_ticks; /**< Sender clock, 100 us ticks, wrapping. */
 } nte_frames_depth_t;
 
 /** Force sample (input). */
 typedef struct {
-    float force_n;         /**< -50 .. 50 N, 0.1 mN resolution; with sensor_fault any value
-                                (a non-finite or out-of-range one is sent as 0; a received
-                                raw value is not range-checked: up to +-52.4288 N). */
-    uint16_t time_ticks;   /**< Same clock as the depth samples. */
-    bool sensor_fault;     /**< The sensor's driver flags the sample bad (SensorFault). */
+    float force_n;       /**< -50 .. 50 N, 0.1 mN resolution; with sensor_fault any value
+                              (a non-finite or out-of-range one is sent as 0; a received
+                              raw value is not range-checked: up to +-52.4288 N). */
+    uint16_t time_ticks; /**< Same clock as the depth samples. */
+    bool sensor_fault;   /**< The sensor's driver flags the sample bad (SensorFault). */
 } nte_frames_force_t;
 
 /** Command (input). */
 typedef struct {
-    bool reset;             /**< Reset the estimator after applying the selections. */
-    uint8_t model_sel;      /**< NTE_FRAMES_MODEL_*. */
-    uint8_t estimator_sel;  /**< NTE_FRAMES_ESTIMATOR_*. */
-    uint8_t adapt_cmd;      /**< NTE_FRAMES_ADAPT_*. */
-    uint8_t force_source;   /**< NTE_FRAMES_FORCE_SOURCE_*. */
+    bool reset;            /**< Reset the estimator after applying the selections. */
+    uint8_t model_sel;     /**< NTE_FRAMES_MODEL_*. */
+    uint8_t estimator_sel; /**< NTE_FRAMES_ESTIMATOR_*. */
+    uint8_t adapt_cmd;     /**< NTE_FRAMES_ADAPT_*. */
+    uint8_t force_source;  /**< NTE_FRAMES_FORCE_SOURCE_*. */
 } nte_frames_command_t;
 
 /** One configuration item (input, on event). */
 typedef struct {
-    uint8_t item;   /**< NTE_FRAMES_SETTING_*: 0..59 or 255 (an error otherwise). */
-    float value;    /**< Any finite float32 (an error otherwise), in the item's unit. */
+    uint8_t item; /**< NTE_FRAMES_SETTING_*: 0..59 or 255 (an error otherwise). */
+    float value;  /**< Any finite float32 (an error otherwise), in the item's unit. */
 } nte_frames_setting_t;
 
 /** Estimate (output, one per force sample). */
 typedef struct {
-    float force_n;       /**< Estimated force, N; clamped to +-50 N, 0.1 mN resolution. */
-    float innovation_n;  /**< Measured - predicted force, N; clamped to -0.8192..0.8188 N,
-                              0.4 mN resolution. */
-    float z;             /**< Internal state z; clamped to -8.192..8.1915, 5e-4 resolution. */
-    bool in_tissue;      /**< Depth > 0. */
-    bool adapting;       /**< Parameter adaptation running (not frozen); false: predict-only,
-                              the force is the model's alone. */
-    bool saturated;      /**< Encode: ORed with "a value was clamped"; decode: as received. */
-    bool fault;          /**< The estimator rejected its update. */
-    bool stale;          /**< No recent depth: the estimate is held, not updated. */
+    float force_n;      /**< Estimated force, N; clamped to +-50 N, 0.1 mN resolution. */
+    float innovation_n; /**< Measured - predicted force, N; clamped to -0.8192..0.8188 N,
+                             0.4 mN resolution. */
+    float z;            /**< Internal state z; clamped to -8.192..8.1915, 5e-4 resolution. */
+    bool in_tissue;     /**< Depth > 0. */
+    bool adapting;      /**< Parameter adaptation running (not frozen); false: predict-only,
+                             the force is the model's alone. */
+    bool saturated;     /**< Encode: ORed with "a value was clamped"; decode: as received. */
+    bool fault;         /**< The estimator rejected its update. */
+    bool stale;         /**< No recent depth: the estimate is held, not updated. */
 } nte_frames_estimate_t;
 
 /** One identified parameter and its standard deviation (output, multiplexed by index). */
 typedef struct {
-    uint8_t index;  /**< NTE_FRAMES_PARAM_*. */
-    float value;    /**< Any finite float32, in the parameter's unit (see the DBC). */
-    float std;      /**< >= 0; 0 = fixed. Sent as log10 with 0.001 resolution (0.23 % relative),
-                         clamped to 10^-32.767 .. 10^32.767. */
+    uint8_t index; /**< NTE_FRAMES_PARAM_*. */
+    float value;   /**< Any finite float32, in the parameter's unit (see the DBC). */
+    float std;     /**< >= 0; 0 = fixed. Sent as log10 with 0.001 resolution (0.23 % relative),
+                        clamped to 10^-32.767 .. 10^32.767. */
 } nte_frames_param_t;
 
 /** Heartbeat (output). */
 typedef struct {
-    uint8_t node_state;        /**< NTE_FRAMES_STATE_*. */
-    uint8_t active_model;      /**< 0 = Model I, 1 = Model II, 2 = Model III. */
-    uint8_t active_estimator;  /**< 0 = bank, 1 = robust. */
-    float uptime_s;            /**< 0 .. NTE_FRAMES_UPTIME_MAX_S s; sent modulo 52428.8 s
-                                    with 0.1 s resolution. */
-    uint32_t e2e_errors;       /**< Counter of frames rejected by E2E; sent modulo 256. */
-    uint32_t range_errors;     /**< Counter of frames rejected by range checks; modulo 256. */
-    float step_time_s;         /**< >= 0 s, longest step since the last heartbeat; clamped to
-                                    8.19 ms, 2 us resolution. */
+    uint8_t node_state;       /**< NTE_FRAMES_STATE_*. */
+    uint8_t active_model;     /**< 0 = Model I, 1 = Model II, 2 = Model III. */
+    uint8_t active_estimator; /**< 0 = bank, 1 = robust. */
+    float uptime_s;           /**< 0 .. NTE_FRAMES_UPTIME_MAX_S s; sent modulo 52428.8 s
+                                   with 0.1 s resolution. */
+    uint32_t e2e_errors;      /**< Counter of frames rejected by E2E; sent modulo 256. */
+    uint32_t range_errors;    /**< Counter of frames rejected by range checks; modulo 256. */
+    float step_time_s;        /**< >= 0 s, longest step since the last heartbeat; clamped to
+                                   8.19 ms, 2 us resolution. */
 } nte_frames_heartbeat_t;
 
 /** Model III's contact front end (output). */
 typedef struct {
-    uint8_t contact_state;  /**< NTE_FRAMES_CONTACT_AIR or _TISSUE. */
-    bool surface_valid;     /**< A surface is known; false: surface_mm is ignored (sent as 0). */
-    uint8_t active_model;   /**< 0 = Model I, 1 = Model II, 2 = Model III. */
-    float surface_mm;       /**< Surface, stage position mm, -500..500 (an error beyond), 1 um
-                                 resolution; must be finite when surface_valid. */
-    float tare_n;           /**< Tare, N; clamped to +-50 N, 0.1 mN resolution. */
-    uint8_t layer;          /**< Model III's layer index, 0..NTE_FRAMES_LAYER_MAX (an error
-                                 beyond; the estimator's is 0..NTE_LAYER_MAX - 1). */
+    uint8_t contact_state; /**< NTE_FRAMES_CONTACT_AIR or _TISSUE. */
+    bool surface_valid;    /**< A surface is known; false: surface_mm is ignored (sent as 0). */
+    uint8_t active_model;  /**< 0 = Model I, 1 = Model II, 2 = Model III. */
+    float surface_mm;      /**< Surface, stage position mm, -500..500 (an error beyond), 1 um
+                                resolution; must be finite when surface_valid. */
+    float tare_n;          /**< Tare, N; clamped to +-50 N, 0.1 mN resolution. */
+    uint8_t layer;         /**< Model III's layer index, 0..NTE_FRAMES_LAYER_MAX (an error
+                                beyond; the estimator's is 0..NTE_LAYER_MAX - 1). */
 } nte_frames_contact_t;
 
 /** Largest layer index the Contact frame carries (its 3-bit Layer signal). */
@@ -241,8 +260,8 @@ typedef struct {
 
 /** Sender clock unwrapper: use ONE for all streams stamped by the same clock. */
 typedef struct {
-    uint32_t ticks;     /**< Unwrapped count of the last sample. */
-    uint16_t last_raw;  /**< Raw 16-bit value of the last sample. */
+    uint32_t ticks;    /**< Unwrapped count of the last sample. */
+    uint16_t last_raw; /**< Raw 16-bit value of the last sample. */
     bool started;
 } nte_frames_clock_t;
 
@@ -290,24 +309,24 @@ nte_frames_err_t nte_frames_decode_depth(nte_e2e_rx_t* e2e, const uint8_t* data,
 nte_frames_err_t nte_frames_decode_force(nte_e2e_rx_t* e2e, const uint8_t* data, size_t length,
                                          nte_frames_force_t* out, nte_e2e_result_t* e2e_result,
                                          uint8_t* lost);
-nte_frames_err_t nte_frames_decode_command(nte_e2e_rx_t* e2e, const uint8_t* data,
-                                           size_t length, nte_frames_command_t* out,
-                                           nte_e2e_result_t* e2e_result, uint8_t* lost);
-nte_frames_err_t nte_frames_decode_setting(nte_e2e_rx_t* e2e, const uint8_t* data,
-                                           size_t length, nte_frames_setting_t* out,
-                                           nte_e2e_result_t* e2e_result, uint8_t* lost);
-nte_frames_err_t nte_frames_decode_estimate(nte_e2e_rx_t* e2e, const uint8_t* data,
-                                            size_t length, nte_frames_estimate_t* out,
+nte_frames_err_t nte_frames_decode_command(nte_e2e_rx_t* e2e, const uint8_t* data, size_t length,
+                                           nte_frames_command_t* out, nte_e2e_result_t* e2e_result,
+                                           uint8_t* lost);
+nte_frames_err_t nte_frames_decode_setting(nte_e2e_rx_t* e2e, const uint8_t* data, size_t length,
+                                           nte_frames_setting_t* out, nte_e2e_result_t* e2e_result,
+                                           uint8_t* lost);
+nte_frames_err_t nte_frames_decode_estimate(nte_e2e_rx_t* e2e, const uint8_t* data, size_t length,
+                                            nte_frames_estimate_t* out,
                                             nte_e2e_result_t* e2e_result, uint8_t* lost);
 nte_frames_err_t nte_frames_decode_param(nte_e2e_rx_t* e2e, const uint8_t* data, size_t length,
                                          nte_frames_param_t* out, nte_e2e_result_t* e2e_result,
                                          uint8_t* lost);
-nte_frames_err_t nte_frames_decode_heartbeat(nte_e2e_rx_t* e2e, const uint8_t* data,
-                                             size_t length, nte_frames_heartbeat_t* out,
+nte_frames_err_t nte_frames_decode_heartbeat(nte_e2e_rx_t* e2e, const uint8_t* data, size_t length,
+                                             nte_frames_heartbeat_t* out,
                                              nte_e2e_result_t* e2e_result, uint8_t* lost);
-nte_frames_err_t nte_frames_decode_contact(nte_e2e_rx_t* e2e, const uint8_t* data,
-                                           size_t length, nte_frames_contact_t* out,
-                                           nte_e2e_result_t* e2e_result, uint8_t* lost);
+nte_frames_err_t nte_frames_decode_contact(nte_e2e_rx_t* e2e, const uint8_t* data, size_t length,
+                                           nte_frames_contact_t* out, nte_e2e_result_t* e2e_result,
+                                           uint8_t* lost);
 
 /** Forget the clock history. */
 void nte_frames_clock_reset(nte_frames_clock_t* self);

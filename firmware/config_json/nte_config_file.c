@@ -19,7 +19,7 @@
 #include <string.h>
 
 #define SCHEMA "nte-estimator-config/1"
-#define PARAM_MAX 1000.0      /* config.NOMINAL_ABS_MAX */
+#define PARAM_MAX 1000.0 /* config.NOMINAL_ABS_MAX */
 /* |surface_mm|: a stage position, within the configuration's depth range (generated from
  * reference_py/config.py, the envelope's one source; estconfig.SURFACE_MAX_MM) */
 #define SURFACE_MAX_MM ((double)NTE_K_DEF_DEPTH_MAX_MM)
@@ -69,8 +69,8 @@ static const cJSON* item(const cJSON* obj, const char* key)
 }
 
 /* estconfig's number(): absent or null -> 0 (not given), 1 (value in *x), -1 refused */
-static int number(const reader_t* r, const cJSON* obj, const char* key, const char* name,
-                  double lo, double hi, double* x)
+static int number(const reader_t* r, const cJSON* obj, const char* key, const char* name, double lo,
+                  double hi, double* x)
 {
     const cJSON* v = item(obj, key);
     if ((v == NULL) || cJSON_IsNull(v)) {
@@ -203,15 +203,19 @@ static int check(const reader_t* r, const cJSON* doc, nte_file_config_t* out)
         cJSON_ArrayForEach(x, s)
         {
             if (!cJSON_IsNull(x) && !(is_num(x) && (fabs(x->valuedouble) <= SURFACE_MAX_MM))) {
-                return fail(r, "surface_mm", "must be a number with |x| <= %g, null or a list "
-                                             "of them", SURFACE_MAX_MM);
+                return fail(r, "surface_mm",
+                            "must be a number with |x| <= %g, null or a list "
+                            "of them",
+                            SURFACE_MAX_MM);
             }
         }
         out->surface_list = 1;
     } else if ((s != NULL) && !cJSON_IsNull(s)) {
         if (!(is_num(s) && (fabs(s->valuedouble) <= SURFACE_MAX_MM))) {
-            return fail(r, "surface_mm", "must be a number with |x| <= %g, null or a list of "
-                                         "them", SURFACE_MAX_MM);
+            return fail(r, "surface_mm",
+                        "must be a number with |x| <= %g, null or a list of "
+                        "them",
+                        SURFACE_MAX_MM);
         }
         out->has_surface = 1;
         out->surface_mm = s->valuedouble;
@@ -221,10 +225,7 @@ static int check(const reader_t* r, const cJSON* doc, nte_file_config_t* out)
     if (cJSON_IsArray(t)) {
         tare_ok = 1;
         const cJSON* x = NULL;
-        cJSON_ArrayForEach(x, t)
-        {
-            tare_ok = tare_ok && (cJSON_IsNull(x) || is_num(x));
-        }
+        cJSON_ArrayForEach(x, t) { tare_ok = tare_ok && (cJSON_IsNull(x) || is_num(x)); }
     }
     if (!tare_ok) {
         return fail(r, "tare_n", "must be a number, null or a list of them");
@@ -242,14 +243,14 @@ static int check(const reader_t* r, const cJSON* doc, nte_file_config_t* out)
             return -1;
         }
         if (got > 0) {
-            got = number(r, dw, "tau_fast_s", "effects.dwell_relaxation.tau_fast_s", 0.0,
-                         3600.0, &out->tau_fast_s);
+            got = number(r, dw, "tau_fast_s", "effects.dwell_relaxation.tau_fast_s", 0.0, 3600.0,
+                         &out->tau_fast_s);
             if (got < 0) {
                 return -1;
             }
             out->has_tau_fast = out->has_tau_fast || got;
-            got = number(r, dw, "tau_slow_s", "effects.dwell_relaxation.tau_slow_s", 0.0,
-                         3600.0, &out->tau_slow_s);
+            got = number(r, dw, "tau_slow_s", "effects.dwell_relaxation.tau_slow_s", 0.0, 3600.0,
+                         &out->tau_slow_s);
             if (got < 0) {
                 return -1;
             }
@@ -273,8 +274,8 @@ static int check(const reader_t* r, const cJSON* doc, nte_file_config_t* out)
             return -1;
         }
         if (got > 0) {
-            got = number(r, pr, "presliding_mm", "effects.reversal_presliding.presliding_mm",
-                         0.0, 1000.0, &out->presliding_mm);
+            got = number(r, pr, "presliding_mm", "effects.reversal_presliding.presliding_mm", 0.0,
+                         1000.0, &out->presliding_mm);
             if (got < 0) {
                 return -1;
             }

@@ -21,13 +21,13 @@
 
 /** What a configuration file sets; each has_* says whether the file gave the value. */
 typedef struct nte_file_config_t {
-    int model;          /**< 1, 2 or 3 */
-    double params[7];   /**< sigma0, sigma1, sigma2, f1, f2, alpha, beta: the new nominal */
+    int model;        /**< 1, 2 or 3 */
+    double params[7]; /**< sigma0, sigma1, sigma2, f1, f2, alpha, beta: the new nominal */
     int has_r_n2;
     double r_n2;
-    int has_surface;    /**< a known surface (a number) */
+    int has_surface; /**< a known surface (a number) */
     double surface_mm;
-    int surface_list;   /**< per-trial surfaces (the workflow's): find it from the force */
+    int surface_list; /**< per-trial surfaces (the workflow's): find it from the force */
     int has_presliding;
     double presliding_mm;
     int has_tau_fast;
@@ -40,10 +40,10 @@ typedef struct nte_file_config_t {
     int relaxation;
     int has_direction_memory;
     int direction_memory;
-    int has_strengths;  /**< g[0] g_fast, g[1] g_slow: nominal strengths */
+    int has_strengths; /**< g[0] g_fast, g[1] g_slow: nominal strengths */
     double g[2];
-    int layer_sets;     /**< model3.layer_sets given: the count, 0..NTE_FILE_LAYER_SETS */
-    double layer_start_mm[NTE_FILE_LAYER_SETS]; /**< each set's start, mm below the surface */
+    int layer_sets; /**< model3.layer_sets given: the count, 0..NTE_FILE_LAYER_SETS */
+    double layer_start_mm[NTE_FILE_LAYER_SETS];  /**< each set's start, mm below the surface */
     double layer_values[NTE_FILE_LAYER_SETS][4]; /**< sigma0, f1, beta, sigma2 */
 } nte_file_config_t;
 

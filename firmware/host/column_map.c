@@ -53,8 +53,10 @@ int nte_column_map_parse(const char* text, nte_columns_t* c, char* msg, size_t c
         const nte_nv_t* it = &items[i];
         if ((it->has_eq == 0) || (it->name[0] == '\0')) {
             nte_py_repr_text(it->item, a, sizeof a);
-            (void)snprintf(why, sizeof why, "%s is not KEY=NAME (expected t=NAME,depth=NAME,"
-                           "force=NAME[,velocity=NAME])", a);
+            (void)snprintf(why, sizeof why,
+                           "%s is not KEY=NAME (expected t=NAME,depth=NAME,"
+                           "force=NAME[,velocity=NAME])",
+                           a);
             return refuse(text, why, msg, cap);
         }
         const int k = key_index(it->name);

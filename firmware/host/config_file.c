@@ -15,7 +15,6 @@
 static const char* const param_names[7] = {"sigma0", "sigma1", "sigma2", "f1",
                                            "f2",     "alpha",  "beta"};
 
-
 typedef struct text_t {
     char* buf;
     size_t cap;
@@ -75,8 +74,7 @@ int nte_config_file_export_text(const nte_export_t* e, char* buf, size_t cap)
     for (int block = 0; block < 2; block++) {
         put(&t, "  \"%s\": {\n", (block == 0) ? "params" : "params_sd");
         for (size_t j = 0U; j < 7U; j++) {
-            put_real(&t, "    ", param_names[j], (block == 0) ? e->params[j] : e->sd[j],
-                     j == 6U);
+            put_real(&t, "    ", param_names[j], (block == 0) ? e->params[j] : e->sd[j], j == 6U);
         }
         put(&t, "  },\n");
     }

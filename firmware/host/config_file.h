@@ -10,10 +10,10 @@
 
 /** What --export-config writes (reference_py/tools/estimate.py export_config). */
 typedef struct nte_export_t {
-    const char* source;  /**< "nte-run" */
+    const char* source; /**< "nte-run" */
     int model;
-    double params[7];    /**< the chosen estimates fitted, the fixed ones at their nominal */
-    double sd[7];        /**< 0 for the fixed ones */
+    double params[7]; /**< the chosen estimates fitted, the fixed ones at their nominal */
+    double sd[7];     /**< 0 for the fixed ones */
     double r_n2;
     size_t samples;
     /* the replay from depth alone that chose the values (export_select.h); NaN: null */
@@ -31,17 +31,17 @@ typedef struct nte_export_t {
     int relax_branches;
     double tau_fast_s;
     double tau_slow_s;
-    size_t n_g;          /**< strengths identified (the branches in use) */
+    size_t n_g; /**< strengths identified (the branches in use) */
     const char* g_name[2];
     double g[2];
     double g_sd[2];
-    size_t n_sets;       /**< layer sets fitted (written as model3.layer_sets) */
+    size_t n_sets; /**< layer sets fitted (written as model3.layer_sets) */
     double set_start_mm[NTE_FILE_LAYER_SETS];
     double set_values[NTE_FILE_LAYER_SETS][4]; /**< sigma0, f1, beta, sigma2 */
     double set_sd[NTE_FILE_LAYER_SETS][4];     /**< NaN: null */
     /* the contact front end */
     int contact;
-    double surface_mm;   /**< NaN: not found (null) */
+    double surface_mm; /**< NaN: not found (null) */
     double tare_n;
 } nte_export_t;
 

@@ -209,8 +209,8 @@ int nte_trial_read(const char* path, nte_trial_t* tr, char* err, const size_t es
     return nte_trial_read_columns(path, &c, tr, err, es);
 }
 
-int nte_trial_read_columns(const char* path, const nte_columns_t* cols, nte_trial_t* tr,
-                           char* err, const size_t es)
+int nte_trial_read_columns(const char* path, const nte_columns_t* cols, nte_trial_t* tr, char* err,
+                           const size_t es)
 {
     memset(tr, 0, sizeof *tr);
     size_t len = 0U;
@@ -279,9 +279,15 @@ int nte_trial_read_columns(const char* path, const nte_columns_t* cols, nte_tria
                 if ((w > 0) && ((size_t)w < (sizeof hbuf - o))) {
                     o += (size_t)w;
                 }
-                if (strcmp(header[c], cols->t) == 0) { ti = (int)c; }
-                if (strcmp(header[c], cols->depth) == 0) { li = (int)c; }
-                if (strcmp(header[c], cols->force) == 0) { fi = (int)c; }
+                if (strcmp(header[c], cols->t) == 0) {
+                    ti = (int)c;
+                }
+                if (strcmp(header[c], cols->depth) == 0) {
+                    li = (int)c;
+                }
+                if (strcmp(header[c], cols->force) == 0) {
+                    fi = (int)c;
+                }
                 if ((cols->velocity[0] != '\0') && (strcmp(header[c], cols->velocity) == 0)) {
                     vi = (int)c;
                 }

@@ -15,7 +15,7 @@ typedef struct nte_trial_t {
     double* depth_mm;
     double* velocity_mm_s;
     double* force_n;
-    size_t* line;       /**< the physical line of every sample (1-based) */
+    size_t* line; /**< the physical line of every sample (1-based) */
     int velocity_given;
 } nte_trial_t;
 
@@ -37,7 +37,7 @@ void nte_columns_standard(nte_columns_t* columns);
  *  (nte_units.h), the sign conventions (depth grows into the tissue, force is positive while
  *  inserting) and whether the result is checked (units_check.h). */
 typedef struct nte_units_t {
-    const char* force;  /**< the unit names (for the messages), e.g. "mN" */
+    const char* force; /**< the unit names (for the messages), e.g. "mN" */
     const char* time;
     const char* depth;
     double force_factor; /**< to N */
@@ -45,7 +45,7 @@ typedef struct nte_units_t {
     double depth_factor; /**< to mm */
     int force_sign;      /**< +1 or -1 */
     int depth_sign;
-    int check;           /**< 0: --no-units-check */
+    int check;             /**< 0: --no-units-check */
     nte_columns_t columns; /**< which columns are read (the messages name them so) */
 } nte_units_t;
 

@@ -134,14 +134,13 @@ typedef struct normal_t {
  * res holds (1 + P) * n doubles, n = tr->n times the replays per row (export_replay.h); *m:
  * the counted samples. */
 static int point_pass(const nte_config_t* run_cfg, const nte_trial_t* tr, const double* row,
-                      size_t row_len, const size_t* idx, size_t P, double surface_mm,
-                      double tare_n, nte_t* scratch, double* res, normal_t* ne, size_t* m)
+                      size_t row_len, const size_t* idx, size_t P, double surface_mm, double tare_n,
+                      nte_t* scratch, double* res, normal_t* ne, size_t* m)
 {
     const size_t n = tr->n * ((run_cfg->layer_sets > 0U) ? NTE_EXPORT_LAYER_SHIFTS : 1U);
     double steps[P_MAX];
     nte_export_replay_t rep;
-    if (nte_export_replay(run_cfg, tr, row, row_len, surface_mm, tare_n, scratch, res, &rep) !=
-        0) {
+    if (nte_export_replay(run_cfg, tr, row, row_len, surface_mm, tare_n, scratch, res, &rep) != 0) {
         return -1;
     }
     *m = rep.counted;
@@ -246,8 +245,8 @@ int nte_export_refine(const nte_config_t* run_cfg, const nte_trial_t* tr, const 
     normal_t heavy_ne;
     size_t m = 0U;
     size_t m2 = 0U;
-    int rc = point_pass(run_cfg, tr, row, row_len, idx, P, surface_mm, tare_n, scratch, res,
-                        &cur, &m);
+    int rc = point_pass(run_cfg, tr, row, row_len, idx, P, surface_mm, tare_n, scratch, res, &cur,
+                        &m);
     unsigned passes = 1U;
     double lam = NTE_REFINE_LAMBDA_START;
     while ((rc == 0) && (passes < NTE_REFINE_PASSES) && (P > 0U) && isfinite(cur.sse) &&
@@ -256,16 +255,16 @@ int nte_export_refine(const nte_config_t* run_cfg, const nte_trial_t* tr, const 
         double light[NTE_EXPORT_ROW_MAX];
         double heavy[NTE_EXPORT_ROW_MAX];
         damped_step(row, row_len, run_cfg->layer_sets, idx, P, &cur, lam, light);
-        damped_step(row, row_len, run_cfg->layer_sets, idx, P, &cur,
-                    lam * NTE_REFINE_LAMBDA_WIDE, heavy);
+        damped_step(row, row_len, run_cfg->layer_sets, idx, P, &cur, lam * NTE_REFINE_LAMBDA_WIDE,
+                    heavy);
         if (same_row(light, row, row_len) && same_row(heavy, row, row_len)) {
             break;
         }
         rc = point_pass(run_cfg, tr, light, row_len, idx, P, surface_mm, tare_n, scratch, res,
                         &light_ne, &m2);
         if (rc == 0) {
-            rc = point_pass(run_cfg, tr, heavy, row_len, idx, P, surface_mm, tare_n, scratch,
-                            res, &heavy_ne, &m2);
+            rc = point_pass(run_cfg, tr, heavy, row_len, idx, P, surface_mm, tare_n, scratch, res,
+                            &heavy_ne, &m2);
         }
         passes++;
         if (rc != 0) {

@@ -12,9 +12,9 @@
 #include <stdbool.h>
 #include <stddef.h>
 
-#define NTE_REFINE_PASSES 20U     /**< passes at most (the first: the start's Jacobian) */
-#define NTE_REFINE_H 1e-3         /**< relative finite-difference step of every value */
-#define NTE_REFINE_TOL 1e-4       /**< a kept step lowering the SSE by less than this ends */
+#define NTE_REFINE_PASSES 20U /**< passes at most (the first: the start's Jacobian) */
+#define NTE_REFINE_H 1e-3     /**< relative finite-difference step of every value */
+#define NTE_REFINE_TOL 1e-4   /**< a kept step lowering the SSE by less than this ends */
 #define NTE_REFINE_LAMBDA_START 1e-3
 #define NTE_REFINE_LAMBDA_MAX 1e8
 #define NTE_REFINE_LAMBDA_WIDE 10.0 /**< the second step's damping: lambda times this */
@@ -27,12 +27,12 @@
 
 /** The fit's result. */
 typedef struct nte_export_fit_t {
-    double row[NTE_EXPORT_ROW_MAX]; /**< the fitted row (the seven values, the strengths, the
-                                         layer sets' values) */
-    double sd[NTE_EXPORT_ROW_MAX];  /**< the fit's sd of each fitted entry */
+    double row[NTE_EXPORT_ROW_MAX];  /**< the fitted row (the seven values, the strengths, the
+                                          layer sets' values) */
+    double sd[NTE_EXPORT_ROW_MAX];   /**< the fit's sd of each fitted entry */
     bool has_sd[NTE_EXPORT_ROW_MAX]; /**< false: not fitted, or A could not be factored */
-    double rmse_n;                  /**< RMSE of the fitted values' replay, N */
-    unsigned passes;                /**< replays done (each of 1 + fitted rows) */
+    double rmse_n;                   /**< RMSE of the fitted values' replay, N */
+    unsigned passes;                 /**< replays done (each of 1 + fitted rows) */
 } nte_export_fit_t;
 
 /**

@@ -25,7 +25,8 @@ static int reader_config(const nte_config_t* run_cfg, const double* row, size_t 
     }
     for (size_t k = 0U; k < run_cfg->layer_sets; k++) {
         for (size_t j = 0U; j < NTE_LAYER_SET_VALUES; j++) {
-            cfg->layer_set[k].values[j] = (nte_real_t)row[base_len + (k * NTE_LAYER_SET_VALUES) + j];
+            cfg->layer_set[k].values[j] =
+                (nte_real_t)row[base_len + (k * NTE_LAYER_SET_VALUES) + j];
         }
     }
     cfg->predict_only = true;
@@ -64,8 +65,8 @@ static int replay_once(const nte_config_t* cfg, const nte_trial_t* tr, double ta
 }
 
 int nte_export_replay(const nte_config_t* run_cfg, const nte_trial_t* tr, const double* row,
-                      size_t row_len, double surface_mm, double tare_n, nte_t* scratch,
-                      double* res, nte_export_replay_t* out)
+                      size_t row_len, double surface_mm, double tare_n, nte_t* scratch, double* res,
+                      nte_export_replay_t* out)
 {
     static const double shifts[NTE_EXPORT_LAYER_SHIFTS] = NTE_EXPORT_LAYER_SHIFTS_MM;
     nte_config_t cfg;

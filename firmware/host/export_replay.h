@@ -24,7 +24,10 @@
  *  shallower, and a set fitted at one depth alone switched its force 1 mm early or late on the
  *  next trial (export_replay.py LAYER_SHIFTS_MM, the measurement). */
 #define NTE_EXPORT_LAYER_SHIFTS 3U
+/* clang-format 14 spreads a braced initializer in a #define over four lines */
+/* clang-format off */
 #define NTE_EXPORT_LAYER_SHIFTS_MM {-1.0, 0.0, 1.0}
+/* clang-format on */
 
 /** One replay's verdict. */
 typedef struct nte_export_replay_t {
@@ -43,7 +46,7 @@ typedef struct nte_export_replay_t {
  * replay's samples.  `scratch` is the estimator the replay runs in.
  */
 int nte_export_replay(const nte_config_t* run_cfg, const nte_trial_t* tr, const double* row,
-                      size_t row_len, double surface_mm, double tare_n, nte_t* scratch,
-                      double* res, nte_export_replay_t* out);
+                      size_t row_len, double surface_mm, double tare_n, nte_t* scratch, double* res,
+                      nte_export_replay_t* out);
 
 #endif /* NTE_HOST_EXPORT_REPLAY_H */

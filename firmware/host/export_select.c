@@ -50,10 +50,7 @@ static void keep_snapshot(const nte_export_snapshot_t* s, const double fixed[7],
                                out->g_name, &out->n_g);
 }
 
-void nte_export_layers_start(nte_export_layers_t* acc)
-{
-    (void)memset(acc, 0, sizeof *acc);
-}
+void nte_export_layers_start(nte_export_layers_t* acc) { (void)memset(acc, 0, sizeof *acc); }
 
 void nte_export_layers_add(nte_export_layers_t* acc, size_t k, double depth_mm, int contact,
                            int with_layer, const nte_output_t* o)
@@ -89,9 +86,9 @@ static int fit_layers(const nte_config_t* replay_cfg, const nte_trial_t* tr,
                       size_t row_len, double surface_mm, double tare_n, nte_t* scratch,
                       nte_export_fit_t* fit, nte_export_choice_t* out)
 {
-    static const size_t ids[NTE_LAYER_SET_VALUES] = {
-        (size_t)nte_param_sigma0, (size_t)nte_param_f1, (size_t)nte_param_beta,
-        (size_t)nte_param_sigma2};
+    static const size_t ids[NTE_LAYER_SET_VALUES] = {(size_t)nte_param_sigma0, (size_t)nte_param_f1,
+                                                     (size_t)nte_param_beta,
+                                                     (size_t)nte_param_sigma2};
     nte_config_t cfg = *replay_cfg;
     double row[NTE_EXPORT_ROW_MAX];
     bool moved[NTE_EXPORT_ROW_MAX];
@@ -132,8 +129,7 @@ static int fit_layers(const nte_config_t* replay_cfg, const nte_trial_t* tr,
 int nte_export_choose(const nte_config_t* run_cfg, const nte_trial_t* tr,
                       const nte_export_snapshot_t snaps[NTE_EXPORT_CANDIDATES],
                       const nte_export_layers_t* layers, const double fixed[7], int model,
-                      double surface_mm, double tare_n, nte_t* scratch,
-                      nte_export_choice_t* out)
+                      double surface_mm, double tare_n, nte_t* scratch, nte_export_choice_t* out)
 {
     /* Model III's turn-over length as identified by the end of the record (it is learned from
      * the turn-overs only): every replay and the fit run with it, and it is exported */
@@ -199,8 +195,8 @@ int nte_export_choose(const nte_config_t* run_cfg, const nte_trial_t* tr,
     }
     /* the fit moves the identified values: the seven's (Model I's beta is its fixed beta0),
      * then every strength */
-    bool fitted[NTE_EXPORT_ROW_MAX] = {false, false, false, false, false, false, false, false,
-                                       false};
+    bool fitted[NTE_EXPORT_ROW_MAX] = {false, false, false, false, false,
+                                       false, false, false, false};
     for (size_t j = 0U; (j < snaps[best].np) && (j < NTE_IDENTIFIED_MAX); j++) {
         const size_t id = (size_t)snaps[best].pe[j].id;
         if ((id < 7U) && !((model == 1) && (id == (size_t)nte_param_beta))) {

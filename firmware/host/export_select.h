@@ -24,22 +24,22 @@
 
 /** The estimates at one sample. */
 typedef struct nte_export_snapshot_t {
-    size_t sample;                             /**< index in the record */
-    double t_s;                                /**< its time, s */
-    size_t np;                                 /**< identified parameters in pe */
+    size_t sample; /**< index in the record */
+    double t_s;    /**< its time, s */
+    size_t np;     /**< identified parameters in pe */
     nte_param_estimate_t pe[NTE_IDENTIFIED_MAX];
 } nte_export_snapshot_t;
 
 /** The replay's verdict, and the values the export writes. */
 typedef struct nte_export_choice_t {
-    size_t candidate;     /**< index into the snapshots */
-    double rmse_n;        /**< RMSE of its replay against force - tare, N (NaN: not replayed) */
-    double final_rmse_n;  /**< the same for the last snapshot (the final estimates), N */
-    double peak_n;        /**< max |force - tare| over the record, N */
+    size_t candidate;    /**< index into the snapshots */
+    double rmse_n;       /**< RMSE of its replay against force - tare, N (NaN: not replayed) */
+    double final_rmse_n; /**< the same for the last snapshot (the final estimates), N */
+    double peak_n;       /**< max |force - tare| over the record, N */
     /* the values to export: the chosen snapshot's, fitted to the record (export_refine.h) */
-    double params[7];     /**< the seven force-model values, nte_param_id_t order */
-    double sd[7];         /**< their sd: the fit's for the fitted ones, 0 for the fixed ones */
-    size_t n_g;           /**< relaxation strengths identified (the branches in use) */
+    double params[7]; /**< the seven force-model values, nte_param_id_t order */
+    double sd[7];     /**< their sd: the fit's for the fitted ones, 0 for the fixed ones */
+    size_t n_g;       /**< relaxation strengths identified (the branches in use) */
     const char* g_name[2];
     double g[2];
     double g_sd[2];
@@ -57,11 +57,11 @@ typedef struct nte_export_choice_t {
  *  run goes: the depths below the surface of the tears the rupture detector found in the
  *  record's first insertion. */
 typedef struct nte_export_layers_t {
-    size_t count;                         /**< starts found */
-    double start_mm[NTE_LAYER_SETS_MAX];  /**< mm below the surface, increasing */
-    unsigned prev_layer;                  /**< the previous sample's published layer */
-    int entered;                          /**< the tip has been in the tissue */
-    int done;                             /**< the first insertion ended */
+    size_t count;                        /**< starts found */
+    double start_mm[NTE_LAYER_SETS_MAX]; /**< mm below the surface, increasing */
+    unsigned prev_layer;                 /**< the previous sample's published layer */
+    int entered;                         /**< the tip has been in the tissue */
+    int done;                            /**< the first insertion ended */
 } nte_export_layers_t;
 
 /** Start gathering (before the first sample). */
@@ -102,7 +102,6 @@ void nte_export_snapshot_values(const nte_export_snapshot_t* s, const double fix
 int nte_export_choose(const nte_config_t* run_cfg, const nte_trial_t* tr,
                       const nte_export_snapshot_t snaps[NTE_EXPORT_CANDIDATES],
                       const nte_export_layers_t* layers, const double fixed[7], int model,
-                      double surface_mm, double tare_n, nte_t* scratch,
-                      nte_export_choice_t* out);
+                      double surface_mm, double tare_n, nte_t* scratch, nte_export_choice_t* out);
 
 #endif /* NTE_HOST_EXPORT_SELECT_H */

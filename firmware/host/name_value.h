@@ -10,7 +10,7 @@
 #include <stddef.h>
 
 #define NTE_NV_TEXT 1024U /**< each part is cut to this many bytes (with its terminator) */
-#define NTE_NV_MAX 16U   /**< at most this many items are split (see nte_nv_split) */
+#define NTE_NV_MAX 16U    /**< at most this many items are split (see nte_nv_split) */
 
 typedef struct nte_nv_t {
     char item[NTE_NV_TEXT];  /**< the whole item, stripped */

@@ -58,7 +58,8 @@ int main(int argc, char** argv)
                    "No flags (nothing to default).\n\n"
                    "  -h, --help  this help\n\n"
                    "Exit status: 0 done, 1 the library refused its configuration, 2 bad "
-                   "arguments.\n", N_SAMPLES);
+                   "arguments.\n",
+                   N_SAMPLES);
             return 0;
         }
     }

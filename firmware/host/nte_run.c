@@ -95,9 +95,9 @@ typedef struct args_t {
     int given_tau_fast;
     int given_tau_slow;
     int given_relax_branches;
-    nte_units_t units; /* the input's units and signs (--force-unit ... --no-units-check) */
-    const char* columns; /* --columns MAP (parsed when the file is read), NULL: standard */
-    double noise;      /* --noise N: the sensor's noise sd, N; NaN: not given */
+    nte_units_t units;      /* the input's units and signs (--force-unit ... --no-units-check) */
+    const char* columns;    /* --columns MAP (parsed when the file is read), NULL: standard */
+    double noise;           /* --noise N: the sensor's noise sd, N; NaN: not given */
     nte_start_flag_t start; /* --start NAME=VALUE,...: starting values over preset/config */
 } args_t;
 
@@ -277,8 +277,8 @@ static int unit_flag(const char* name, const char* val, nte_units_t* u, char* ms
             return 1;
         }
     }
-    size_t o = (size_t)snprintf(msg, cap, "argument %s: invalid choice: '%s' (choose from ",
-                                name, val);
+    size_t o = (size_t)snprintf(msg, cap, "argument %s: invalid choice: '%s' (choose from ", name,
+                                val);
     for (size_t i = 0U; (i < count) && (o < cap); i++) {
         o += (size_t)snprintf(msg + o, cap - o, "%s'%s'", (i > 0U) ? ", " : "", table[i].name);
     }
@@ -370,8 +370,7 @@ static int parse_args(int argc, char** argv, args_t* a)
         }
         if (strncmp(opt, "--", 2) != 0) {
             if (a->csv != NULL) {
-                (void)snprintf(msg, sizeof msg, "unrecognized arguments: %s (one input file)",
-                               opt);
+                (void)snprintf(msg, sizeof msg, "unrecognized arguments: %s (one input file)", opt);
                 return usage(msg);
             }
             a->csv = opt;
@@ -430,7 +429,8 @@ static int parse_args(int argc, char** argv, args_t* a)
                 (void)snprintf(msg, sizeof msg,
                                "argument --precision: this binary computes in " PRECISION
                                " (got '%s'; use nte-run for float32, nte-run-double for "
-                               "float64)", val);
+                               "float64)",
+                               val);
                 return usage(msg);
             }
         } else if (strcmp(name, "--init-seed") == 0) {
@@ -439,14 +439,14 @@ static int parse_args(int argc, char** argv, args_t* a)
             if ((end == val) || (*end != '\0') || (errno != 0) || (a->seed < 0)) {
                 (void)snprintf(msg, sizeof msg,
                                "argument --init-seed: must be >= 0 and <= 9223372036854775807 "
-                               "(got %s)", val);
+                               "(got %s)",
+                               val);
                 return usage(msg);
             }
         } else if (strcmp(name, "--init-factor") == 0) {
             a->factor = strtod(val, &end);
             if ((end == val) || (*end != '\0')) {
-                (void)snprintf(msg, sizeof msg, "argument --init-factor: not a number: '%s'",
-                               val);
+                (void)snprintf(msg, sizeof msg, "argument --init-factor: not a number: '%s'", val);
                 return usage(msg);
             }
             if (!((a->factor >= 1.0) && (a->factor <= 100.0))) { /* also NaN */
@@ -498,11 +498,12 @@ static int parse_args(int argc, char** argv, args_t* a)
              * reference_py/config.py, the envelope's one source) */
             const double smax = (double)NTE_K_DEF_DEPTH_MAX_MM;
             a->surface = strtod(val, &end);
-            if ((end == val) || (*end != '\0') || !((a->surface >= -smax) &&
-                                                    (a->surface <= smax))) { /* also NaN */
+            if ((end == val) || (*end != '\0') ||
+                !((a->surface >= -smax) && (a->surface <= smax))) { /* also NaN */
                 (void)snprintf(msg, sizeof msg,
                                "argument --surface: must be a number >= %g and <= %g "
-                               "(got %s)", -smax, smax, val);
+                               "(got %s)",
+                               -smax, smax, val);
                 return usage(msg);
             }
         } else if (unit_flag(name, val, &a->units, msg, sizeof msg) != 0) {
@@ -517,13 +518,17 @@ static int parse_args(int argc, char** argv, args_t* a)
                 return usage(msg);
             }
             if (isfinite(a->noise) && (a->noise >= 1.0)) {
-                (void)snprintf(msg, sizeof msg, "argument --noise: %s N is not a plausible "
-                               "sensor noise: probably millinewtons, give it in N", val);
+                (void)snprintf(msg, sizeof msg,
+                               "argument --noise: %s N is not a plausible "
+                               "sensor noise: probably millinewtons, give it in N",
+                               val);
                 return usage(msg);
             }
             if (!(isfinite(a->noise) && (a->noise > 0.0))) {
-                (void)snprintf(msg, sizeof msg, "argument --noise: must be > 0 and < 1 N (got "
-                               "%s)", val);
+                (void)snprintf(msg, sizeof msg,
+                               "argument --noise: must be > 0 and < 1 N (got "
+                               "%s)",
+                               val);
                 return usage(msg);
             }
         } else if (strcmp(name, "--start") == 0) {
@@ -604,27 +609,31 @@ static int check_out(const char* flag, const char* path, out_t* o, char* msg, si
             (void)snprintf(o->target, sizeof o->target, "%s", link);
         } else {
             char joined[(2U * sizeof o->target) + 2U];
-            (void)snprintf(joined, sizeof joined, "%.*s/%s", (int)(slash - o->target),
-                           o->target, link);
+            (void)snprintf(joined, sizeof joined, "%.*s/%s", (int)(slash - o->target), o->target,
+                           link);
             const size_t len = strlen(joined);
             if (len >= sizeof o->target) {
-                (void)snprintf(msg, cap, "%s %s: the symbolic link's target path is too "
-                                         "long", flag, path);
+                (void)snprintf(msg, cap,
+                               "%s %s: the symbolic link's target path is too "
+                               "long",
+                               flag, path);
                 return -1;
             }
             (void)memcpy(o->target, joined, len + 1U);
         }
     }
     if (stat(o->target, &st) == 0) {
-        const char* kind = S_ISDIR(st.st_mode)   ? "a directory"
+        const char* kind = S_ISDIR(st.st_mode)    ? "a directory"
                            : S_ISCHR(st.st_mode)  ? "a character device"
                            : S_ISBLK(st.st_mode)  ? "a block device"
                            : S_ISFIFO(st.st_mode) ? "a FIFO"
                            : S_ISSOCK(st.st_mode) ? "a socket"
                                                   : NULL;
         if (kind != NULL) {
-            (void)snprintf(msg, cap, "%s %s: is %s, not a regular file; refusing to "
-                                     "replace it", flag, path, kind);
+            (void)snprintf(msg, cap,
+                           "%s %s: is %s, not a regular file; refusing to "
+                           "replace it",
+                           flag, path, kind);
             return -1;
         }
         o->mode = st.st_mode & 07777U;
@@ -641,8 +650,8 @@ static int check_out(const char* flag, const char* path, out_t* o, char* msg, si
     (void)snprintf(dir, sizeof dir, "%.*s", (slash == o->target) ? 1 : (int)(slash - o->target),
                    o->target);
     if (stat(dir, &st) != 0) {
-        (void)snprintf(msg, cap, "%s %s: directory %s does not exist (it is not created)",
-                       flag, path, dir);
+        (void)snprintf(msg, cap, "%s %s: directory %s does not exist (it is not created)", flag,
+                       path, dir);
         return -1;
     }
     if (!S_ISDIR(st.st_mode)) {
@@ -746,9 +755,8 @@ static int run(const args_t* a, const out_t* out, const nte_trial_t* tr, nte_t* 
  * double build writes the reference's bytes but for "source"): the snapshot that replays the
  * record best (export_select.h); temporary file, then rename */
 static int export_config(const args_t* a, const out_t* out, const nte_export_snapshot_t* snap,
-                         const nte_export_choice_t* choice, const nte_config_t* cfg,
-                         size_t samples, const nte_output_t* last,
-                         double r_n2)
+                         const nte_export_choice_t* choice, const nte_config_t* cfg, size_t samples,
+                         const nte_output_t* last, double r_n2)
 {
     nte_export_t e;
     (void)memset(&e, 0, sizeof e);
@@ -799,8 +807,8 @@ static int export_config(const args_t* a, const out_t* out, const nte_export_sna
     FILE* fh = ((fd >= 0) && (fchmod(fd, out->mode) == 0)) ? fdopen(fd, "w") : NULL;
     if ((fh == NULL) || (fwrite(text, 1U, (size_t)n, fh) != (size_t)n) || (fclose(fh) != 0) ||
         (rename(tmp, out->target) != 0)) {
-        fprintf(stderr, PROG ": error: --export-config %s: cannot write: %s\n",
-                a->export_config, strerror(errno));
+        fprintf(stderr, PROG ": error: --export-config %s: cannot write: %s\n", a->export_config,
+                strerror(errno));
         if ((fh == NULL) && (fd >= 0)) {
             (void)close(fd);
         }
@@ -888,7 +896,8 @@ int main(int argc, char** argv)
                 a.contact = 1;
             } else if (fc.surface_list) {
                 if (a.predict_only) {
-                    (void)snprintf(msg, sizeof msg, "%s: key 'surface_mm': per-trial surfaces "
+                    (void)snprintf(msg, sizeof msg,
+                                   "%s: key 'surface_mm': per-trial surfaces "
                                    "give no surface to predict with; give --surface MM",
                                    a.config);
                     return bad(msg);
@@ -900,12 +909,12 @@ int main(int argc, char** argv)
                                                                      : a.presliding_mm;
         a.tau_fast_s = (fc.has_tau_fast && !a.given_tau_fast) ? fc.tau_fast_s : a.tau_fast_s;
         a.tau_slow_s = (fc.has_tau_slow && !a.given_tau_slow) ? fc.tau_slow_s : a.tau_slow_s;
-        a.relax_branches = (fc.has_relax_branches && !a.given_relax_branches)
-                               ? fc.relax_branches : a.relax_branches;
+        a.relax_branches = (fc.has_relax_branches && !a.given_relax_branches) ? fc.relax_branches
+                                                                              : a.relax_branches;
         /* the flags can only switch these off */
         a.relaxation = (fc.has_relaxation && a.relaxation) ? fc.relaxation : a.relaxation;
-        a.direction_memory = (fc.has_direction_memory && a.direction_memory)
-                                 ? fc.direction_memory : a.direction_memory;
+        a.direction_memory = (fc.has_direction_memory && a.direction_memory) ? fc.direction_memory
+                                                                             : a.direction_memory;
     }
     if ((a.contact == -1) && isnan(a.surface) && (a.model == 3) && !a.predict_only) {
         /* the front end is part of Model III: a record as a rig writes it starts in the air */
@@ -929,9 +938,10 @@ int main(int argc, char** argv)
     }
     for (int j = (int)nte_param_g_fast; (j <= (int)nte_param_g_slow) && (a.model != 3); j++) {
         if (a.start.given[j] != 0) {
-            (void)snprintf(msg, sizeof msg, "argument --start: %s is a relaxation strength of "
-                           "Model III (not of Model %s)", nte_param_name((nte_param_id_t)j),
-                           (a.model == 1) ? "I" : "II");
+            (void)snprintf(msg, sizeof msg,
+                           "argument --start: %s is a relaxation strength of "
+                           "Model III (not of Model %s)",
+                           nte_param_name((nte_param_id_t)j), (a.model == 1) ? "I" : "II");
             return bad(msg);
         }
     }
@@ -947,8 +957,8 @@ int main(int argc, char** argv)
         return bad(msg);
     }
     nte_config_t cfg;
-    const nte_schedule_t sch =
-        (strcmp(a.schedule, "rotate") == 0) ? nte_schedule_rotate : nte_schedule_all;
+    const nte_schedule_t sch = (strcmp(a.schedule, "rotate") == 0) ? nte_schedule_rotate
+                                                                   : nte_schedule_all;
     if (strcmp(a.profile, "paper") == 0) {
         nte_config_paper(&cfg, a.model, sch);
     } else {
@@ -980,8 +990,7 @@ int main(int argc, char** argv)
     /* the config's params are the new nominal values unless --preset is given; --start's
      * on top of either */
     double values[7];
-    (void)memcpy(values, (have_fc && !a.given_preset) ? fc.params : preset->values,
-                 sizeof values);
+    (void)memcpy(values, (have_fc && !a.given_preset) ? fc.params : preset->values, sizeof values);
     for (size_t j = 0U; j < 7U; j++) {
         values[j] = (a.start.given[j] != 0) ? a.start.value[j] : values[j];
     }
@@ -1045,21 +1054,21 @@ int main(int argc, char** argv)
     nte_export_layers_start(&layers);
     nte_verdict_acc_t verdict;
     nte_verdict_start(&verdict);
-    int rc = run(&a, &out, &tr, &est, &counts, &last,
-                 (a.export_config != NULL) ? snaps : NULL, &layers, &verdict);
+    int rc = run(&a, &out, &tr, &est, &counts, &last, (a.export_config != NULL) ? snaps : NULL,
+                 &layers, &verdict);
     nte_export_choice_t choice;
     (void)memset(&choice, 0, sizeof choice);
     if ((rc == 0) && (a.export_config != NULL)) {
         static nte_t scratch; /* the replays of the candidates */
         if (nte_export_choose(&cfg, &tr, snaps, (a.layer_sets != 0) ? &layers : NULL, values,
-                              a.model, (double)last.surface_mm,
-                              (double)last.tare_n, &scratch, &choice) != 0) {
+                              a.model, (double)last.surface_mm, (double)last.tare_n, &scratch,
+                              &choice) != 0) {
             fprintf(stderr, PROG ": error: --export-config: a replay of the estimates was refused "
-                            "or memory ran out\n");
+                                 "or memory ran out\n");
             rc = 1;
         } else {
-            rc = export_config(&a, &exp_out, &snaps[choice.candidate], &choice, &cfg, tr.n,
-                               &last, r_n2);
+            rc = export_config(&a, &exp_out, &snaps[choice.candidate], &choice, &cfg, tr.n, &last,
+                               r_n2);
         }
     }
     if (rc == 0) {

@@ -70,8 +70,10 @@ static int parse_item(const nte_nv_t* it, nte_start_flag_t* out, char* msg, size
     }
     if ((j == (int)nte_param_g_fast) || (j == (int)nte_param_g_slow)) {
         if (!((x > 0.0) && (x < 1.0))) {
-            (void)snprintf(msg, cap, "%s=%s: must be > 0 and < 1 (a fraction of the elastic "
-                           "force)", name, value);
+            (void)snprintf(msg, cap,
+                           "%s=%s: must be > 0 and < 1 (a fraction of the elastic "
+                           "force)",
+                           name, value);
             return -1;
         }
     } else if (j != (int)nte_param_f2) {

@@ -11,7 +11,7 @@
 #include <stddef.h>
 
 typedef struct nte_start_flag_t {
-    int given[NTE_PARAM_COUNT];      /**< 1: the value of this parameter (nte_param_id_t) */
+    int given[NTE_PARAM_COUNT]; /**< 1: the value of this parameter (nte_param_id_t) */
     double value[NTE_PARAM_COUNT];
 } nte_start_flag_t;
 

@@ -34,10 +34,7 @@ static int is_inserting(const nte_trial_t* tr, const size_t k)
 }
 
 /* np.mean of a boolean array: the share of true. */
-static double share(const size_t count, const size_t n)
-{
-    return (double)count / (double)n;
-}
+static double share(const size_t count, const size_t n) { return (double)count / (double)n; }
 
 static double force_unit(const char* name)
 {
@@ -84,16 +81,18 @@ static int check_time(const char* path, const nte_trial_t* tr, const nte_units_t
     if (dt > lim->dt_max_s) {
         char hint[128];
         time_hint(dt, u->time, lim->dt_max_s, hint, sizeof hint);
-        (void)snprintf(err, es, "%s: column '%s': median time step %.4g s (longer than the %g "
-                       "s gap limit): %s", path, u->columns.t, dt, lim->dt_max_s, hint);
+        (void)snprintf(err, es,
+                       "%s: column '%s': median time step %.4g s (longer than the %g "
+                       "s gap limit): %s",
+                       path, u->columns.t, dt, lim->dt_max_s, hint);
         return -1;
     }
     return 0;
 }
 
 /* Rules 2 and 3: a stroke under a millimetre (metres read as mm), mostly negative depths. */
-static int check_depth(const char* path, const nte_trial_t* tr, const nte_units_t* u,
-                       char* err, size_t es)
+static int check_depth(const char* path, const nte_trial_t* tr, const nte_units_t* u, char* err,
+                       size_t es)
 {
     double lo = tr->depth_mm[0];
     double hi = tr->depth_mm[0];
@@ -106,15 +105,19 @@ static int check_depth(const char* path, const nte_trial_t* tr, const nte_units_
     }
     const double stroke = hi - lo;
     if ((0.0 < stroke) && (stroke < NTE_UNITS_MIN_STROKE_MM)) {
-        (void)snprintf(err, es, "%s: column '%s': the depth spans only %.4g mm (less than "
-                       "%g mm): %s", path, u->columns.depth, stroke, NTE_UNITS_MIN_STROKE_MM,
+        (void)snprintf(err, es,
+                       "%s: column '%s': the depth spans only %.4g mm (less than "
+                       "%g mm): %s",
+                       path, u->columns.depth, stroke, NTE_UNITS_MIN_STROKE_MM,
                        (strcmp(u->depth, "mm") == 0)
-                           ? "probably metres: convert with --depth-unit m" : "no insertion");
+                           ? "probably metres: convert with --depth-unit m"
+                           : "no insertion");
         return -1;
     }
     const double ns = share(neg, tr->n);
     if (ns > NTE_UNITS_NEGATIVE_DEPTH_SHARE) {
-        (void)snprintf(err, es, "%s: column '%s': %.0f %% of the depths are negative (down to "
+        (void)snprintf(err, es,
+                       "%s: column '%s': %.0f %% of the depths are negative (down to "
                        "%.4g mm): probably measured the other way: convert with --depth-sign -1",
                        path, u->columns.depth, 100.0 * ns, lo);
         return -1;
@@ -150,16 +153,19 @@ static int check_force(const char* path, const nte_trial_t* tr, const nte_units_
     const double os = share(out, present);
     if (os > NTE_UNITS_MAX_FORCE_OUT_SHARE) {
         const int mn = (strcmp(u->force, "N") == 0) && ((peak * force_unit("mN")) <= fmax);
-        (void)snprintf(err, es, "%s: column '%s': %.0f %% of the forces exceed the configured "
-                       "range \xc2\xb1%g N (up to %.4g): %s", path, u->columns.force, 100.0 * os,
-                       fmax, peak, mn ? "probably millinewtons: convert with --force-unit mN"
-                                : "not a force in N");
+        (void)snprintf(err, es,
+                       "%s: column '%s': %.0f %% of the forces exceed the configured "
+                       "range \xc2\xb1%g N (up to %.4g): %s",
+                       path, u->columns.force, 100.0 * os, fmax, peak,
+                       mn ? "probably millinewtons: convert with --force-unit mN"
+                          : "not a force in N");
         return -1;
     }
     if (peak > (NTE_UNITS_FORCE_IMPLAUSIBLE_FACTOR * fmax)) {
-        (void)snprintf(err, es, "%s:%zu: column '%s': %.4g N is not a plausible force (the "
-                       "configured range is \xc2\xb1%g N)", path, tr->line[kpeak],
-                       u->columns.force, tr->force_n[kpeak], fmax);
+        (void)snprintf(err, es,
+                       "%s:%zu: column '%s': %.4g N is not a plausible force (the "
+                       "configured range is \xc2\xb1%g N)",
+                       path, tr->line[kpeak], u->columns.force, tr->force_n[kpeak], fmax);
         return -1;
     }
     /* judged on the force less its tare (the median of the first forces), where it departs
@@ -194,18 +200,19 @@ static int check_force(const char* path, const nte_trial_t* tr, const nte_units_
         }
     }
     if ((m >= NTE_UNITS_INSERTING_MIN_SAMPLES) && (median(v, m) < 0.0)) {
-        (void)snprintf(err, es, "%s: column '%s': the force less its tare (%.4g N) is negative "
+        (void)snprintf(err, es,
+                       "%s: column '%s': the force less its tare (%.4g N) is negative "
                        "in %.0f %% of the samples taken while inserting: probably the sensor's "
-                       "opposite sign: convert with --force-sign -1", path, u->columns.force,
-                       tare, 100.0 * share(negative, m));
+                       "opposite sign: convert with --force-sign -1",
+                       path, u->columns.force, tare, 100.0 * share(negative, m));
         return -1;
     }
     return 0;
 }
 
 /* Rule 7: most samples outside the estimator's accepted ranges. */
-static int check_ranges(const char* path, const nte_trial_t* tr, const nte_limits_t* lim,
-                        char* err, size_t es)
+static int check_ranges(const char* path, const nte_trial_t* tr, const nte_limits_t* lim, char* err,
+                        size_t es)
 {
     size_t bad = 0U;
     for (size_t k = 0U; k < tr->n; k++) {
@@ -213,11 +220,14 @@ static int check_ranges(const char* path, const nte_trial_t* tr, const nte_limit
         const double f = tr->force_n[k];
         bad += ((d < lim->depth_min_mm) || (d > lim->depth_max_mm) ||
                 (fabs(tr->velocity_mm_s[k]) > lim->speed_max_mm_s) ||
-                (isfinite(f) && (fabs(f) > lim->force_max_n))) ? 1U : 0U;
+                (isfinite(f) && (fabs(f) > lim->force_max_n)))
+                   ? 1U
+                   : 0U;
     }
     const double bs = share(bad, tr->n);
     if (bs > NTE_UNITS_MAX_REJECTED_SHARE) {
-        (void)snprintf(err, es, "%s: %zu of %zu samples (%.0f %%) are outside the estimator's "
+        (void)snprintf(err, es,
+                       "%s: %zu of %zu samples (%.0f %%) are outside the estimator's "
                        "accepted ranges (depth %g..%g mm, speed \xc2\xb1%g mm/s, force \xc2\xb1%g "
                        "N): check the units (--time-unit, --depth-unit, --force-unit) and signs",
                        path, bad, tr->n, 100.0 * bs, lim->depth_min_mm, lim->depth_max_mm,
@@ -238,7 +248,9 @@ int nte_units_check(const char* path, const nte_trial_t* tr, const nte_units_t* 
     const int rc = ((check_time(path, tr, u, lim, scratch, err, es) != 0) ||
                     (check_depth(path, tr, u, err, es) != 0) ||
                     (check_force(path, tr, u, lim, scratch, err, es) != 0) ||
-                    (check_ranges(path, tr, lim, err, es) != 0)) ? -1 : 0;
+                    (check_ranges(path, tr, lim, err, es) != 0))
+                       ? -1
+                       : 0;
     free(scratch);
     return rc;
 }

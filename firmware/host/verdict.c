@@ -40,8 +40,7 @@ void nte_verdict_add(nte_verdict_acc_t* acc, double t_s, double innovation_n, ui
     }
 }
 
-size_t nte_verdict_rest_noise(const double* depth_mm, const double* force_n, size_t n,
-                              double* sd_n)
+size_t nte_verdict_rest_noise(const double* depth_mm, const double* force_n, size_t n, double* sd_n)
 {
     size_t m = 0U;
     while ((m < n) && (fabs(depth_mm[m] - depth_mm[0]) <= NTE_VERDICT_REST_DEPTH_MM)) {
@@ -82,33 +81,42 @@ int nte_verdict_text(const nte_verdict_acc_t* acc, const nte_verdict_opts_t* opt
 {
     char robust[128] = "";
     if (opts->robust != 0) {
-        (void)snprintf(robust, sizeof robust, "; robust refinement: confidence %.3g, %s",
-                       acc->last_confidence,
-                       ((acc->last_status & NTE_STATUS_CONVERGED) != 0U) ? "converged"
-                                                                         : "not converged");
+        (void)snprintf(
+            robust, sizeof robust, "; robust refinement: confidence %.3g, %s", acc->last_confidence,
+            ((acc->last_status & NTE_STATUS_CONVERGED) != 0U) ? "converged" : "not converged");
     }
     size_t o = 0U;
     warning[0] = '\0';
     if (opts->predict_only != 0) {
-        return put(ls, &o, snprintf(line, ls, "verdict: predict-only, the force was not "
-                                          "read: no verdict%s", robust));
+        return put(ls, &o,
+                   snprintf(line, ls,
+                            "verdict: predict-only, the force was not "
+                            "read: no verdict%s",
+                            robust));
     }
     if (acc->inside == 0U) {
-        return put(ls, &o, snprintf(line, ls, "verdict: no sample in tissue: no "
-                                          "verdict%s", robust));
+        return put(ls, &o,
+                   snprintf(line, ls,
+                            "verdict: no sample in tissue: no "
+                            "verdict%s",
+                            robust));
     }
     const double r_n = sqrt(acc->sum_sq / (double)acc->inside);
     const double gated = (100.0 * (double)acc->gated) / (double)acc->inside;
     if (isnan(opts->noise_n)) {
-        return put(ls, &o, snprintf(line, ls, "verdict: innovation RMS %.3g mN; gated "
-                                          "%.1f %% of updates; noise unknown (no rest before "
-                                          "the stage moves): give --noise N%s", 1000.0 * r_n,
-                                          gated, robust));
+        return put(ls, &o,
+                   snprintf(line, ls,
+                            "verdict: innovation RMS %.3g mN; gated "
+                            "%.1f %% of updates; noise unknown (no rest before "
+                            "the stage moves): give --noise N%s",
+                            1000.0 * r_n, gated, robust));
     }
     const double k = r_n / opts->noise_n;
-    if (put(ls, &o, snprintf(line, ls, "verdict: innovation RMS %.3g mN = %.1fx the "
-                                   "noise (%.3g mN, ", 1000.0 * r_n, k,
-                                   1000.0 * opts->noise_n)) != 0) {
+    if (put(ls, &o,
+            snprintf(line, ls,
+                     "verdict: innovation RMS %.3g mN = %.1fx the "
+                     "noise (%.3g mN, ",
+                     1000.0 * r_n, k, 1000.0 * opts->noise_n)) != 0) {
         return -1;
     }
     const int w = (opts->rest_n == 0U)
@@ -119,9 +127,12 @@ int nte_verdict_text(const nte_verdict_acc_t* acc, const nte_verdict_opts_t* opt
         return -1;
     }
     const int c = (k <= NTE_VERDICT_FOLLOWS_FACTOR)
-                      ? snprintf(line + o, ls - o, "); gated %.1f %% of updates; the model "
-                                 "follows this file%s", gated, robust)
-                      : snprintf(line + o, ls - o, "); gated %.1f %% of updates; the model does "
+                      ? snprintf(line + o, ls - o,
+                                 "); gated %.1f %% of updates; the model "
+                                 "follows this file%s",
+                                 gated, robust)
+                      : snprintf(line + o, ls - o,
+                                 "); gated %.1f %% of updates; the model does "
                                  "not fit this file (%.1fx the noise): see nte-discrepancy%s",
                                  gated, k, robust);
     if (put(ls, &o, c) != 0) {
@@ -130,10 +141,12 @@ int nte_verdict_text(const nte_verdict_acc_t* acc, const nte_verdict_opts_t* opt
     const double k2 = sqrt(acc->early_sum_sq / (double)acc->early) / opts->noise_n;
     if (k2 > NTE_VERDICT_START_FACTOR) {
         size_t p = 0U;
-        return put(ws, &p, snprintf(warning, ws, "warning: the first %g s in tissue "
-                                             "are %.0fx the noise off the start: set it with "
-                                             "--preset, --start or --config",
-                                             NTE_VERDICT_START_WINDOW_S, k2));
+        return put(ws, &p,
+                   snprintf(warning, ws,
+                            "warning: the first %g s in tissue "
+                            "are %.0fx the noise off the start: set it with "
+                            "--preset, --start or --config",
+                            NTE_VERDICT_START_WINDOW_S, k2));
     }
     return 0;
 }

@@ -13,13 +13,13 @@
 /** The in-tissue samples seen so far (those without INIT, REJECTED, OUT_OF_TISSUE and
  *  PREDICT_ONLY), fed one sample at a time in order. */
 typedef struct nte_verdict_acc_t {
-    size_t inside;        /**< in-tissue samples */
-    size_t gated;         /**< of them with NTE_STATUS_GATED */
-    double sum_sq;        /**< sum of their innovation^2, N^2 */
-    double t_first;       /**< the first one's time, s */
-    size_t early;         /**< of them within NTE_VERDICT_START_WINDOW_S of the first */
-    double early_sum_sq;  /**< their innovation^2 summed, N^2 */
-    uint32_t last_status; /**< the last sample's status (any sample) */
+    size_t inside;          /**< in-tissue samples */
+    size_t gated;           /**< of them with NTE_STATUS_GATED */
+    double sum_sq;          /**< sum of their innovation^2, N^2 */
+    double t_first;         /**< the first one's time, s */
+    size_t early;           /**< of them within NTE_VERDICT_START_WINDOW_S of the first */
+    double early_sum_sq;    /**< their innovation^2 summed, N^2 */
+    uint32_t last_status;   /**< the last sample's status (any sample) */
     double last_confidence; /**< the last sample's confidence (the robust estimator's) */
 } nte_verdict_acc_t;
 
@@ -36,10 +36,10 @@ size_t nte_verdict_rest_noise(const double* depth_mm, const double* force_n, siz
 
 /** What to judge by: the noise (N) and its source, which form, the robust suffix. */
 typedef struct nte_verdict_opts_t {
-    double noise_n;    /**< given by --noise, else measured at rest; NaN: unknown */
-    size_t rest_n;     /**< 0: noise_n given by --noise; else the samples it was measured on */
-    int predict_only;  /**< the force was not read */
-    int robust;        /**< append the robust refinement's confidence and convergence */
+    double noise_n;   /**< given by --noise, else measured at rest; NaN: unknown */
+    size_t rest_n;    /**< 0: noise_n given by --noise; else the samples it was measured on */
+    int predict_only; /**< the force was not read */
+    int robust;       /**< append the robust refinement's confidence and convergence */
 } nte_verdict_opts_t;
 
 /** The verdict line (stdout, no newline) and the start's warning (stderr, no newline; empty

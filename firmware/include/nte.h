@@ -282,8 +282,8 @@ typedef float nte_real_t;
 #ifndef NTE_ROBUST_BUFFER_LEN
 #define NTE_ROBUST_BUFFER_LEN 96
 #endif
-#if (NTE_ROBUST_BUFFER_LEN != 0) &&                                                          \
-    ((NTE_ROBUST_BUFFER_LEN < 2) || (NTE_ROBUST_BUFFER_LEN > 4096) ||                        \
+#if (NTE_ROBUST_BUFFER_LEN != 0) &&                                   \
+    ((NTE_ROBUST_BUFFER_LEN < 2) || (NTE_ROBUST_BUFFER_LEN > 4096) || \
      ((NTE_ROBUST_BUFFER_LEN % 2) != 0))
 #error "NTE_ROBUST_BUFFER_LEN must be 0 (no robust estimator) or even in 2..4096"
 #endif
@@ -391,6 +391,8 @@ typedef enum nte_err_t {
 } nte_err_t;
 
 /* Status bits of one sample (same values as reference_py/bank.py STATUS_*). */
+/* a hand-aligned table: clang-format would split the #defines with multi-line comments */
+/* clang-format off */
 #define NTE_STATUS_INIT (1U << 0U)            /**< first sample after init/reset: no prediction */
 #define NTE_STATUS_REJECTED (1U << 1U)        /**< sample invalid and ignored; outputs held */
 #define NTE_STATUS_GATED (1U << 2U)           /**< a filter's innovation failed the gate */
@@ -428,6 +430,7 @@ typedef enum nte_err_t {
                                                 sample.force_n was not read (THE
                                                 PREDICT-ONLY MODE above); set on rejected
                                                 samples too while the mode is on */
+/* clang-format on */
 
 /* Causes of a rejected sample (same values as reference_py/bank.py REJECT_*). */
 #define NTE_REJECT_NONFINITE 0 /**< depth, velocity or force NaN or infinite */
@@ -439,11 +442,11 @@ typedef enum nte_err_t {
  *  application may also clear them itself at any time (plain fields). */
 typedef struct nte_counters_t {
     uint32_t rejected[NTE_REJECT_CAUSES]; /**< rejected samples, by NTE_REJECT_* cause */
-    uint32_t gated;                        /**< filter updates skipped by the innovation gate */
-    uint32_t filter_resets;                /**< filter resets (covariance lost definiteness) */
-    uint32_t gaps;                         /**< samples after a gap longer than dt_max_s */
-    uint32_t diverged;                     /**< NTE_STATUS_DIVERGED events: filters and
-                                                    outputs reset out of their range */
+    uint32_t gated;                       /**< filter updates skipped by the innovation gate */
+    uint32_t filter_resets;               /**< filter resets (covariance lost definiteness) */
+    uint32_t gaps;                        /**< samples after a gap longer than dt_max_s */
+    uint32_t diverged;                    /**< NTE_STATUS_DIVERGED events: filters and
+                                                   outputs reset out of their range */
 } nte_counters_t;
 
 /* ---------------------------------------------------------------------------------------- */
@@ -464,11 +467,11 @@ typedef enum nte_estimator_t {
  *  brackets, set by nte_config_default / nte_config_paper).  Checked by nte_init only when
  *  cfg.estimator is nte_estimator_robust. */
 typedef struct nte_robust_config_t {
-    int32_t buffer_len;     /**< [96] decimated samples kept per insertion, even,
-                                 4..min(4096, NTE_ROBUST_BUFFER_LEN) */
-    int32_t fit_substeps;   /**< [2] RK3 sub-steps between buffer entries, 1..16 */
-    int32_t fit_iterations; /**< [8] LM iterations per start, 1..200 */
-    int32_t min_entries;    /**< [24] a shorter insertion is not refined, 2..buffer_len */
+    int32_t buffer_len;              /**< [96] decimated samples kept per insertion, even,
+                                          4..min(4096, NTE_ROBUST_BUFFER_LEN) */
+    int32_t fit_substeps;            /**< [2] RK3 sub-steps between buffer entries, 1..16 */
+    int32_t fit_iterations;          /**< [8] LM iterations per start, 1..200 */
+    int32_t min_entries;             /**< [24] a shorter insertion is not refined, 2..buffer_len */
     nte_real_t restart_p0_u;         /**< [0.01] var(u) of the bank after a restart, log^2,
                                           > 0, <= 100 */
     nte_real_t lm_lambda0;           /**< [0.01] initial LM damping, > 0 */
@@ -524,57 +527,57 @@ typedef struct nte_layer_set_t {
  * reference's float64 value rounded to nte_real_t.
  */
 typedef struct nte_config_t {
-    int32_t model;              /**< [argument] 1 (Model I), 2 (Model II) or 3 (Model III) */
-    nte_schedule_t schedule;    /**< [argument] nte_schedule_all or _rotate */
-    int32_t substeps;           /**< [1] RK3 sub-steps per sample, 1..16 (cost linear) */
-    int32_t gate_reopen_after;  /**< [10; Model III 1] after this many gated updates in a row
-                                     accept one, 1..1000 (Model III: a lasting change such as
-                                     a tear passes after one refused sample) */
-    bool sign_inflation;        /**< [true] inflate R where the smooth sign may be wrong */
-    bool predict_only;          /**< [false] start in predict-only mode: the model alone
-                                     (sensorless prediction, the paper's atlas) from the
-                                     nominal values; every filter predicts, none updates,
-                                     z and the memories propagate and sample.force_n is
-                                     not read (THE PREDICT-ONLY MODE above; switch it at
-                                     run time with nte_set_predict_only, which writes this
-                                     field).  Sits in sign_inflation's padding: no size
-                                     change */
-    nte_real_t eps_mm_s;        /**< [0.5] smooth-sign width, s(v) = tanh(v/eps), mm/s, > 0 */
-    nte_real_t beta0;           /**< [0.0255] Model I's fixed beta, > 0 (Model II ignores it) */
-    nte_real_t r_n2;            /**< [4e-6] measurement noise variance, N^2, > 0 */
-    nte_real_t q_z;             /**< [1e-8] process noise of z per sample, >= 0 */
+    int32_t model;             /**< [argument] 1 (Model I), 2 (Model II) or 3 (Model III) */
+    nte_schedule_t schedule;   /**< [argument] nte_schedule_all or _rotate */
+    int32_t substeps;          /**< [1] RK3 sub-steps per sample, 1..16 (cost linear) */
+    int32_t gate_reopen_after; /**< [10; Model III 1] after this many gated updates in a row
+                                    accept one, 1..1000 (Model III: a lasting change such as
+                                    a tear passes after one refused sample) */
+    bool sign_inflation;       /**< [true] inflate R where the smooth sign may be wrong */
+    bool predict_only;         /**< [false] start in predict-only mode: the model alone
+                                    (sensorless prediction, the paper's atlas) from the
+                                    nominal values; every filter predicts, none updates,
+                                    z and the memories propagate and sample.force_n is
+                                    not read (THE PREDICT-ONLY MODE above; switch it at
+                                    run time with nte_set_predict_only, which writes this
+                                    field).  Sits in sign_inflation's padding: no size
+                                    change */
+    nte_real_t eps_mm_s;       /**< [0.5] smooth-sign width, s(v) = tanh(v/eps), mm/s, > 0 */
+    nte_real_t beta0;          /**< [0.0255] Model I's fixed beta, > 0 (Model II ignores it) */
+    nte_real_t r_n2;           /**< [4e-6] measurement noise variance, N^2, > 0 */
+    nte_real_t q_z;            /**< [1e-8] process noise of z per sample, >= 0 */
     nte_real_t q_u[NTE_PARAM_COUNT]; /**< [NTE_Q_U_USE_DEFAULT] per-sample variance of
                                           each u, log^2, >= 0, or negative: q_u_default */
-    nte_real_t q_u_default;     /**< [2e-7] variance of u for defaulted entries, >= 0 */
-    nte_real_t p0_z;            /**< [1e-6] initial variance of z, > 0 */
-    nte_real_t p0_u;            /**< [0.03] initial variance of every u, log^2, > 0, <= 100 */
-    nte_real_t gate_sigma;      /**< [12] innovation gate in standard deviations, > 0; the gate
-                                     compares NIS with gate_sigma^2 computed in nte_real_t */
-    nte_real_t u_max;           /**< [3.9] |u| clip, log units (3.9 = factor 50), > 0, <= 10 */
-    nte_real_t var_floor_z;     /**< [1e-12] lower bound of var(z), > 0 */
-    nte_real_t var_floor_u;     /**< [1e-10] lower bound of var(u), log^2, > 0 */
-    nte_real_t v_still_mm_s;    /**< [1e-3] |v| below: a dwell (no sign inflation), mm/s, >= 0 */
-    nte_real_t dt_max_s;        /**< [0.5] a longer gap restarts z at steady state, s, > 0 */
-    nte_real_t depth_min_mm;    /**< [-1] accepted depth range, mm, finite, min <= max */
-    nte_real_t depth_max_mm;    /**< [500] > 0 */
-    nte_real_t speed_max_mm_s;  /**< [500] accepted |velocity|, mm/s, > 0 */
-    nte_real_t force_max_n;     /**< [50] accepted |force| and the physical range of every
-                                     predicted and published force, N, > 0 */
+    nte_real_t q_u_default;          /**< [2e-7] variance of u for defaulted entries, >= 0 */
+    nte_real_t p0_z;                 /**< [1e-6] initial variance of z, > 0 */
+    nte_real_t p0_u;                 /**< [0.03] initial variance of every u, log^2, > 0, <= 100 */
+    nte_real_t gate_sigma;           /**< [12] innovation gate in standard deviations, > 0; the gate
+                                          compares NIS with gate_sigma^2 computed in nte_real_t */
+    nte_real_t u_max;                /**< [3.9] |u| clip, log units (3.9 = factor 50), > 0, <= 10 */
+    nte_real_t var_floor_z;          /**< [1e-12] lower bound of var(z), > 0 */
+    nte_real_t var_floor_u;          /**< [1e-10] lower bound of var(u), log^2, > 0 */
+    nte_real_t v_still_mm_s;   /**< [1e-3] |v| below: a dwell (no sign inflation), mm/s, >= 0 */
+    nte_real_t dt_max_s;       /**< [0.5] a longer gap restarts z at steady state, s, > 0 */
+    nte_real_t depth_min_mm;   /**< [-1] accepted depth range, mm, finite, min <= max */
+    nte_real_t depth_max_mm;   /**< [500] > 0 */
+    nte_real_t speed_max_mm_s; /**< [500] accepted |velocity|, mm/s, > 0 */
+    nte_real_t force_max_n;    /**< [50] accepted |force| and the physical range of every
+                                    predicted and published force, N, > 0 */
     /* Model III (reference_py/MODEL.md §3b); Models I and II ignore these fields */
-    bool layers;                /**< [true] Model III: the layer index (a rupture detector on
-                                     filter 1's innovations; THE LAYER INDEX above) */
-    bool direction_memory;      /**< [true] the direction state s (travelled distance, Dahl)
-                                     replaces tanh(v/eps); no sign inflation of R then */
-    bool relaxation;            /**< [true] relaxation branches take sum g_i m_i off the
-                                     elastic force */
-    int32_t relax_branches;     /**< [2] 1: the fast branch only; 2: fast and slow, 1..2 */
-    nte_real_t presliding_mm;   /**< [2.5] starting turn-over length delta of s, mm, > 0,
-                                     <= 1000; with the direction memory on, filter 2
-                                     identifies delta from the turn-overs */
-    nte_real_t tau_fast_s;      /**< [0.3] time constant of the fast branch, s, > 0, <= 3600 */
-    nte_real_t tau_slow_s;      /**< [3] time constant of the slow branch, s, > 0, <= 3600 */
-    uint32_t layer_sets;        /**< [0] Model III: layer sets in use, 0..NTE_LAYER_SETS_MAX
-                                     (THE LAYER SETS above; --export-config writes them) */
+    bool layers;              /**< [true] Model III: the layer index (a rupture detector on
+                                   filter 1's innovations; THE LAYER INDEX above) */
+    bool direction_memory;    /**< [true] the direction state s (travelled distance, Dahl)
+                                   replaces tanh(v/eps); no sign inflation of R then */
+    bool relaxation;          /**< [true] relaxation branches take sum g_i m_i off the
+                                   elastic force */
+    int32_t relax_branches;   /**< [2] 1: the fast branch only; 2: fast and slow, 1..2 */
+    nte_real_t presliding_mm; /**< [2.5] starting turn-over length delta of s, mm, > 0,
+                                   <= 1000; with the direction memory on, filter 2
+                                   identifies delta from the turn-overs */
+    nte_real_t tau_fast_s;    /**< [0.3] time constant of the fast branch, s, > 0, <= 3600 */
+    nte_real_t tau_slow_s;    /**< [3] time constant of the slow branch, s, > 0, <= 3600 */
+    uint32_t layer_sets;      /**< [0] Model III: layer sets in use, 0..NTE_LAYER_SETS_MAX
+                                   (THE LAYER SETS above; --export-config writes them) */
     nte_layer_set_t layer_set[NTE_LAYER_SETS_MAX]; /**< [none] the layers below the first,
                                                         in depth order */
     /** [preset paper-10mms; g_fast 0.15, g_slow 0.25] Nominal (starting) physical values,
@@ -587,8 +590,8 @@ typedef struct nte_config_t {
      *  from nominal f1 and f2".  Give it explicitly (computed in double, then rounded) to
      *  match a reference that starts from double values. */
     nte_real_t f1_excess;
-    nte_estimator_t estimator;  /**< [nte_estimator_bank] or nte_estimator_robust */
-    nte_robust_config_t robust; /**< [see above] the robust estimator's tuning */
+    nte_estimator_t estimator;    /**< [nte_estimator_bank] or nte_estimator_robust */
+    nte_robust_config_t robust;   /**< [see above] the robust estimator's tuning */
     nte_contact_config_t contact; /**< [see above; off] the surface and tare front end */
 } nte_config_t;
 
@@ -653,17 +656,17 @@ typedef struct nte_theta_t {
 /** The robust estimator's state and workspace (internal; see the top of this file). */
 typedef struct nte_robust_t {
     nte_real_t buf[4][NTE_ROBUST_BUFFER_LEN]; /**< t - t0 s, depth mm, velocity mm/s, force N */
-    int64_t t0_us;          /**< time of the buffer's first entry */
-    int64_t anchor_t_us;    /**< the latest accepted sample at the surface ... */
-    nte_real_t anchor[3];   /**< ... its depth, velocity, force */
-    uint32_t count;         /**< entries in the buffer */
-    uint32_t decim;         /**< keep every decim-th sample */
-    uint32_t phase;         /**< samples seen since the buffer start */
-    bool inside;            /**< needle in the tissue */
+    int64_t t0_us;                            /**< time of the buffer's first entry */
+    int64_t anchor_t_us;                      /**< the latest accepted sample at the surface ... */
+    nte_real_t anchor[3];                     /**< ... its depth, velocity, force */
+    uint32_t count;                           /**< entries in the buffer */
+    uint32_t decim;                           /**< keep every decim-th sample */
+    uint32_t phase;                           /**< samples seen since the buffer start */
+    bool inside;                              /**< needle in the tissue */
     bool has_refined;
     bool converged;
-    bool tainted;           /**< predict-only mode was on during this insertion: not
-                                 recorded, no refinement at its end */
+    bool tainted; /**< predict-only mode was on during this insertion: not
+                       recorded, no refinement at its end */
     nte_real_t confidence;
     nte_real_t prev_theta[NTE_PARAM_COUNT]; /**< start (b) of the next refinement */
     /* Levenberg-Marquardt workspace: J^T J and J^T r at the current and the trial point */
@@ -686,13 +689,13 @@ typedef struct nte_layers_t {
 /** The contact front end's state (internal; reference_py/contact.py ContactFrontEnd). */
 typedef struct nte_contact_t {
     bool in_contact;
-    int32_t n;      /**< samples learned since the last re-arm (at most tare_samples) */
-    int32_t run;    /**< consecutive samples above the threshold */
-    int32_t seg_n;  /**< samples in the onset segment */
+    int32_t n;     /**< samples learned since the last re-arm (at most tare_samples) */
+    int32_t run;   /**< consecutive samples above the threshold */
+    int32_t seg_n; /**< samples in the onset segment */
     nte_real_t tare;
-    nte_real_t ms;    /**< mean square of the force about the tare, N^2 */
-    nte_real_t cusum; /**< one-sided CUSUM, noise standard deviations */
-    nte_real_t x0;    /**< the onset segment: its first stage position, mm ... */
+    nte_real_t ms;               /**< mean square of the force about the tare, N^2 */
+    nte_real_t cusum;            /**< one-sided CUSUM, noise standard deviations */
+    nte_real_t x0;               /**< the onset segment: its first stage position, mm ... */
     nte_real_t sh, se, shh, she; /**< ... and its sums of h, e, h^2, h e (h = x - x0) */
     nte_real_t surface;          /**< stage position, mm; NaN until found */
 } nte_contact_t;

@@ -19,11 +19,12 @@
 #define NTE_NODE_MODELS 3
 
 static const char* const nte_node_event_names[NTE_NODE_EVENT_COUNT] = {
-    "wrong_dlc",      "unknown_id",    "bad_crc",        "counter_invalid", "counter_repeated",
-    "counter_skipped", "out_of_range", "time_backwards", "queue_overflow",  "send_failed",
-    "command_refused", "stale",        "receive_error",  "encode_error",    "time_jump_dropped",
-    "time_resync",     "command_stale", "command_rate_limited", "sensor_stuck",
-    "sensor_saturated", "setting_refused"};
+    "wrong_dlc",        "unknown_id",           "bad_crc",           "counter_invalid",
+    "counter_repeated", "counter_skipped",      "out_of_range",      "time_backwards",
+    "queue_overflow",   "send_failed",          "command_refused",   "stale",
+    "receive_error",    "encode_error",         "time_jump_dropped", "time_resync",
+    "command_stale",    "command_rate_limited", "sensor_stuck",      "sensor_saturated",
+    "setting_refused"};
 
 /* Signed difference a - b of two unwrapped tick counts (they wrap modulo 2^32). */
 static int32_t nte_node_tdiff(uint32_t a, uint32_t b)
@@ -169,8 +170,7 @@ static nte_node_err_t nte_node_check(const nte_node_config_t* cfg, const nte_nod
         (cfg->depth_timeout_us > 3000000u) || (cfg->heartbeat_period_us < 1000u) ||
         (cfg->heartbeat_period_us > 10000000u) || (cfg->params_per_step < 1u) ||
         (cfg->params_per_step > (uint32_t)NTE_FRAMES_PARAM_COUNT_MODEL_II) ||
-        (cfg->rx_budget < 1u) ||
-        (cfg->rx_budget > 65535u) || (cfg->resync_gap_us < 1000u) ||
+        (cfg->rx_budget < 1u) || (cfg->rx_budget > 65535u) || (cfg->resync_gap_us < 1000u) ||
         (cfg->resync_gap_us > 3000000u) || (cfg->command_interval_us > 10000000u)) {
         return nte_node_err_bad_config;
     }
@@ -207,9 +207,9 @@ nte_node_err_t nte_node_init(nte_node_t* self, const nte_node_config_t* cfg,
     static const nte_frames_kind_t in_kinds[NTE_NODE_INPUTS] = {
         nte_frames_kind_depth, nte_frames_kind_force, nte_frames_kind_command,
         nte_frames_kind_setting};
-    static const nte_frames_kind_t out_kinds[4] = {
-        nte_frames_kind_estimate, nte_frames_kind_params, nte_frames_kind_heartbeat,
-        nte_frames_kind_contact};
+    static const nte_frames_kind_t out_kinds[4] = {nte_frames_kind_estimate, nte_frames_kind_params,
+                                                   nte_frames_kind_heartbeat,
+                                                   nte_frames_kind_contact};
     if ((self == NULL) || (cfg == NULL) || (port == NULL)) {
         return nte_node_err_null;
     }
@@ -243,20 +243,11 @@ uint32_t nte_node_input_id(const nte_node_t* self, uint32_t kind)
     return self->cfg.base_id + offsets[(kind < NTE_NODE_INPUTS) ? kind : 0u];
 }
 
-int32_t nte_node_model(const nte_node_t* self)
-{
-    return self->model;
-}
+int32_t nte_node_model(const nte_node_t* self) { return self->model; }
 
-nte_node_state_t nte_node_state(const nte_node_t* self)
-{
-    return self->state;
-}
+nte_node_state_t nte_node_state(const nte_node_t* self) { return self->state; }
 
-uint64_t nte_node_next_deadline_us(const nte_node_t* self)
-{
-    return self->next_heartbeat_us;
-}
+uint64_t nte_node_next_deadline_us(const nte_node_t* self) { return self->next_heartbeat_us; }
 
 const char* nte_node_event_name(uint32_t event)
 {
@@ -344,8 +335,7 @@ static void nte_node_publish_params(nte_node_t* self)
         p.value = value[p.index];
         p.std = sd[p.index];
         self->param_next = (uint8_t)((self->param_next + 1u) % count);
-        if (nte_frames_encode_param(&p, &self->tx[NTE_NODE_OUT_PARAMS], data) !=
-            nte_frames_ok) {
+        if (nte_frames_encode_param(&p, &self->tx[NTE_NODE_OUT_PARAMS], data) != nte_frames_ok) {
             nte_node_count(self, nte_node_ev_encode_error);
             continue;
         }
@@ -411,8 +401,7 @@ static void nte_node_publish_contact(nte_node_t* self, uint32_t t, const nte_out
     c.surface_mm = c.surface_valid ? (float)o->surface_mm : 0.0f;
     c.tare_n = (float)o->tare_n;
     c.layer = (uint8_t)o->layer;
-    const bool changed = !self->contact_sent ||
-                         (c.contact_state != self->contact.contact_state) ||
+    const bool changed = !self->contact_sent || (c.contact_state != self->contact.contact_state) ||
                          (c.layer != self->contact.layer) ||
                          (c.surface_valid != self->contact.surface_valid) ||
                          (c.surface_mm < self->contact.surface_mm) ||
@@ -878,8 +867,8 @@ static void nte_node_on_command(nte_node_t* self, const nte_node_frame_t* fr)
     nte_frames_command_t c;
     nte_e2e_result_t e2e = nte_e2e_ok;
     uint8_t lost = 0u;
-    const nte_frames_err_t err = nte_frames_decode_command(
-        &self->rx[NTE_NODE_IN_COMMAND], fr->data, fr->len, &c, &e2e, &lost);
+    const nte_frames_err_t err = nte_frames_decode_command(&self->rx[NTE_NODE_IN_COMMAND], fr->data,
+                                                           fr->len, &c, &e2e, &lost);
     if (!nte_node_decoded(self, err, e2e, lost)) {
         return;
     }
@@ -902,7 +891,7 @@ static void nte_node_on_command(nte_node_t* self, const nte_node_frame_t* fr)
     }
     if (c.estimator_sel != NTE_FRAMES_ESTIMATOR_KEEP) {
         estimator = (c.estimator_sel == NTE_FRAMES_ESTIMATOR_ROBUST) ? nte_estimator_robust
-                                                                    : nte_estimator_bank;
+                                                                     : nte_estimator_bank;
     }
     const bool restart = (model != self->model) || (estimator != self->estimator);
     /* freeze: the library has no way to hold the parameters; a restart or reset needs the
@@ -959,8 +948,8 @@ static void nte_node_on_setting(nte_node_t* self, const nte_node_frame_t* fr)
     nte_e2e_result_t e2e = nte_e2e_ok;
     uint8_t lost = 0u;
     nte_node_settings_t* st = &self->settings;
-    const nte_frames_err_t err = nte_frames_decode_setting(
-        &self->rx[NTE_NODE_IN_SETTING], fr->data, fr->len, &s, &e2e, &lost);
+    const nte_frames_err_t err = nte_frames_decode_setting(&self->rx[NTE_NODE_IN_SETTING], fr->data,
+                                                           fr->len, &s, &e2e, &lost);
     if (!nte_node_decoded(self, err, e2e, lost)) {
         st->open = false; /* an item may be missing: the transfer cannot complete */
         return;

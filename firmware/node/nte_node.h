@@ -211,10 +211,10 @@ extern "C" {
 
 /** Classic CAN frame as the port passes it. */
 typedef struct nte_node_frame_t {
-    uint32_t id;      /**< 11-bit (or 29-bit if `extended`) identifier */
-    uint8_t len;      /**< data length, 0..8 */
-    bool extended;    /**< 29-bit identifier (never one of the node's) */
-    bool remote;      /**< remote request (never one of the node's) */
+    uint32_t id;   /**< 11-bit (or 29-bit if `extended`) identifier */
+    uint8_t len;   /**< data length, 0..8 */
+    bool extended; /**< 29-bit identifier (never one of the node's) */
+    bool remote;   /**< remote request (never one of the node's) */
     uint8_t data[8];
 } nte_node_frame_t;
 
@@ -228,38 +228,38 @@ typedef struct nte_node_port_t {
 
 /** Events counted by the node (nte_node_counters_t.events[]). */
 typedef enum nte_node_event_t {
-    nte_node_ev_wrong_dlc = 0,        /**< input frame whose length is not 8: dropped */
-    nte_node_ev_unknown_id = 1,       /**< id none of the node's inputs, extended or remote */
-    nte_node_ev_bad_crc = 2,          /**< E2E CRC wrong: dropped */
-    nte_node_ev_counter_invalid = 3,  /**< alive counter 15 (never sent): dropped */
-    nte_node_ev_counter_repeated = 4, /**< alive counter equal to the previous one: dropped */
-    nte_node_ev_counter_skipped = 5,  /**< counter jumped (frames lost upstream): ACCEPTED;
-                                           the number lost is in frames_lost */
-    nte_node_ev_out_of_range = 6,     /**< E2E-valid frame with a raw value outside the DBC
-                                           range, or a command selector undefined: dropped */
-    nte_node_ev_time_backwards = 7,   /**< sample not later than the previous one of its stream */
-    nte_node_ev_queue_overflow = 8,   /**< force frame dropped: force queue full */
-    nte_node_ev_send_failed = 9,      /**< port send() refused an output frame: dropped */
-    nte_node_ev_command_refused = 10, /**< valid command the node may not carry out (model,
-                                           estimator or reset while in tissue; freeze; Model
-                                           III with the robust estimator): ignored */
-    nte_node_ev_stale = 11,           /**< force sample without recent depth: estimate held */
-    nte_node_ev_receive_error = 12,   /**< port receive() reported an error */
-    nte_node_ev_encode_error = 13,    /**< an output could not be encoded (non-finite): the
-                                           Estimate is sent with Fault set instead */
+    nte_node_ev_wrong_dlc = 0,          /**< input frame whose length is not 8: dropped */
+    nte_node_ev_unknown_id = 1,         /**< id none of the node's inputs, extended or remote */
+    nte_node_ev_bad_crc = 2,            /**< E2E CRC wrong: dropped */
+    nte_node_ev_counter_invalid = 3,    /**< alive counter 15 (never sent): dropped */
+    nte_node_ev_counter_repeated = 4,   /**< alive counter equal to the previous one: dropped */
+    nte_node_ev_counter_skipped = 5,    /**< counter jumped (frames lost upstream): ACCEPTED;
+                                             the number lost is in frames_lost */
+    nte_node_ev_out_of_range = 6,       /**< E2E-valid frame with a raw value outside the DBC
+                                             range, or a command selector undefined: dropped */
+    nte_node_ev_time_backwards = 7,     /**< sample not later than the previous one of its stream */
+    nte_node_ev_queue_overflow = 8,     /**< force frame dropped: force queue full */
+    nte_node_ev_send_failed = 9,        /**< port send() refused an output frame: dropped */
+    nte_node_ev_command_refused = 10,   /**< valid command the node may not carry out (model,
+                                             estimator or reset while in tissue; freeze; Model
+                                             III with the robust estimator): ignored */
+    nte_node_ev_stale = 11,             /**< force sample without recent depth: estimate held */
+    nte_node_ev_receive_error = 12,     /**< port receive() reported an error */
+    nte_node_ev_encode_error = 13,      /**< an output could not be encoded (non-finite): the
+                                             Estimate is sent with Fault set instead */
     nte_node_ev_time_jump_dropped = 14, /**< sample held for a time jump and not confirmed by
                                            the next sample of its stream: dropped */
-    nte_node_ev_time_resync = 15,     /**< time jump confirmed: the stream resynchronised */
-    nte_node_ev_command_stale = 16,   /**< command whose counter is not the successor of the
-                                           last command's (replayed or after a loss): ignored */
+    nte_node_ev_time_resync = 15,       /**< time jump confirmed: the stream resynchronised */
+    nte_node_ev_command_stale = 16,     /**< command whose counter is not the successor of the
+                                             last command's (replayed or after a loss): ignored */
     nte_node_ev_command_rate_limited = 17, /**< command within command_interval_us of the last
                                            applied one: ignored */
-    nte_node_ev_sensor_stuck = 18,     /**< force reading judged stuck (SENSOR WATCH): not
-                                           read, predicted from the model */
-    nte_node_ev_sensor_saturated = 19, /**< force reading at the Force frame's limit (SENSOR
-                                           WATCH): not read, predicted from the model */
-    nte_node_ev_setting_refused = 20   /**< Setting frame not taken: the transfer breaks off
-                                           (SETTINGS) */
+    nte_node_ev_sensor_stuck = 18,         /**< force reading judged stuck (SENSOR WATCH): not
+                                               read, predicted from the model */
+    nte_node_ev_sensor_saturated = 19,     /**< force reading at the Force frame's limit (SENSOR
+                                               WATCH): not read, predicted from the model */
+    nte_node_ev_setting_refused = 20       /**< Setting frame not taken: the transfer breaks off
+                                               (SETTINGS) */
 } nte_node_event_t;
 #define NTE_NODE_EVENT_COUNT 21
 
@@ -335,13 +335,13 @@ typedef enum nte_node_err_t {
 
 /** Node state (as in the Heartbeat). */
 typedef enum nte_node_state_t {
-    nte_node_state_init = 0,    /**< no estimate yet (after start, reset or model change) */
+    nte_node_state_init = 0, /**< no estimate yet (after start, reset or model change) */
     nte_node_state_running = 1,
-    nte_node_state_fault = 2    /**< the last step was rejected by the estimator */
+    nte_node_state_fault = 2 /**< the last step was rejected by the estimator */
 } nte_node_state_t;
 
 typedef struct nte_node_depth_t {
-    uint32_t t;        /**< unwrapped sensor ticks (100 us) */
+    uint32_t t; /**< unwrapped sensor ticks (100 us) */
     float depth_mm;
     float velocity_mm_s;
 } nte_node_depth_t;
@@ -349,30 +349,30 @@ typedef struct nte_node_depth_t {
 typedef struct nte_node_force_t {
     uint32_t t;
     float force_n;
-    bool fault;        /**< SensorFault: processed in predict-only, force not read */
-    bool on_depth;     /**< not a force sample: a step on the depth stream at a depth
-                            sample's time (PREDICT-ONLY (c)) */
+    bool fault;    /**< SensorFault: processed in predict-only, force not read */
+    bool on_depth; /**< not a force sample: a step on the depth stream at a depth
+                        sample's time (PREDICT-ONLY (c)) */
 } nte_node_force_t;
 
 /** A sample held for a time jump, with the E2E state and clock it would commit. */
 typedef struct nte_node_pending_t {
     bool held;
-    uint32_t t;                /**< unwrapped against `clock` */
-    nte_frames_clock_t clock;  /**< the shared clock after this sample */
-    nte_e2e_rx_t rx;           /**< the stream's E2E state after this sample */
+    uint32_t t;               /**< unwrapped against `clock` */
+    nte_frames_clock_t clock; /**< the shared clock after this sample */
+    nte_e2e_rx_t rx;          /**< the stream's E2E state after this sample */
     nte_e2e_result_t e2e;
     uint8_t lost;
-    float a;                   /**< depth_mm or force_n */
-    float b;                   /**< velocity_mm_s (depth); force: 1 = SensorFault, 0 = not */
+    float a; /**< depth_mm or force_n */
+    float b; /**< velocity_mm_s (depth); force: 1 = SensorFault, 0 = not */
 } nte_node_pending_t;
 
 /** A configuration transfer in progress (SETTINGS). */
 typedef struct nte_node_settings_t {
-    bool open;          /**< BEGIN taken, no COMMIT or break yet */
-    bool unapplied;     /**< the configurations hold a transfer not applied */
-    uint8_t announced;  /**< value items BEGIN announced */
-    uint8_t received;   /**< value items taken */
-    uint64_t seen;      /**< bit i: item i taken (items 1..59) */
+    bool open;         /**< BEGIN taken, no COMMIT or break yet */
+    bool unapplied;    /**< the configurations hold a transfer not applied */
+    uint8_t announced; /**< value items BEGIN announced */
+    uint8_t received;  /**< value items taken */
+    uint64_t seen;     /**< bit i: item i taken (items 1..59) */
 } nte_node_settings_t;
 
 /** One node.  Every field except `counters` is private. */
@@ -383,12 +383,12 @@ typedef struct nte_node_t {
     int32_t model;
     nte_estimator_t estimator;
     bool have_command;
-    uint64_t last_command_us;     /* port clock of the last applied command */
-    nte_e2e_rx_t rx[4];           /* depth, force, command, setting */
-    nte_e2e_tx_t tx[4];           /* estimate, params, heartbeat, contact */
+    uint64_t last_command_us; /* port clock of the last applied command */
+    nte_e2e_rx_t rx[4];       /* depth, force, command, setting */
+    nte_e2e_tx_t tx[4];       /* estimate, params, heartbeat, contact */
     nte_frames_clock_t clock;
     nte_node_depth_t depth[NTE_NODE_DEPTH_HISTORY];
-    uint32_t depth_next;          /* ring write index */
+    uint32_t depth_next; /* ring write index */
     uint32_t depth_count;
     nte_node_force_t force[NTE_NODE_FORCE_QUEUE];
     uint32_t force_head;
@@ -400,16 +400,16 @@ typedef struct nte_node_t {
     uint32_t watch_run;
     float watch_depth_mm;
     nte_node_pending_t pending[2]; /* depth, force */
-    uint32_t last_force_t;        /* newest accepted force time (queued or processed) */
-    nte_frames_estimate_t last;   /* last published estimate values (held when stale) */
+    uint32_t last_force_t;         /* newest accepted force time (queued or processed) */
+    nte_frames_estimate_t last;    /* last published estimate values (held when stale) */
     uint8_t param_next;
     bool contact_sent;            /* a Contact frame was sent since the model started */
     uint32_t contact_t;           /* sensor ticks of the force sample of the last one */
     nte_frames_contact_t contact; /* its content */
     nte_node_state_t state;
-    bool force_cmd_model;         /* Command.ForceSource 2 in force (PREDICT-ONLY (a)) */
-    bool predicting;              /* the mode of the last step */
-    bool depth_stepped;           /* the last step was on a depth sample (PREDICT-ONLY (c)) */
+    bool force_cmd_model; /* Command.ForceSource 2 in force (PREDICT-ONLY (a)) */
+    bool predicting;      /* the mode of the last step */
+    bool depth_stepped;   /* the last step was on a depth sample (PREDICT-ONLY (c)) */
     bool have_step;
     uint32_t step_t;              /* sensor ticks of the last step */
     bool depth_since_force;       /* a depth sample came after the newest force sample ... */

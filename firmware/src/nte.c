@@ -14,8 +14,7 @@
 #include "nte_robust.h"
 
 static const char* const param_names[NTE_PARAM_COUNT] = {
-    "sigma0", "sigma1", "sigma2", "f1", "f2", "alpha", "beta", "g_fast", "g_slow",
-    "delta"};
+    "sigma0", "sigma1", "sigma2", "f1", "f2", "alpha", "beta", "g_fast", "g_slow", "delta"};
 
 const char* nte_param_name(const nte_param_id_t id)
 {
@@ -152,10 +151,7 @@ nte_err_t nte_set_predict_only(nte_t* self, const bool on)
     return nte_err_ok;
 }
 
-bool nte_predict_only(const nte_t* self)
-{
-    return (self != NULL) && self->cfg.predict_only;
-}
+bool nte_predict_only(const nte_t* self) { return (self != NULL) && self->cfg.predict_only; }
 
 size_t nte_get_params(const nte_t* self, nte_param_estimate_t* out, const size_t capacity)
 {

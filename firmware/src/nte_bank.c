@@ -16,12 +16,15 @@
  * bank.py filter_subsets drops those a configuration switches off, as subset_count does). */
 static const uint8_t subset_len[3][NTE_FILTER_COUNT] = {{2U, 2U, 2U}, {1U, 2U, 2U}, {3U, 3U, 2U}};
 static const uint8_t subsets[3][NTE_FILTER_COUNT][3] = {
-    {{nte_param_f2, nte_param_sigma0, 0U}, {nte_param_f1, nte_param_sigma1, 0U},
+    {{nte_param_f2, nte_param_sigma0, 0U},
+     {nte_param_f1, nte_param_sigma1, 0U},
      {nte_param_alpha, nte_param_sigma2, 0U}},
-    {{nte_param_sigma0, 0U, 0U}, {nte_param_f1, nte_param_sigma1, 0U},
+    {{nte_param_sigma0, 0U, 0U},
+     {nte_param_f1, nte_param_sigma1, 0U},
      {nte_param_beta, nte_param_sigma2, 0U}},
     {{nte_param_sigma0, nte_param_g_fast, nte_param_g_slow},
-     {nte_param_f1, nte_param_sigma1, nte_param_delta}, {nte_param_beta, nte_param_sigma2, 0U}}};
+     {nte_param_f1, nte_param_sigma1, nte_param_delta},
+     {nte_param_beta, nte_param_sigma2, 0U}}};
 /* reference MODEL_PARAMS: the identified parameters in output order; Model III's by its
  * relaxation branches in use (0, 1, 2), delta last (identified.identified_names) */
 static const uint8_t identified_len[3] = {6U, 5U, 5U};
@@ -276,14 +279,14 @@ typedef struct step_ctx_t {
     nte_real_t v;
     nte_real_t y;
     nte_real_t s;
-    nte_real_t s_du;    /* Model III: ds/du_delta (bank._direction) */
-    bool turned;        /* ... and whether the motion went against s since the surface */
+    nte_real_t s_du; /* Model III: ds/du_delta (bank._direction) */
+    bool turned;     /* ... and whether the motion went against s since the surface */
     nte_real_t z_prev;
     nte_real_t a_rel[2]; /* Model III: each relaxation branch's decay over the sample */
     bool surface;
     bool gap;
     bool rotate;
-    bool tear;          /* Model III: a layer tore at this sample (nte_layers_watch) */
+    bool tear; /* Model III: a layer tore at this sample (nte_layers_watch) */
 } step_ctx_t;
 
 /* ---- Model III (reference_py/MODEL.md §3b, JACOBIANS.md §7) ---- */
@@ -339,8 +342,8 @@ static void model3_exps(const nte_t* self, const bool dir, const size_t nr, cons
 static void direction(const nte_t* self, const nte_real_t dl, const nte_real_t E,
                       const nte_real_t adl, step_ctx_t* c)
 {
-    const nte_real_t sig =
-        (dl > NTE_C(0.0)) ? NTE_C(1.0) : ((dl < NTE_C(0.0)) ? NTE_C(-1.0) : NTE_C(0.0));
+    const nte_real_t sig = (dl > NTE_C(0.0)) ? NTE_C(1.0)
+                                             : ((dl < NTE_C(0.0)) ? NTE_C(-1.0) : NTE_C(0.0));
     c->s = sig + ((self->sdir - sig) * E);
     c->turned = self->turned || ((sig * self->sdir) < NTE_C(0.0));
     c->s_du = (E * self->sdir_du) + (c->turned ? (((self->sdir - sig) * E) * adl) : NTE_C(0.0));
@@ -363,20 +366,20 @@ typedef struct filter_out_t {
 
 /* One filter's working set at a running sample: its state (z, its u) and covariance. */
 typedef struct filter_work_t {
-    size_t n;                   /* 1 + the number of parameters of the filter */
-    const uint8_t* names;       /* its parameters (Table I) */
+    size_t n;                    /* 1 + the number of parameters of the filter */
+    const uint8_t* names;        /* its parameters (Table I) */
     nte_real_t x[NTE_EKF_N_MAX]; /* prior state */
-    nte_mat3_t P;               /* predicted covariance */
+    nte_mat3_t P;                /* predicted covariance */
     nte_real_t h[NTE_EKF_N_MAX]; /* measurement Jacobian at the prior */
     nte_real_t innovation;
     nte_real_t r_eff;
-    bool in_range;              /* the prior z and its force within their range (in_range) */
+    bool in_range; /* the prior z and its force within their range (in_range) */
 } filter_work_t;
 
 /* bank._predict: the prior state (z restarted at the surface or after a gap) and the predicted
  * covariance F P F^T + Q of filter i. */
-static void predict(nte_t* self, const step_ctx_t* c, const size_t i,
-                    const nte_rk3_result_t* pred, const nte_depth_terms_t* d, filter_work_t* w)
+static void predict(nte_t* self, const step_ctx_t* c, const size_t i, const nte_rk3_result_t* pred,
+                    const nte_depth_terms_t* d, filter_work_t* w)
 {
     const size_t na = w->n - 1U;
     /* out of tissue z is 0; after a gap it has relaxed to its steady state: either way the
@@ -494,8 +497,7 @@ static uint32_t update_and_guard(nte_t* self, const size_t i, const nte_depth_te
         }
     }
     /* a gate that refused too many samples in a row would lock the filter out: open it */
-    const bool open_gate =
-        (self->gated_run[i] >= (uint32_t)self->cfg.gate_reopen_after) || tear;
+    const bool open_gate = (self->gated_run[i] >= (uint32_t)self->cfg.gate_reopen_after) || tear;
     const nte_ekf_update_t upd = nte_ekf_joseph_update(n, xn, Pn, w->h, w->innovation, w->r_eff,
                                                        self->gate2, open_gate, fo->active);
     if (fo->active) {
@@ -515,8 +517,7 @@ static uint32_t update_and_guard(nte_t* self, const size_t i, const nte_depth_te
     /* a prior that is not positive definite (or a non-positive innovation variance) can still
      * yield a plausible-looking posterior: judge the filter on both */
     /* and a prior whose force left its physical range has diverged: z to its steady state */
-    const bool prior_ok =
-        nte_ekf_positive_definite(n, w->P) && (upd.s > NTE_C(0.0)) && w->in_range;
+    const bool prior_ok = nte_ekf_positive_definite(n, w->P) && (upd.s > NTE_C(0.0)) && w->in_range;
     nte_real_t z_ss = NTE_C(0.0);
     if (!w->in_range) {
         z_ss = nte_model_steady_state_z(&self->th, d);
@@ -618,7 +619,7 @@ static void enter_layer_sets(nte_t* self, const nte_real_t l, const bool surface
 }
 
 void nte_bank_advance(nte_t* self, const bool first, const nte_real_t dt, const nte_real_t l_in,
-                    const nte_real_t v, const nte_real_t y, nte_output_t* out)
+                      const nte_real_t v, const nte_real_t y, nte_output_t* out)
 {
     step_ctx_t c;
     (void)memset(&c, 0, sizeof c);
@@ -669,8 +670,8 @@ void nte_bank_advance(nte_t* self, const bool first, const nte_real_t dt, const 
             /* one prediction, with every identified parameter's sensitivity, serves all three */
             const uint8_t* ids = NULL;
             const size_t n_ids = identified_ids(self, &ids);
-            nte_model_rk3(&shared, &self->th, c.z_prev, c.l_prev, c.l, dt, self->cfg.substeps,
-                          ids, dynamic_count(ids, n_ids));
+            nte_model_rk3(&shared, &self->th, c.z_prev, c.l_prev, c.l, dt, self->cfg.substeps, ids,
+                          dynamic_count(ids, n_ids));
         }
         nte_real_t z_post = c.z_prev;
         for (size_t i = 0U; i < NTE_FILTER_COUNT; i++) {

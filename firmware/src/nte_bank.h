@@ -26,8 +26,7 @@ size_t nte_bank_identified(const nte_t* self, const uint8_t** ids);
  *  physical values): nominal = theta, ex_nominal = f1 - kappa (-f2) in nte_real_t, u = 0,
  *  every filter's P = P0 with var(u) = p0_u, gated runs cleared; z and the time line carry
  *  on.  Cost: 7 exp. */
-void nte_bank_restart_from(nte_t* self, const nte_real_t theta[NTE_PARAM_COUNT],
-                           nte_real_t p0_u);
+void nte_bank_restart_from(nte_t* self, const nte_real_t theta[NTE_PARAM_COUNT], nte_real_t p0_u);
 
 /** FilterBank.parameter_estimates: up to `capacity` identified parameters with their
  *  standard deviations (delta method on u); returns the count (see nte_get_params). */

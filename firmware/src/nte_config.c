@@ -317,8 +317,8 @@ nte_err_t nte_config_check(const nte_config_t* cfg)
     }
     if (!(cfg->f1_excess > NTE_C(0.0))) {
         const nte_real_t f2 = cfg->nominal[nte_param_f2];
-        const nte_real_t ex =
-            nte_model_f1_excess(cfg->nominal[nte_param_f1], f2, nte_model_f1_kappa(f2));
+        const nte_real_t ex = nte_model_f1_excess(cfg->nominal[nte_param_f1], f2,
+                                                  nte_model_f1_kappa(f2));
         if (!(ex > NTE_C(0.0))) {
             return nte_err_bad_f1;
         }

@@ -14,8 +14,7 @@ typedef nte_real_t nte_mat3_t[NTE_EKF_N_MAX][NTE_EKF_N_MAX];
 
 /** out = F P F^T + diag(q).  P and F are read only (not const: C99 array qualifiers);
  *  out must not alias P. */
-void nte_ekf_predict(size_t n, nte_mat3_t P, nte_mat3_t F, const nte_real_t* q,
-                     nte_mat3_t out);
+void nte_ekf_predict(size_t n, nte_mat3_t P, nte_mat3_t F, const nte_real_t* q, nte_mat3_t out);
 
 /** Result of one scalar update. */
 typedef struct nte_ekf_update_t {

@@ -24,7 +24,7 @@ bool nte_layers_watch(nte_t* self, nte_real_t depth_mm, nte_real_t velocity_mm_s
                      ((depth_mm - st->last_mm) > NTE_K_LAYER_HOLDOFF_MM);
     /* the innovation in units of the sensor noise (the front end's, or sqrt(r_n2)) */
     const nte_real_t sigma = self->cfg.contact.enabled ? nte_contact_noise_sigma(self)
-                                                      : nte_sqrt(self->cfg.r_n2);
+                                                       : nte_sqrt(self->cfg.r_n2);
     const nte_real_t nu = innovation_n / sigma;
     nte_real_t g = (st->g - nu) - NTE_K_LAYER_DRIFT_SIGMA;
     g = (may && (g > zero)) ? g : zero;

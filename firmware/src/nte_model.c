@@ -21,8 +21,7 @@ void nte_model_theta(nte_theta_t* th, const nte_real_t nominal[NTE_PARAM_COUNT],
 
 void nte_model_refresh(nte_theta_t* th, const nte_real_t nominal[NTE_PARAM_COUNT],
                        const nte_real_t ex_nominal, const nte_real_t kappa,
-                       const nte_real_t u[NTE_PARAM_COUNT], const uint8_t* ids,
-                       const size_t count)
+                       const nte_real_t u[NTE_PARAM_COUNT], const uint8_t* ids, const size_t count)
 {
     bool f1 = false;
     bool f2 = false;
@@ -46,10 +45,7 @@ void nte_model_refresh(nte_theta_t* th, const nte_real_t nominal[NTE_PARAM_COUNT
     }
 }
 
-nte_real_t nte_model_clamp_depth(const nte_real_t l)
-{
-    return (l > NTE_C(0.0)) ? l : NTE_C(0.0);
-}
+nte_real_t nte_model_clamp_depth(const nte_real_t l) { return (l > NTE_C(0.0)) ? l : NTE_C(0.0); }
 
 void nte_model_depth_terms(nte_depth_terms_t* d, const nte_theta_t* th, const nte_real_t l)
 {
@@ -66,10 +62,7 @@ nte_real_t nte_model_rate(const nte_theta_t* th, const nte_depth_terms_t* d, con
     return d->l * (th->v[nte_param_beta] - (d->b * z));
 }
 
-nte_real_t nte_model_rate_dz(const nte_depth_terms_t* d)
-{
-    return -(d->l * d->b);
-}
+nte_real_t nte_model_rate_dz(const nte_depth_terms_t* d) { return -(d->l * d->b); }
 
 nte_real_t nte_model_rate_du(const nte_theta_t* th, const nte_depth_terms_t* d, const nte_real_t z,
                              const uint8_t id, bool* present)
@@ -77,15 +70,10 @@ nte_real_t nte_model_rate_du(const nte_theta_t* th, const nte_depth_terms_t* d, 
     *present = true;
     switch (id) {
     case nte_param_sigma1:
-    case nte_param_sigma2:
-        *present = false;
-        return NTE_C(0.0);
-    case nte_param_sigma0:
-        return (-(d->l * (z * d->inv_g))) * th->v[nte_param_sigma0];
-    case nte_param_beta:
-        return d->l * th->v[nte_param_beta];
-    default:
-        break;
+    case nte_param_sigma2: *present = false; return NTE_C(0.0);
+    case nte_param_sigma0: return (-(d->l * (z * d->inv_g))) * th->v[nte_param_sigma0];
+    case nte_param_beta: return d->l * th->v[nte_param_beta];
+    default: break;
     }
     /* every other parameter acts through g: d(rate)/dg = l b z / g */
     const nte_real_t rate_g = d->l * ((d->b * z) * d->inv_g);
@@ -114,21 +102,17 @@ nte_real_t nte_model_output_dz(const nte_theta_t* th, const nte_depth_terms_t* d
     return (th->v[nte_param_sigma0] * d->l) - (o->sl * ((th->v[nte_param_sigma1] * d->e) * d->b));
 }
 
-nte_real_t nte_model_output_du(const nte_theta_t* th, const nte_depth_terms_t* d, const nte_real_t z,
-                               const nte_output_terms_t* o, const uint8_t id)
+nte_real_t nte_model_output_du(const nte_theta_t* th, const nte_depth_terms_t* d,
+                               const nte_real_t z, const nte_output_terms_t* o, const uint8_t id)
 {
     const nte_real_t s1e = th->v[nte_param_sigma1] * d->e;
     switch (id) {
     case nte_param_sigma0:
         return ((z * d->l) - (o->sl * (s1e * (z * d->inv_g)))) * th->v[nte_param_sigma0];
-    case nte_param_sigma1:
-        return (o->sl * (d->e * o->m)) * th->v[nte_param_sigma1];
-    case nte_param_sigma2:
-        return o->sl * th->v[nte_param_sigma2];
-    case nte_param_beta:
-        return (o->sl * s1e) * th->v[nte_param_beta];
-    default:
-        break;
+    case nte_param_sigma1: return (o->sl * (d->e * o->m)) * th->v[nte_param_sigma1];
+    case nte_param_sigma2: return o->sl * th->v[nte_param_sigma2];
+    case nte_param_beta: return (o->sl * s1e) * th->v[nte_param_beta];
+    default: break;
     }
     const nte_real_t h_g = o->sl * (s1e * ((d->b * z) * d->inv_g));
     if (id == (uint8_t)nte_param_f1) {
@@ -152,9 +136,9 @@ nte_real_t nte_model_smooth_sign(const nte_real_t v, const nte_real_t eps)
     return nte_tanh(v / eps);
 }
 
-void nte_model_rk3(nte_rk3_result_t* res, const nte_theta_t* th, nte_real_t z,
-                   const nte_real_t l_a, const nte_real_t l_b, const nte_real_t dt,
-                   const int32_t substeps, const uint8_t* ids, const size_t count)
+void nte_model_rk3(nte_rk3_result_t* res, const nte_theta_t* th, nte_real_t z, const nte_real_t l_a,
+                   const nte_real_t l_b, const nte_real_t dt, const int32_t substeps,
+                   const uint8_t* ids, const size_t count)
 {
     const nte_real_t n = (nte_real_t)substeps;
     const nte_real_t h = dt / n;
@@ -261,17 +245,10 @@ bool nte_model_decay_du(const nte_theta_t* th, const nte_depth_terms_t* d, const
         *lam_u = lam - lam;
         *zq_u = zq;
         return true;
-    case nte_param_f1:
-        dg = th->ex;
-        break;
-    case nte_param_f2:
-        dg = (d->e * th->v[nte_param_f2]) + th->mkf2;
-        break;
-    case nte_param_alpha:
-        dg = d->dg_dalpha * th->v[nte_param_alpha];
-        break;
-    default:
-        return false; /* sigma1, sigma2 */
+    case nte_param_f1: dg = th->ex; break;
+    case nte_param_f2: dg = (d->e * th->v[nte_param_f2]) + th->mkf2; break;
+    case nte_param_alpha: dg = d->dg_dalpha * th->v[nte_param_alpha]; break;
+    default: return false; /* sigma1, sigma2 */
     }
     /* every other parameter acts through g: d lambda = -lambda dg/g, d zq = zq dg/g */
     const nte_real_t G = dg * d->inv_g;

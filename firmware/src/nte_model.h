@@ -53,8 +53,8 @@ void nte_model_theta(nte_theta_t* th, const nte_real_t nominal[NTE_PARAM_COUNT],
 
 /** theta after the parameters in ids[0..count) changed (ScaledParams.refresh). */
 void nte_model_refresh(nte_theta_t* th, const nte_real_t nominal[NTE_PARAM_COUNT],
-                       nte_real_t ex_nominal, nte_real_t kappa,
-                       const nte_real_t u[NTE_PARAM_COUNT], const uint8_t* ids, size_t count);
+                       nte_real_t ex_nominal, nte_real_t kappa, const nte_real_t u[NTE_PARAM_COUNT],
+                       const uint8_t* ids, size_t count);
 
 nte_real_t nte_model_clamp_depth(nte_real_t l);
 void nte_model_depth_terms(nte_depth_terms_t* d, const nte_theta_t* th, nte_real_t l);

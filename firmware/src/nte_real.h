@@ -42,10 +42,7 @@ static inline nte_real_t nte_sqrt(const nte_real_t x)
 #endif
 }
 
-static inline bool nte_isfinite(const nte_real_t x)
-{
-    return isfinite(x) != 0;
-}
+static inline bool nte_isfinite(const nte_real_t x) { return isfinite(x) != 0; }
 
 /** 2^n for n in the normal exponent range, assembled from the exponent bits. */
 static inline nte_real_t nte_pow2(const int32_t n)

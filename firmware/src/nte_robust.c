@@ -17,8 +17,7 @@
 #define ROW_V 2U /* velocity, mm/s */
 #define ROW_F 3U /* force, N */
 
-bool nte_robust_ldlt_solve(const size_t n, nte_robust_mat_t M, const nte_real_t* b,
-                           nte_real_t* x)
+bool nte_robust_ldlt_solve(const size_t n, nte_robust_mat_t M, const nte_real_t* b, nte_real_t* x)
 {
     nte_robust_mat_t L;
     nte_real_t D[NTE_MODEL_PARAM_COUNT];

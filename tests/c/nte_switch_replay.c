@@ -19,10 +19,7 @@
 
 #include "nte.h"
 
-static void put(double x)
-{
-    (void)printf(" %a", x);
-}
+static void put(double x) { (void)printf(" %a", x); }
 
 int main(int argc, char** argv)
 {
@@ -32,8 +29,8 @@ int main(int argc, char** argv)
     }
     nte_config_t cfg;
     const int model = atoi(argv[1]);
-    const nte_schedule_t sch =
-        (strcmp(argv[2], "rotate") == 0) ? nte_schedule_rotate : nte_schedule_all;
+    const nte_schedule_t sch = (strcmp(argv[2], "rotate") == 0) ? nte_schedule_rotate
+                                                                : nte_schedule_all;
     nte_config_default(&cfg, model, sch);
     cfg.contact.enabled = atoi(argv[3]) != 0;
     cfg.contact.surface_mm = (nte_real_t)strtod(argv[5], NULL);

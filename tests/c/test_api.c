@@ -133,27 +133,46 @@ static void test_every_error_code_leaves_instance_untouched(void** state)
         spoil_fn fn;
         nte_err_t err;
     } cases[] = {
-        {spoil_model, nte_err_bad_model},         {spoil_model0, nte_err_bad_model},
-        {spoil_schedule, nte_err_bad_schedule},   {spoil_substeps0, nte_err_bad_substeps},
-        {spoil_substeps17, nte_err_bad_substeps}, {spoil_reopen0, nte_err_bad_gate_reopen},
-        {spoil_reopen1001, nte_err_bad_gate_reopen}, {spoil_eps_nan, nte_err_not_finite},
-        {spoil_eps_zero, nte_err_not_positive},   {spoil_eps_neg, nte_err_not_positive},
-        {spoil_r_inf, nte_err_not_finite},        {spoil_r_zero, nte_err_not_positive},
-        {spoil_p0z, nte_err_not_positive},        {spoil_gate, nte_err_not_positive},
-        {spoil_floor, nte_err_not_positive},      {spoil_qz, nte_err_not_positive},
-        {spoil_qu_inf, nte_err_not_finite},       {spoil_vstill, nte_err_not_finite},
-        {spoil_dmin_nan, nte_err_not_finite},     {spoil_range, nte_err_bad_range},
-        {spoil_nominal, nte_err_bad_nominal},     {spoil_f1_low, nte_err_bad_f1},
-        {spoil_f1_neg, nte_err_bad_f1},           {spoil_f1_nan, nte_err_bad_f1},
-        {spoil_nominal_big, nte_err_bad_nominal}, {spoil_umax, nte_err_bad_range},
+        {spoil_model, nte_err_bad_model},
+        {spoil_model0, nte_err_bad_model},
+        {spoil_schedule, nte_err_bad_schedule},
+        {spoil_substeps0, nte_err_bad_substeps},
+        {spoil_substeps17, nte_err_bad_substeps},
+        {spoil_reopen0, nte_err_bad_gate_reopen},
+        {spoil_reopen1001, nte_err_bad_gate_reopen},
+        {spoil_eps_nan, nte_err_not_finite},
+        {spoil_eps_zero, nte_err_not_positive},
+        {spoil_eps_neg, nte_err_not_positive},
+        {spoil_r_inf, nte_err_not_finite},
+        {spoil_r_zero, nte_err_not_positive},
+        {spoil_p0z, nte_err_not_positive},
+        {spoil_gate, nte_err_not_positive},
+        {spoil_floor, nte_err_not_positive},
+        {spoil_qz, nte_err_not_positive},
+        {spoil_qu_inf, nte_err_not_finite},
+        {spoil_vstill, nte_err_not_finite},
+        {spoil_dmin_nan, nte_err_not_finite},
+        {spoil_range, nte_err_bad_range},
+        {spoil_nominal, nte_err_bad_nominal},
+        {spoil_f1_low, nte_err_bad_f1},
+        {spoil_f1_neg, nte_err_bad_f1},
+        {spoil_f1_nan, nte_err_bad_f1},
+        {spoil_nominal_big, nte_err_bad_nominal},
+        {spoil_umax, nte_err_bad_range},
         {spoil_p0u, nte_err_bad_range},
-        {spoil_branches, nte_err_bad_range},      {spoil_presliding, nte_err_not_positive},
-        {spoil_tau_big, nte_err_bad_range},       {spoil_tau_nan, nte_err_not_finite},
-        {spoil_g_sum, nte_err_bad_nominal},       {spoil_g_zero, nte_err_bad_nominal},
+        {spoil_branches, nte_err_bad_range},
+        {spoil_presliding, nte_err_not_positive},
+        {spoil_tau_big, nte_err_bad_range},
+        {spoil_tau_nan, nte_err_not_finite},
+        {spoil_g_sum, nte_err_bad_nominal},
+        {spoil_g_zero, nte_err_bad_nominal},
         {spoil_m3_robust, nte_err_bad_estimator},
-        {spoil_sets_model2, nte_err_bad_layer_sets}, {spoil_sets_count, nte_err_bad_layer_sets},
-        {spoil_sets_start0, nte_err_bad_layer_sets}, {spoil_sets_order, nte_err_bad_layer_sets},
-        {spoil_sets_deep, nte_err_bad_layer_sets},   {spoil_sets_value, nte_err_bad_layer_sets},
+        {spoil_sets_model2, nte_err_bad_layer_sets},
+        {spoil_sets_count, nte_err_bad_layer_sets},
+        {spoil_sets_start0, nte_err_bad_layer_sets},
+        {spoil_sets_order, nte_err_bad_layer_sets},
+        {spoil_sets_deep, nte_err_bad_layer_sets},
+        {spoil_sets_value, nte_err_bad_layer_sets},
         {spoil_sets_g0, nte_err_bad_layer_sets},
     };
     static nte_t est;
@@ -239,7 +258,8 @@ static void test_every_status_flag_and_counter(void** state)
 
     /* REJECTED, by each cause: outputs hold, counters count */
     const nte_output_t before = est.last;
-    const double bad[3][3] = {{(double)NAN, 10, 0.1}, {depth, (double)INFINITY, 0.1}, {depth, 10, -(double)INFINITY}};
+    const double bad[3][3] = {
+        {(double)NAN, 10, 0.1}, {depth, (double)INFINITY, 0.1}, {depth, 10, -(double)INFINITY}};
     for (int i = 0; i < 3; i++) {
         s = sample(t, bad[i][0], bad[i][1], bad[i][2]);
         nte_step(&est, &s, &o);
@@ -323,8 +343,9 @@ static int filter_of(const int32_t model, const nte_param_id_t id)
 {
     /* Table I */
     if (model == 1) {
-        return (id == nte_param_f2 || id == nte_param_sigma0) ? 0
-               : (id == nte_param_f1 || id == nte_param_sigma1) ? 1 : 2;
+        return (id == nte_param_f2 || id == nte_param_sigma0)   ? 0
+               : (id == nte_param_f1 || id == nte_param_sigma1) ? 1
+                                                                : 2;
     }
     return (id == nte_param_sigma0) ? 0 : (id == nte_param_f1 || id == nte_param_sigma1) ? 1 : 2;
 }

@@ -55,7 +55,12 @@ static int load(void** state)
 }
 
 typedef enum fault_t {
-    fault_none, fault_nan, fault_inf, fault_huge, fault_negative_dt, fault_gap
+    fault_none,
+    fault_nan,
+    fault_inf,
+    fault_huge,
+    fault_negative_dt,
+    fault_gap
 } fault_t;
 
 typedef struct result_t {
@@ -139,8 +144,8 @@ static void check_fault(const fault_t fault, const int fault_len)
         const double e_fault = mean_err(&faulty, after);
         const double e_before = mean_err(&clean, FAULT_K - WINDOW);
         print_message("fault %d schedule %d: error before %.3g mN, 2 s after %.3g mN "
-                      "(clean run %.3g mN)\n", (int)fault, sch, e_before * 1e3, e_fault * 1e3,
-                      e_clean * 1e3);
+                      "(clean run %.3g mN)\n",
+                      (int)fault, sch, e_before * 1e3, e_fault * 1e3, e_clean * 1e3);
         assert_true(e_fault <= (1.5 * e_clean) + 1e-3);
     }
 }
@@ -198,7 +203,8 @@ static void test_reversal_at_full_speed(void** state)
         run(fault_none, (nte_schedule_t)sch, &faulty);
         assert_true(faulty.all_finite);
         assert_int_equal(faulty.counters.rejected[0] + faulty.counters.rejected[1] +
-                             faulty.counters.rejected[2], 0);
+                             faulty.counters.rejected[2],
+                         0);
         const double e_before = mean_err(&faulty, FAULT_K - WINDOW);
         const double e_after = mean_err(&faulty, FAULT_K + 400);
         print_message("reversal schedule %d: error before %.3g mN, 2 s after %.3g mN\n", sch,
@@ -211,9 +217,12 @@ static void test_reversal_at_full_speed(void** state)
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_nan),          cmocka_unit_test(test_infinities),
-        cmocka_unit_test(test_huge_values),  cmocka_unit_test(test_negative_dt),
-        cmocka_unit_test(test_ten_second_gap), cmocka_unit_test(test_reversal_at_full_speed),
+        cmocka_unit_test(test_nan),
+        cmocka_unit_test(test_infinities),
+        cmocka_unit_test(test_huge_values),
+        cmocka_unit_test(test_negative_dt),
+        cmocka_unit_test(test_ten_second_gap),
+        cmocka_unit_test(test_reversal_at_full_speed),
     };
     return cmocka_run_group_tests(tests, load, NULL);
 }

@@ -21,8 +21,7 @@
 #define NOMINAL_F1 5.59e-2
 #define NOMINAL_F2 -2.11e-2
 
-static const double nominal_d[NP] = {7.9e-3, 2.46, 4.14e-3, 5.59e-2,
-                                                  -2.11e-2, 5.25e-2, 2.55e-2};
+static const double nominal_d[NP] = {7.9e-3, 2.46, 4.14e-3, 5.59e-2, -2.11e-2, 5.25e-2, 2.55e-2};
 
 static int same_bits(const nte_real_t a, const nte_real_t b)
 {
@@ -164,8 +163,8 @@ static nte_real_t rk3_at(const double* u, const double z)
     nte_theta_t th;
     nte_rk3_result_t res;
     make_theta(&th, u);
-    nte_model_rk3(&res, &th, (nte_real_t)z, (nte_real_t)10.0, (nte_real_t)10.5, (nte_real_t)0.05,
-                  4, NULL, 0);
+    nte_model_rk3(&res, &th, (nte_real_t)z, (nte_real_t)10.0, (nte_real_t)10.5, (nte_real_t)0.05, 4,
+                  NULL, 0);
     return res.z;
 }
 
@@ -206,10 +205,12 @@ static void test_jacobians_finite_differences(void** state)
         const double hscale = fabs((double)o.h) + 1e-3;
         /* dh/dz and d rate/dz */
         const double fd_hz = ((double)output_at(u0, k->l, k->z + hstep, k->v) -
-                              (double)output_at(u0, k->l, k->z - hstep, k->v)) / (2.0 * hstep);
+                              (double)output_at(u0, k->l, k->z - hstep, k->v)) /
+                             (2.0 * hstep);
         check_close("h (z)", -1, (double)nte_model_output_dz(&th, &d, &o), fd_hz, hscale);
         const double fd_rz = ((double)rate_at(u0, k->l, k->z + hstep) -
-                              (double)rate_at(u0, k->l, k->z - hstep)) / (2.0 * hstep);
+                              (double)rate_at(u0, k->l, k->z - hstep)) /
+                             (2.0 * hstep);
         check_close("rate (z)", -1, (double)nte_model_rate_dz(&d), fd_rz, 1e-3);
         for (uint8_t j = 0; j < NP; j++) {
             double up[NP];
@@ -219,13 +220,14 @@ static void test_jacobians_finite_differences(void** state)
             up[j] += hstep;
             um[j] -= hstep;
             const double fd_h = ((double)output_at(up, k->l, k->z, k->v) -
-                                 (double)output_at(um, k->l, k->z, k->v)) / (2.0 * hstep);
-            check_close("h", j, (double)nte_model_output_du(&th, &d, (nte_real_t)k->z, &o, j),
-                        fd_h, hscale);
+                                 (double)output_at(um, k->l, k->z, k->v)) /
+                                (2.0 * hstep);
+            check_close("h", j, (double)nte_model_output_du(&th, &d, (nte_real_t)k->z, &o, j), fd_h,
+                        hscale);
             bool present = false;
             const nte_real_t r = nte_model_rate_du(&th, &d, (nte_real_t)k->z, j, &present);
-            const double fd_r = ((double)rate_at(up, k->l, k->z) - (double)rate_at(um, k->l, k->z))
-                                / (2.0 * hstep);
+            const double fd_r =
+                ((double)rate_at(up, k->l, k->z) - (double)rate_at(um, k->l, k->z)) / (2.0 * hstep);
             check_close("rate", j, present ? (double)r : 0.0, fd_r,
                         fabs((double)nte_model_rate(&th, &d, (nte_real_t)k->z)) + 1e-3);
         }

@@ -38,6 +38,8 @@ typedef struct {
     size_t count;
 } message_t;
 
+/* kept by hand: SIG/MSG lines have no semicolon, so clang-format would chain them as one */
+/* clang-format off */
 #define SIG(msg, field)                                                                        \
     static void set_##msg##_##field(void* m, float v)                                          \
     {                                                                                          \
@@ -140,6 +142,7 @@ static const signal_t contact_signals[] = {
     ENTRY(contact, contact_state, "ContactState"), ENTRY(contact, surface_valid, "SurfaceValid"),
     ENTRY(contact, active_model, "ActiveModel"), ENTRY(contact, surface, "Surface"),
     ENTRY(contact, tare, "Tare"), ENTRY(contact, layer, "Layer")};
+/* clang-format on */
 
 #define COUNT(a) (sizeof(a) / sizeof((a)[0]))
 static const message_t messages[] = {

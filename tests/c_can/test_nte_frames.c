@@ -95,8 +95,8 @@ static void test_depth_range_errors(void** state)
 {
     link_t l;
     nte_frames_depth_t bad[] = {
-        {-0.001f, 0.0f, 0}, {500.001f, 0.0f, 0}, {0.0f, -500.01f, 0}, {0.0f, 500.01f, 0},
-        {1e30f, 0.0f, 0},   {0.0f, -1e30f, 0},
+        {-0.001f, 0.0f, 0}, {500.001f, 0.0f, 0}, {0.0f, -500.01f, 0},
+        {0.0f, 500.01f, 0}, {1e30f, 0.0f, 0},    {0.0f, -1e30f, 0},
     };
     size_t i;
     nte_frames_depth_t nan_in = {NAN, 0.0f, 0};
@@ -391,8 +391,13 @@ static void test_estimate_clamp_and_flags(void** state)
                      nte_frames_err_not_finite);
     /* every combination of the five status bits survives */
     for (flags = 0; flags < 32u; ++flags) {
-        nte_frames_estimate_t f = {0.0f, 0.0f, 0.0f, (flags & 1u) != 0u, (flags & 2u) != 0u,
-                                   (flags & 4u) != 0u, (flags & 8u) != 0u,
+        nte_frames_estimate_t f = {0.0f,
+                                   0.0f,
+                                   0.0f,
+                                   (flags & 1u) != 0u,
+                                   (flags & 2u) != 0u,
+                                   (flags & 4u) != 0u,
+                                   (flags & 8u) != 0u,
                                    (flags & 16u) != 0u};
         assert_int_equal(nte_frames_encode_estimate(&f, &l.tx, l.frame), nte_frames_ok);
         assert_int_equal(nte_frames_decode_estimate(&l.rx, l.frame, 8, &out, NULL, NULL),
@@ -408,9 +413,9 @@ static void test_estimate_clamp_and_flags(void** state)
 static void test_params(void** state)
 {
     /* Model II nominal values (reference_py/MODEL.md §3) and a spread of standard deviations */
-    static const float values[10] = {7.9e-3f, 2.46f, 4.14e-3f, 5.59e-2f, -2.11e-2f, 5.25e-2f,
-                                     2.55e-2f, 0.15f, 0.25f, 2.5f}; /* + Model III's g_fast,
-                                                                        g_slow, delta */
+    static const float values[10] = {7.9e-3f,  2.46f, 4.14e-3f, 5.59e-2f, -2.11e-2f, 5.25e-2f,
+                                     2.55e-2f, 0.15f, 0.25f,    2.5f}; /* + Model III's g_fast,
+                                                                           g_slow, delta */
     static const float stds[] = {0.0f, 1e-30f, 3.3e-7f, 1e-4f, 0.0123f, 1.0f, 517.0f, 1e30f};
     link_t l;
     unsigned i;
@@ -472,7 +477,12 @@ static void test_heartbeat(void** state)
     link_t l;
     nte_frames_heartbeat_t out;
     nte_frames_heartbeat_t in = {NTE_FRAMES_STATE_RUNNING, 1u, 0u, 3600.3f, 259u, 17u, 0.000734f};
-    nte_frames_heartbeat_t wrap = {NTE_FRAMES_STATE_FAULT, 2u, 1u, 52428.8f + 12.5f, 0u, 255u,
+    nte_frames_heartbeat_t wrap = {NTE_FRAMES_STATE_FAULT,
+                                   2u,
+                                   1u,
+                                   52428.8f + 12.5f,
+                                   0u,
+                                   255u,
                                    0.5f}; /* Model III; Uptime wraps at 2^19 x 0.1 s */
     nte_frames_heartbeat_t bad_model = {0u, 3u, 0u, 0.0f, 0u, 0u, 0.0f};
     nte_frames_heartbeat_t bad_state = {3u, 0u, 0u, 0.0f, 0u, 0u, 0.0f};
@@ -527,8 +537,12 @@ static void test_contact(void** state)
     link_init(&l, nte_frames_kind_contact);
     for (i = 0; i < sizeof surfaces / sizeof surfaces[0]; ++i) {
         for (j = 0; j < sizeof tares / sizeof tares[0]; ++j) {
-            nte_frames_contact_t in = {(uint8_t)(j % 2u), (i % 3u) != 0u, 2u, surfaces[i],
-                                       tares[j], (uint8_t)((i + j) % (NTE_FRAMES_LAYER_MAX + 1u))};
+            nte_frames_contact_t in = {(uint8_t)(j % 2u),
+                                       (i % 3u) != 0u,
+                                       2u,
+                                       surfaces[i],
+                                       tares[j],
+                                       (uint8_t)((i + j) % (NTE_FRAMES_LAYER_MAX + 1u))};
             assert_int_equal(nte_frames_encode_contact(&in, &l.tx, l.frame), nte_frames_ok);
             assert_int_equal(nte_frames_decode_contact(&l.rx, l.frame, 8, &out, NULL, NULL),
                              nte_frames_ok);

@@ -51,10 +51,7 @@ static int fake_send(void* ctx, const nte_node_frame_t* f)
     return 0;
 }
 
-static uint64_t fake_now(void* ctx)
-{
-    return ((fake_port_t*)ctx)->now;
-}
+static uint64_t fake_now(void* ctx) { return ((fake_port_t*)ctx)->now; }
 
 static fake_port_t g_port_a; /* large: kept out of the stack */
 static fake_port_t g_port_b;
@@ -149,14 +146,11 @@ static float force_at(uint32_t k)
 }
 
 /* Quantise like the frames: the node and the expectation see the same decoded values. */
-static float q(float x, float step)
-{
-    return (float)(int32_t)roundf(x / step) * step;
-}
+static float q(float x, float step) { return (float)(int32_t)roundf(x / step) * step; }
 
 /* Fill the port with `n_force` force samples, depth every depth_step ticks starting at t0. */
-static void scenario(fake_port_t* p, bench_t* b, uint32_t t0, uint32_t depth_step,
-                     uint32_t n_force, int force_first)
+static void scenario(fake_port_t* p, bench_t* b, uint32_t t0, uint32_t depth_step, uint32_t n_force,
+                     int force_first)
 {
     const uint32_t t_end = t0 + (n_force - 1u) * 50u;
     for (uint32_t t = t0; t <= t_end; t++) {
@@ -198,9 +192,9 @@ static size_t estimates(const fake_port_t* p, nte_frames_estimate_t* out, size_t
     for (size_t i = 0u; i < p->tx_n; i++) {
         if (p->tx[i].id == BASE + NTE_FRAMES_OFFSET_ESTIMATE) {
             assert_true(n < cap);
-            assert_int_equal(nte_frames_decode_estimate(&rx, p->tx[i].data, p->tx[i].len,
-                                                        &out[n], NULL, NULL),
-                             nte_frames_ok);
+            assert_int_equal(
+                nte_frames_decode_estimate(&rx, p->tx[i].data, p->tx[i].len, &out[n], NULL, NULL),
+                nte_frames_ok);
             n++;
         }
     }
@@ -282,10 +276,7 @@ static void test_config_errors(void** state)
 }
 
 /* the same float32, bit for bit */
-static bool same(float a, float b)
-{
-    return memcmp(&a, &b, sizeof a) == 0;
-}
+static bool same(float a, float b) { return memcmp(&a, &b, sizeof a) == 0; }
 
 /* SETTINGS: what each value item writes, and every value it refuses (cfg unchanged then). */
 static void test_setting_apply(void** state)
@@ -296,10 +287,11 @@ static void test_setting_apply(void** state)
     nte_node_config_default(&cfg, 2);
     /* a force-model parameter: every model's nominal; beta also Model I's beta0; f1 and f2
      * make the excess computed from the nominal */
-    assert_int_equal(nte_node_setting_apply(&cfg, NTE_FRAMES_SETTING_PARAM0 + nte_param_beta,
-                                            0.0042f), nte_node_ok);
-    assert_int_equal(nte_node_setting_apply(&cfg, NTE_FRAMES_SETTING_PARAM0 + nte_param_f1,
-                                            0.17f), nte_node_ok);
+    assert_int_equal(
+        nte_node_setting_apply(&cfg, NTE_FRAMES_SETTING_PARAM0 + nte_param_beta, 0.0042f),
+        nte_node_ok);
+    assert_int_equal(nte_node_setting_apply(&cfg, NTE_FRAMES_SETTING_PARAM0 + nte_param_f1, 0.17f),
+                     nte_node_ok);
     for (int m = 0; m < 3; m++) {
         assert_true(same(cfg.estimator[m].nominal[nte_param_beta], 0.0042f));
         assert_true(same(cfg.estimator[m].beta0, 0.0042f));
@@ -307,10 +299,12 @@ static void test_setting_apply(void** state)
         assert_true(same(cfg.estimator[m].f1_excess, 0.0f));
     }
     /* Model III's own: strengths, delta (presliding_mm), time constants, a layer set */
-    assert_int_equal(nte_node_setting_apply(&cfg, NTE_FRAMES_SETTING_PARAM0 + nte_param_g_slow,
-                                            0.08f), nte_node_ok);
-    assert_int_equal(nte_node_setting_apply(&cfg, NTE_FRAMES_SETTING_PARAM0 + nte_param_delta,
-                                            4.0f), nte_node_ok);
+    assert_int_equal(
+        nte_node_setting_apply(&cfg, NTE_FRAMES_SETTING_PARAM0 + nte_param_g_slow, 0.08f),
+        nte_node_ok);
+    assert_int_equal(
+        nte_node_setting_apply(&cfg, NTE_FRAMES_SETTING_PARAM0 + nte_param_delta, 4.0f),
+        nte_node_ok);
     assert_int_equal(nte_node_setting_apply(&cfg, NTE_FRAMES_SETTING_TAU_SLOW_S, 2.5f),
                      nte_node_ok);
     assert_int_equal(nte_node_setting_apply(&cfg, NTE_FRAMES_SETTING_LAYER0 + 5u + 2u, 0.39f),
@@ -377,8 +371,8 @@ static void test_estimates_equal_library_with_interpolation(void** state)
         assert_int_equal(nte_frames_tx_init(&tx, nte_frames_kind_estimate), nte_frames_ok);
         assert_int_equal(nte_frames_rx_init(&rx, nte_frames_kind_estimate), nte_frames_ok);
         for (uint32_t i = 0u; i < 40u; i++) {
-            const uint32_t k = i * 50u;             /* ticks since t0 */
-            const uint32_t ka = (k / 3u) * 3u;      /* depth sample at or before */
+            const uint32_t k = i * 50u;        /* ticks since t0 */
+            const uint32_t ka = (k / 3u) * 3u; /* depth sample at or before */
             const uint32_t kb = ka + 3u;
             const float da = q(depth_at(ka), 0.001f);
             const float db = q(depth_at(kb), 0.001f);
@@ -391,8 +385,14 @@ static void test_estimates_equal_library_with_interpolation(void** state)
                               q(force_at(k), 0.0001f)};
             nte_output_t o;
             assert_int_equal(nte_step(&ref, &s, &o), nte_err_ok);
-            nte_frames_estimate_t e = {o.force_hat_n, o.innovation_n, o.z, d > 0.0f, true,
-                                       false, (o.status & NTE_STATUS_REJECTED) != 0u, false};
+            nte_frames_estimate_t e = {o.force_hat_n,
+                                       o.innovation_n,
+                                       o.z,
+                                       d > 0.0f,
+                                       true,
+                                       false,
+                                       (o.status & NTE_STATUS_REJECTED) != 0u,
+                                       false};
             nte_frames_estimate_t back;
             uint8_t data[8];
             memset(&back, 0, sizeof back);
@@ -428,8 +428,15 @@ static void test_independent_of_arrival_order(void** state)
 }
 
 typedef enum {
-    bad_dlc, bad_unknown, bad_extended, bad_crc, bad_repeat, bad_counter15, bad_range,
-    bad_backwards, bad_count
+    bad_dlc,
+    bad_unknown,
+    bad_extended,
+    bad_crc,
+    bad_repeat,
+    bad_counter15,
+    bad_range,
+    bad_backwards,
+    bad_count
 } bad_kind_t;
 
 /* Each kind of bad frame is dropped, counted under its cause, and changes no estimate. */
@@ -438,14 +445,11 @@ static void test_bad_frames_counted_and_harmless(void** state)
     static const struct {
         bad_kind_t kind;
         nte_node_event_t ev;
-    } cases[] = {{bad_dlc, nte_node_ev_wrong_dlc},
-                 {bad_unknown, nte_node_ev_unknown_id},
-                 {bad_extended, nte_node_ev_unknown_id},
-                 {bad_crc, nte_node_ev_bad_crc},
-                 {bad_repeat, nte_node_ev_counter_repeated},
-                 {bad_counter15, nte_node_ev_counter_invalid},
-                 {bad_range, nte_node_ev_out_of_range},
-                 {bad_backwards, nte_node_ev_time_backwards}};
+    } cases[] = {
+        {bad_dlc, nte_node_ev_wrong_dlc},           {bad_unknown, nte_node_ev_unknown_id},
+        {bad_extended, nte_node_ev_unknown_id},     {bad_crc, nte_node_ev_bad_crc},
+        {bad_repeat, nte_node_ev_counter_repeated}, {bad_counter15, nte_node_ev_counter_invalid},
+        {bad_range, nte_node_ev_out_of_range},      {bad_backwards, nte_node_ev_time_backwards}};
     nte_node_config_t cfg;
     bench_t b;
     (void)state;
@@ -651,11 +655,11 @@ static void test_forged_time_jump_costs_one_frame(void** state)
             run_all(&g_node_b, &g_port_b);
             assert_true(inserted > 0u);
             for (uint32_t e = 0u; e < (uint32_t)NTE_NODE_EVENT_COUNT; e++) {
-                const uint32_t expect =
-                    (e == (uint32_t)nte_node_ev_time_jump_dropped) ? inserted : 0u;
+                const uint32_t expect = (e == (uint32_t)nte_node_ev_time_jump_dropped) ? inserted
+                                                                                       : 0u;
                 if (g_node_b.counters.events[e] != expect) {
-                    print_error("stream %u jump %d event %s\n", (unsigned)stream,
-                                (int)jumps[j], nte_node_event_name(e));
+                    print_error("stream %u jump %d event %s\n", (unsigned)stream, (int)jumps[j],
+                                nte_node_event_name(e));
                 }
                 assert_int_equal(g_node_b.counters.events[e], expect);
             }
@@ -767,8 +771,7 @@ static int last_heartbeat_estimator(const fake_port_t* p)
     for (size_t i = 0u; i < p->tx_n; i++) {
         if (p->tx[i].id == BASE + NTE_FRAMES_OFFSET_HEARTBEAT) {
             nte_frames_heartbeat_t hb;
-            assert_int_equal(nte_frames_decode_heartbeat(&rx, p->tx[i].data, 8u, &hb, NULL,
-                                                         NULL),
+            assert_int_equal(nte_frames_decode_heartbeat(&rx, p->tx[i].data, 8u, &hb, NULL, NULL),
                              nte_frames_ok);
             est = (int)hb.active_estimator;
         }
@@ -893,8 +896,8 @@ static void test_commands(void** state)
 /* Predict-only (nte_node.h PREDICT-ONLY): force samples i0..i1-1 of an insertion (depth every
  * 10 ticks = 1 kHz, force every 50 = 200 Hz, absolute depth), sent as they are (mode 0), flagged
  * SensorFault with the value `garbage` (mode 1), or left out (mode 2: a lost sensor). */
-static void po_stream(fake_port_t* p, bench_t* b, uint32_t t0, uint32_t i0, uint32_t i1,
-                      int mode, float garbage)
+static void po_stream(fake_port_t* p, bench_t* b, uint32_t t0, uint32_t i0, uint32_t i1, int mode,
+                      float garbage)
 {
     for (uint32_t k = i0 * 50u; k < i1 * 50u; k++) {
         if ((k % 10u) == 0u) {
@@ -1035,8 +1038,7 @@ static void test_params_and_heartbeat(void** state)
     for (size_t i = 0u; i < g_port_a.tx_n; i++) {
         if (g_port_a.tx[i].id == BASE + NTE_FRAMES_OFFSET_PARAMS) {
             nte_frames_param_t p;
-            assert_int_equal(nte_frames_decode_param(&rx, g_port_a.tx[i].data, 8u, &p, NULL,
-                                                     NULL),
+            assert_int_equal(nte_frames_decode_param(&rx, g_port_a.tx[i].data, 8u, &p, NULL, NULL),
                              nte_frames_ok);
             assert_int_equal(p.index, k % 7u);
             seen[p.index]++;
@@ -1046,9 +1048,9 @@ static void test_params_and_heartbeat(void** state)
             k++;
         } else if (g_port_a.tx[i].id == BASE + NTE_FRAMES_OFFSET_HEARTBEAT) {
             nte_frames_heartbeat_t h;
-            assert_int_equal(nte_frames_decode_heartbeat(&rxh, g_port_a.tx[i].data, 8u, &h,
-                                                         NULL, NULL),
-                             nte_frames_ok);
+            assert_int_equal(
+                nte_frames_decode_heartbeat(&rxh, g_port_a.tx[i].data, 8u, &h, NULL, NULL),
+                nte_frames_ok);
             assert_int_equal(h.node_state, NTE_FRAMES_STATE_RUNNING);
             assert_int_equal(h.active_model, 1u);
         }
@@ -1069,9 +1071,16 @@ static void test_params_and_heartbeat(void** state)
  * (the node computes them without one), also past 2^32 us and far beyond. */
 static void test_heartbeat_uptime_after_long_runs(void** state)
 {
-    static const uint64_t ups[] = {100000u, 199999u, 200000u, 4294967295u, 4294967296u,
-                                   52428799999u, 52428800000u, 5u * 4294967296u + 123456789u,
-                                   0x0123456789ABCDEFu, 0xFFFFFFFF00000000u};
+    static const uint64_t ups[] = {100000u,
+                                   199999u,
+                                   200000u,
+                                   4294967295u,
+                                   4294967296u,
+                                   52428799999u,
+                                   52428800000u,
+                                   5u * 4294967296u + 123456789u,
+                                   0x0123456789ABCDEFu,
+                                   0xFFFFFFFF00000000u};
     nte_node_config_t cfg;
     nte_e2e_rx_t rxh;
     (void)state;
@@ -1088,9 +1097,9 @@ static void test_heartbeat_uptime_after_long_runs(void** state)
         assert_true(last < g_port_a.tx_n);
         nte_frames_heartbeat_t h;
         (void)nte_frames_rx_init(&rxh, nte_frames_kind_heartbeat);
-        assert_int_equal(nte_frames_decode_heartbeat(&rxh, g_port_a.tx[last].data, 8u, &h, NULL,
-                                                     NULL),
-                         nte_frames_ok);
+        assert_int_equal(
+            nte_frames_decode_heartbeat(&rxh, g_port_a.tx[last].data, 8u, &h, NULL, NULL),
+            nte_frames_ok);
         const double expect = (double)((ups[i] / 100000u) % 524288u) * 0.1;
         assert_true(fabs((double)h.uptime_s - expect) < 0.05);
     }
@@ -1101,9 +1110,9 @@ static void test_heartbeat_uptime_after_long_runs(void** state)
 
 #define M3_SURFACE_MM 1.0f
 #define M3_TARE_N 0.05f
-#define M3_AIR 60u      /* force samples in the air before the stage moves (0.3 s) */
-#define M3_IN 100u      /* moving in at 10 mm/s (0.5 s: 5 mm of stage, 4 mm of tissue) */
-#define M3_OUT 140u     /* moving out at -10 mm/s (0.7 s: back to 0) */
+#define M3_AIR 60u  /* force samples in the air before the stage moves (0.3 s) */
+#define M3_IN 100u  /* moving in at 10 mm/s (0.5 s: 5 mm of stage, 4 mm of tissue) */
+#define M3_OUT 140u /* moving out at -10 mm/s (0.7 s: back to 0) */
 #define M3_N (M3_AIR + M3_IN + M3_OUT)
 
 /* Stage position, velocity and raw force of sample i (one every 50 ticks). */
@@ -1138,10 +1147,7 @@ static void m3_push(fake_port_t* p, bench_t* b, uint32_t t0)
     }
 }
 
-static bool m3_same_float(float a, float b)
-{
-    return memcmp(&a, &b, sizeof a) == 0;
-}
+static bool m3_same_float(float a, float b) { return memcmp(&a, &b, sizeof a) == 0; }
 
 /* ModelSel 3 switches a Model II node to Model III out of tissue; every Estimate then equals a
  * directly stepped Model III estimator (contact front end on: the depth is the stage
@@ -1170,8 +1176,8 @@ static void test_model3_params_contact(void** state)
     run_all(&g_node_a, &g_port_a);
     assert_int_equal(g_node_a.counters.steps, 10u);
     /* Model III with the robust estimator: refused entirely */
-    push(&g_port_a, command_frame(&b, false, NTE_FRAMES_MODEL_III, NTE_FRAMES_ESTIMATOR_ROBUST,
-                                  0u));
+    push(&g_port_a,
+         command_frame(&b, false, NTE_FRAMES_MODEL_III, NTE_FRAMES_ESTIMATOR_ROBUST, 0u));
     run_all(&g_node_a, &g_port_a);
     assert_int_equal(g_node_a.counters.events[nte_node_ev_command_refused], 1u);
     assert_int_equal(nte_node_model(&g_node_a), 2);
@@ -1243,9 +1249,14 @@ static void test_model3_params_contact(void** state)
             assert_true(step < (int32_t)M3_N);
             const nte_output_t* o = &ro[step];
             memset(&got, 0, sizeof got); /* padding compared below */
-            nte_frames_estimate_t e = {o->force_hat_n, o->innovation_n, o->z,
-                                       o->contact == nte_contact_tissue, true, false,
-                                       (o->status & NTE_STATUS_REJECTED) != 0u, false};
+            nte_frames_estimate_t e = {o->force_hat_n,
+                                       o->innovation_n,
+                                       o->z,
+                                       o->contact == nte_contact_tissue,
+                                       true,
+                                       false,
+                                       (o->status & NTE_STATUS_REJECTED) != 0u,
+                                       false};
             assert_int_equal(nte_frames_decode_estimate(&rxe, fr->data, 8u, &got, NULL, NULL),
                              nte_frames_ok);
             memset(&back, 0, sizeof back);
@@ -1332,8 +1343,8 @@ static void test_model3_params_contact(void** state)
         nte_frames_heartbeat_t h;
         (void)nte_frames_rx_init(&rxh, nte_frames_kind_heartbeat);
         assert_int_equal(g_port_a.tx[g_port_a.tx_n - 1u].id, BASE + NTE_FRAMES_OFFSET_HEARTBEAT);
-        assert_int_equal(nte_frames_decode_heartbeat(&rxh, g_port_a.tx[g_port_a.tx_n - 1u].data,
-                                                     8u, &h, NULL, NULL),
+        assert_int_equal(nte_frames_decode_heartbeat(&rxh, g_port_a.tx[g_port_a.tx_n - 1u].data, 8u,
+                                                     &h, NULL, NULL),
                          nte_frames_ok);
         assert_int_equal(h.active_model, 2u);
         assert_int_equal(h.active_estimator, 0u);

@@ -54,7 +54,8 @@ static int trial(ctx_t* c, uint64_t mask)
     uint8_t f1[8];
     memcpy(f0, sig, 8U);
     memcpy(f1, sig, 8U);
-    if ((nte_e2e_protect(&tx, f0, 8U) != nte_e2e_ok) || (nte_e2e_check(&rx, f0, 8U, NULL) != nte_e2e_ok)) {
+    if ((nte_e2e_protect(&tx, f0, 8U) != nte_e2e_ok) ||
+        (nte_e2e_check(&rx, f0, 8U, NULL) != nte_e2e_ok)) {
         abort();
     }
     f1[7] ^= 0x5AU; /* the next frame carries other signal values */
@@ -148,7 +149,8 @@ int main(int argc, char** argv)
         }
         printf("frame=%s data_id=%u single=%lu single_undetected=%lu double=%lu "
                "double_undetected=%lu triple=%lu triple_undetected=%lu bursts=%lu "
-               "burst_undetected=%lu crc_byte_bursts=%lu crc_byte_burst_undetected=%lu random=%lu random_accepted=%lu random_rate=%.6g "
+               "burst_undetected=%lu crc_byte_bursts=%lu crc_byte_burst_undetected=%lu random=%lu "
+               "random_accepted=%lu random_rate=%.6g "
                "random_accepted_in_sequence=%lu in_sequence_rate=%.6g\n",
                name, id, n1, m1, n2, m2, n3, m3, nbd, mbd, nb, mb, n_random, acc,
                (n_random > 0U) ? (double)acc / (double)n_random : 0.0, acc_ok,

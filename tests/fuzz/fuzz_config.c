@@ -24,15 +24,9 @@
 
 #include "nte.h"
 
-static int finite_r(nte_real_t x)
-{
-    return isfinite(x) ? 1 : 0;
-}
+static int finite_r(nte_real_t x) { return isfinite(x) ? 1 : 0; }
 
-static nte_real_t nte_abs_r(nte_real_t x)
-{
-    return (x < (nte_real_t)0) ? -x : x;
-}
+static nte_real_t nte_abs_r(nte_real_t x) { return (x < (nte_real_t)0) ? -x : x; }
 
 /* A violated property: say which one (file:line), then abort() so libFuzzer keeps the input. */
 #define need(ok) need_at((ok) ? 1 : 0, __LINE__)
@@ -57,8 +51,9 @@ static void check_state(const nte_t* e)
     need(finite_r(e->last.force_hat_n) && finite_r(e->last.z) && finite_r(e->last.innovation_n));
 }
 
-static const double edge[16] = {0.0, -0.0, 1.0, -1.0, 1e-30, -1e-30, 1e30, -1e30, 1e-45,
-                                3.4e38, -3.4e38, 1e300, 0.5, 1000.0, (double)INFINITY, (double)NAN};
+static const double edge[16] = {
+    0.0,    -0.0,    1.0,   -1.0, 1e-30,  -1e-30,           1e30,       -1e30, 1e-45,
+    3.4e38, -3.4e38, 1e300, 0.5,  1000.0, (double)INFINITY, (double)NAN};
 
 int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size);
 
@@ -69,17 +64,48 @@ int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size)
     nte_config_t cfg;
     nte_config_default(&cfg, 1 + (int32_t)(size & 1U), nte_schedule_all);
 
-    nte_real_t* reals[] = {
-        &cfg.eps_mm_s, &cfg.beta0, &cfg.r_n2, &cfg.q_z, &cfg.q_u[0], &cfg.q_u[1], &cfg.q_u[2],
-        &cfg.q_u[3], &cfg.q_u[4], &cfg.q_u[5], &cfg.q_u[6], &cfg.q_u_default, &cfg.p0_z,
-        &cfg.p0_u, &cfg.gate_sigma, &cfg.u_max, &cfg.var_floor_z, &cfg.var_floor_u,
-        &cfg.v_still_mm_s, &cfg.dt_max_s, &cfg.depth_min_mm, &cfg.depth_max_mm,
-        &cfg.speed_max_mm_s, &cfg.force_max_n, &cfg.nominal[0], &cfg.nominal[1],
-        &cfg.nominal[2], &cfg.nominal[3], &cfg.nominal[4], &cfg.nominal[5], &cfg.nominal[6],
-        &cfg.f1_excess, &cfg.robust.restart_p0_u, &cfg.robust.lm_lambda0,
-        &cfg.robust.converged_confidence, &cfg.robust.converged_change};
-    int32_t* ints[] = {&cfg.model, &cfg.substeps, &cfg.gate_reopen_after, &cfg.robust.buffer_len,
-                       &cfg.robust.fit_substeps, &cfg.robust.fit_iterations,
+    nte_real_t* reals[] = {&cfg.eps_mm_s,
+                           &cfg.beta0,
+                           &cfg.r_n2,
+                           &cfg.q_z,
+                           &cfg.q_u[0],
+                           &cfg.q_u[1],
+                           &cfg.q_u[2],
+                           &cfg.q_u[3],
+                           &cfg.q_u[4],
+                           &cfg.q_u[5],
+                           &cfg.q_u[6],
+                           &cfg.q_u_default,
+                           &cfg.p0_z,
+                           &cfg.p0_u,
+                           &cfg.gate_sigma,
+                           &cfg.u_max,
+                           &cfg.var_floor_z,
+                           &cfg.var_floor_u,
+                           &cfg.v_still_mm_s,
+                           &cfg.dt_max_s,
+                           &cfg.depth_min_mm,
+                           &cfg.depth_max_mm,
+                           &cfg.speed_max_mm_s,
+                           &cfg.force_max_n,
+                           &cfg.nominal[0],
+                           &cfg.nominal[1],
+                           &cfg.nominal[2],
+                           &cfg.nominal[3],
+                           &cfg.nominal[4],
+                           &cfg.nominal[5],
+                           &cfg.nominal[6],
+                           &cfg.f1_excess,
+                           &cfg.robust.restart_p0_u,
+                           &cfg.robust.lm_lambda0,
+                           &cfg.robust.converged_confidence,
+                           &cfg.robust.converged_change};
+    int32_t* ints[] = {&cfg.model,
+                       &cfg.substeps,
+                       &cfg.gate_reopen_after,
+                       &cfg.robust.buffer_len,
+                       &cfg.robust.fit_substeps,
+                       &cfg.robust.fit_iterations,
                        &cfg.robust.min_entries};
     const size_t n_reals = sizeof reals / sizeof reals[0];
     const size_t n_ints = sizeof ints / sizeof ints[0];

@@ -85,10 +85,7 @@ static int fake_send(void* ctx, const nte_node_frame_t* frame)
     return 0;
 }
 
-static uint64_t fake_now(void* ctx)
-{
-    return ((fake_port_t*)ctx)->now;
-}
+static uint64_t fake_now(void* ctx) { return ((fake_port_t*)ctx)->now; }
 
 static void check_state(const nte_node_t* n)
 {
@@ -172,8 +169,7 @@ int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size)
         }
         port.send_fail = (r[0] & 0x40U) != 0U;
         port.rx_error = (r[0] & 0x80U) != 0U;
-        const uint32_t adv = ((uint32_t)r[12] | ((uint32_t)r[13] << 8U) |
-                              ((uint32_t)r[14] << 16U)) ;
+        const uint32_t adv = ((uint32_t)r[12] | ((uint32_t)r[13] << 8U) | ((uint32_t)r[14] << 16U));
         port.now += adv;
 
         nte_node_counters_t c0 = node.counters;

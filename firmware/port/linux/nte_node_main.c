@@ -160,8 +160,10 @@ static int parse_args(int argc, char** argv, args_t* a)
             a->received = v;
         } else if (strcmp(o, "--model") == 0) {
             if ((strcmp(v, "1") != 0) && (strcmp(v, "2") != 0) && (strcmp(v, "3") != 0)) {
-                (void)snprintf(msg, sizeof msg, "argument --model: invalid choice: '%s' "
-                               "(choose from 1, 2, 3)", v);
+                (void)snprintf(msg, sizeof msg,
+                               "argument --model: invalid choice: '%s' "
+                               "(choose from 1, 2, 3)",
+                               v);
                 return usage(msg);
             }
             a->model = v[0] - '0';
@@ -220,19 +222,19 @@ static void write_stats(const nte_node_t* n, const nte_port_socketcan_t* port, F
     }
     fprintf(f,
             "}, \"frames_lost\": %u, \"rx_accepted\": {\"depth\": %u, \"force\": %u, "
-            "\"command\": %u, \"setting\": %u}, \"tx\": {\"estimate\": %u, \"params\": %u, \"heartbeat\": %u, "
+            "\"command\": %u, \"setting\": %u}, \"tx\": {\"estimate\": %u, \"params\": %u, "
+            "\"heartbeat\": %u, "
             "\"contact\": %u}, "
             "\"steps\": %u, \"commands_applied\": %u, \"predict_on\": %u, "
             "\"predict_off\": %u, \"predict_depth_steps\": %u, \"settings_applied\": %u, "
             "\"model\": %d, "
             "\"state\": %d, \"send_enobufs\": %u, \"last_errno\": %d}\n",
             (unsigned)c->frames_lost, (unsigned)c->rx_accepted[0], (unsigned)c->rx_accepted[1],
-            (unsigned)c->rx_accepted[2], (unsigned)c->rx_accepted[3], (unsigned)c->tx[0], (unsigned)c->tx[1],
-            (unsigned)c->tx[2], (unsigned)c->tx[3], (unsigned)c->steps, (unsigned)c->commands_applied,
-            (unsigned)c->predict_on, (unsigned)c->predict_off, (unsigned)c->predict_depth_steps,
-            (unsigned)c->settings_applied,
-            (int)nte_node_model(n), (int)nte_node_state(n), (unsigned)port->send_errors_enobufs,
-            port->last_errno);
+            (unsigned)c->rx_accepted[2], (unsigned)c->rx_accepted[3], (unsigned)c->tx[0],
+            (unsigned)c->tx[1], (unsigned)c->tx[2], (unsigned)c->tx[3], (unsigned)c->steps,
+            (unsigned)c->commands_applied, (unsigned)c->predict_on, (unsigned)c->predict_off,
+            (unsigned)c->predict_depth_steps, (unsigned)c->settings_applied, (int)nte_node_model(n),
+            (int)nte_node_state(n), (unsigned)port->send_errors_enobufs, port->last_errno);
 }
 
 static void dump_stats(const char* path, const nte_node_t* n, const nte_port_socketcan_t* port)
@@ -417,8 +419,10 @@ int main(int argc, char** argv)
                 items[i].value = (float)p->values[j];
             }
             if (nte_node_setting_apply(&cfg, items[i].item, items[i].value) != nte_node_ok) {
-                (void)snprintf(msg, sizeof msg, "%s: item %u of the configuration cannot be "
-                               "applied to this node", a.config, (unsigned)items[i].item);
+                (void)snprintf(msg, sizeof msg,
+                               "%s: item %u of the configuration cannot be "
+                               "applied to this node",
+                               a.config, (unsigned)items[i].item);
                 fprintf(stderr, PROG ": error: %s\n", msg);
                 return EXIT_USAGE;
             }
@@ -449,9 +453,9 @@ int main(int argc, char** argv)
                                            sizeof msg);
     if (rc != nte_port_ok) {
         fprintf(stderr, PROG ": error: %s\n", msg);
-        return (rc == nte_port_err_no_af_can) ? EXIT_NO_AF_CAN
+        return (rc == nte_port_err_no_af_can)  ? EXIT_NO_AF_CAN
                : (rc == nte_port_err_no_iface) ? EXIT_NO_IFACE
-                                              : 1;
+                                               : 1;
     }
     static tap_t tap;
     tap.inner = nte_port_socketcan_port(&sock);
@@ -482,9 +486,8 @@ int main(int argc, char** argv)
             (void)fclose(f);
         }
     }
-    fprintf(stderr, PROG ": %s, base 0x%03X, Model %s, preset %s, depth timeout %lu ms\n",
-            a.iface, (unsigned)cfg.base_id,
-            (a.model == 1) ? "I" : ((a.model == 2) ? "II" : "III"), a.preset,
+    fprintf(stderr, PROG ": %s, base 0x%03X, Model %s, preset %s, depth timeout %lu ms\n", a.iface,
+            (unsigned)cfg.base_id, (a.model == 1) ? "I" : ((a.model == 2) ? "II" : "III"), a.preset,
             a.timeout_ms);
     while (g_stop == 0) {
         struct pollfd pfd;

@@ -126,10 +126,7 @@ static int log_send(void* ctx, const nte_node_frame_t* frame)
     return 0;
 }
 
-static uint64_t log_now(void* ctx)
-{
-    return ((const nte_port_log_t*)ctx)->now_us;
-}
+static uint64_t log_now(void* ctx) { return ((const nte_port_log_t*)ctx)->now_us; }
 
 nte_node_port_t nte_port_log_port(nte_port_log_t* self)
 {

@@ -19,13 +19,13 @@
 
 typedef struct nte_port_log_t {
     FILE* in;
-    FILE* out;               /**< NULL: sent frames are discarded (but counted) */
-    const char* iface;       /**< interface name written on output lines */
-    uint64_t now_us;         /**< time of the last frame read */
-    uint32_t lines_bad;      /**< input lines that are not a CAN frame */
-    uint32_t frames_in;      /**< frames read */
-    uint32_t frames_out;     /**< frames written */
-    int eof;                 /**< 1 once the input is exhausted */
+    FILE* out;           /**< NULL: sent frames are discarded (but counted) */
+    const char* iface;   /**< interface name written on output lines */
+    uint64_t now_us;     /**< time of the last frame read */
+    uint32_t lines_bad;  /**< input lines that are not a CAN frame */
+    uint32_t frames_in;  /**< frames read */
+    uint32_t frames_out; /**< frames written */
+    int eof;             /**< 1 once the input is exhausted */
 } nte_port_log_t;
 
 /** The nte_node_port_t functions over these files (ctx = self). */

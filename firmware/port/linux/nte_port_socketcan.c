@@ -134,8 +134,8 @@ int nte_port_socketcan_open(nte_port_socketcan_t* self, const char* iface, const
     addr.can_ifindex = (int)idx;
     if (bind(fd, (struct sockaddr*)&addr, sizeof addr) != 0) {
         const int e = errno;
-        (void)snprintf(msg, msg_size, "cannot bind a CAN socket to '%s': %s%s", iface,
-                       strerror(e), (e == EINVAL) ? " (not a CAN interface?)" : "");
+        (void)snprintf(msg, msg_size, "cannot bind a CAN socket to '%s': %s%s", iface, strerror(e),
+                       (e == EINVAL) ? " (not a CAN interface?)" : "");
         (void)close(fd);
         return (e == ENODEV || e == EINVAL) ? nte_port_err_no_iface : nte_port_err_other;
     }

@@ -29,7 +29,7 @@ enum {
 
 typedef struct nte_port_socketcan_t {
     int fd;
-    int last_errno;      /**< errno of the last failed send or receive */
+    int last_errno;               /**< errno of the last failed send or receive */
     uint32_t send_errors_enobufs; /**< failed sends with ENOBUFS (TX queue / bus full) */
 } nte_port_socketcan_t;
 

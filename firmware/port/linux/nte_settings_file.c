@@ -41,8 +41,7 @@ size_t nte_settings_file_items(const nte_file_config_t* fc, nte_frames_setting_t
         put(out, &n, NTE_FRAMES_SETTING_RELAXATION, (fc->relaxation != 0) ? 1.0 : 0.0);
     }
     if (fc->has_direction_memory) {
-        put(out, &n, NTE_FRAMES_SETTING_DIRECTION_MEMORY,
-            (fc->direction_memory != 0) ? 1.0 : 0.0);
+        put(out, &n, NTE_FRAMES_SETTING_DIRECTION_MEMORY, (fc->direction_memory != 0) ? 1.0 : 0.0);
     }
     if (fc->layer_sets > 0) {
         put(out, &n, NTE_FRAMES_SETTING_LAYER_SETS, (double)fc->layer_sets);

@@ -9,10 +9,7 @@
 #define REG32(addr) (*(volatile uint32_t*)(uintptr_t)(addr))
 
 /* ---- semihosting ---------------------------------------------------------------------- */
-void nte_board_write0(const char* s)
-{
-    (void)nte_semihost(NTE_SH_SYS_WRITE0, s);
-}
+void nte_board_write0(const char* s) { (void)nte_semihost(NTE_SH_SYS_WRITE0, s); }
 
 void nte_board_exit(int code)
 {
@@ -90,10 +87,7 @@ uint32_t nte_board_stack_used(void)
 static volatile uint32_t g_ms;
 
 void nte_systick_handler(void);
-void nte_systick_handler(void)
-{
-    g_ms = g_ms + 1U;
-}
+void nte_systick_handler(void) { g_ms = g_ms + 1U; }
 
 void nte_board_clock_init(void)
 {
@@ -104,10 +98,7 @@ void nte_board_clock_init(void)
     REG32(SYST_CSR) = SYST_CSR_ENABLE | SYST_CSR_TICKINT | SYST_CSR_CLKSOURCE;
 }
 
-uint32_t nte_board_now_ms(void)
-{
-    return g_ms;
-}
+uint32_t nte_board_now_ms(void) { return g_ms; }
 
 uint64_t nte_board_now_us(void)
 {

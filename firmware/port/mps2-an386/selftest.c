@@ -20,10 +20,8 @@ typedef struct run_spec_t {
 } run_spec_t;
 
 static const run_spec_t RUNS[] = {
-    {1, nte_estimator_bank, nte_schedule_all},
-    {2, nte_estimator_bank, nte_schedule_rotate},
-    {2, nte_estimator_robust, nte_schedule_all},
-    {2, nte_estimator_bank, nte_schedule_all},
+    {1, nte_estimator_bank, nte_schedule_all},   {2, nte_estimator_bank, nte_schedule_rotate},
+    {2, nte_estimator_robust, nte_schedule_all}, {2, nte_estimator_bank, nte_schedule_all},
     {3, nte_estimator_bank, nte_schedule_all},
 };
 

@@ -12,14 +12,8 @@
    never inlined, never removed, no effect. */
 void nte_mark_step_begin(void) __attribute__((noinline, used));
 void nte_mark_step_end(void) __attribute__((noinline, used));
-void nte_mark_step_begin(void)
-{
-    __asm__ volatile("" ::: "memory");
-}
-void nte_mark_step_end(void)
-{
-    __asm__ volatile("" ::: "memory");
-}
+void nte_mark_step_begin(void) { __asm__ volatile("" ::: "memory"); }
+void nte_mark_step_end(void) { __asm__ volatile("" ::: "memory"); }
 
 static void emit_semihost(void* ctx, const char* line)
 {

@@ -7,10 +7,7 @@
 
 #include "board.h"
 
-void nte_slcan_init(nte_slcan_t* self)
-{
-    memset(self, 0, sizeof *self);
-}
+void nte_slcan_init(nte_slcan_t* self) { memset(self, 0, sizeof *self); }
 
 static int hex_val(char c)
 {
@@ -100,12 +97,8 @@ int nte_slcan_parse(nte_slcan_t* self, const char* line, uint32_t len, nte_node_
         }
         return rc;
     }
-    case 'O':
-        self->open = true;
-        break;
-    case 'C':
-        self->open = false;
-        break;
+    case 'O': self->open = true; break;
+    case 'C': self->open = false; break;
     case 'S':
     case 's':
     case 'L':
@@ -114,11 +107,8 @@ int nte_slcan_parse(nte_slcan_t* self, const char* line, uint32_t len, nte_node_
     case 'X':
     case 'M':
     case 'm':
-    case 'W':
-        break;
-    case 'V':
-        (void)strcpy(reply, "V0100\r");
-        return 0;
+    case 'W': break;
+    case 'V': (void)strcpy(reply, "V0100\r"); return 0;
     default:
         reply[0] = '\a';
         reply[1] = '\0';
