@@ -38,7 +38,7 @@ import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterable, Iterator, Sequence
+from typing import Callable, Iterable, Iterator, Sequence
 
 import numpy as np
 
@@ -102,8 +102,10 @@ def parse_cell(name: str, lineno: int, col: str, text: str) -> float:
 
 def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
                sparse: Sequence[str] = (), increasing: str | None = "t_s",
-               nan_ok: Sequence[str] = ()) -> Table:
-    """Read a numeric CSV by the rules of this module (see the module's docstring)."""
+               nan_ok: Sequence[str] = (),
+               missing_hint: Callable[[list[str]], str] | None = None) -> Table:
+    """Read a numeric CSV by the rules of this module (see the module's docstring).
+    ``missing_hint(header)``: advice appended to the refusal of a missing column ("" none)."""
     name = str(path)
     try:
         fh = open(path, "rb")
@@ -142,8 +144,10 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
                     header_line = lineno
                     for col in required:
                         if col not in header:
+                            advice = missing_hint(header) if missing_hint else ""
                             raise CsvError(f"{name}:{lineno}: column '{col}': missing from the "
-                                           f"header (have: {', '.join(header)})")
+                                           f"header (have: {', '.join(header)})"
+                                           + (f"; {advice}" if advice else ""))
                     if len(set(header)) != len(header):
                         dup = next(c for c in header if header.count(c) > 1)
                         raise CsvError(f"{name}:{lineno}: column '{dup}': duplicate column "
@@ -190,6 +194,31 @@ DEPTH_UNITS = {"mm": 1.0, "m": 1.0e3}
 class UnitsError(CsvError):
     """The file's values are implausible in the tools' units: the message names the probable
     unit or convention and the option that converts it."""
+
+
+#: what a header may name its insertion columns when their unit is not the tools' one: the
+#: quantity, "_", then one of its units (case aside: force_mN, t_ms, depth_m, force_N).  The
+#: reader does not guess (a column named so may hold anything); it says how to read them.
+UNIT_SUFFIX_QUANTITIES = (("t", "time", TIME_UNITS), ("depth", "depth", DEPTH_UNITS),
+                          ("force", "force", FORCE_UNITS))
+
+
+def unit_suffix_hint(header: list[str]) -> str:
+    """The options that read a header whose time, depth and force columns carry their unit in
+    their names (t_ms, depth_m, force_mN...): ``--columns t=..,depth=..,force=..`` and a
+    ``--KIND-unit U`` for every unit that is not the tools' own; "" when a quantity has no such
+    column or more than one (then nothing is sure enough to advise)."""
+    mapped, options = [], []
+    for key, kind, units in UNIT_SUFFIX_QUANTITIES:
+        found = [(col, unit) for col in header for unit in units
+                 if col.lower() == f"{key}_{unit}".lower()]
+        if len(found) != 1:
+            return ""
+        col, unit = found[0]
+        mapped.append(f"{key}={col}")
+        if units[unit] != 1.0:
+            options.append(f"--{kind}-unit {unit}")
+    return "read it with --columns " + " ".join([",".join(mapped)] + options)
 
 
 @dataclass(frozen=True)
@@ -392,7 +421,8 @@ def read_trial(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
     named = tuple(cmap.name(c) for c in required)
     if cmap.text and cmap.velocity is not None:
         named += (cmap.velocity,)       # a velocity the map names must be there
-    table = read_table(path, named, tuple(cmap.name(c) for c in sparse), increasing=cmap.t)
+    table = read_table(path, named, tuple(cmap.name(c) for c in sparse), increasing=cmap.t,
+                       missing_hint=None if cmap.text else unit_suffix_hint)
     cols = table.columns
     t, depth, force = cols[cmap.t], cols[cmap.depth], cols[cmap.force]
     given = cmap.velocity is not None and cmap.velocity in cols

@@ -251,4 +251,11 @@ def main(presets: list[str]) -> None:
 
 
 if __name__ == "__main__":
-    main(sys.argv[1:] or ["skin-on-muscle"])
+    args = sys.argv[1:] or ["skin-on-muscle"]
+    from reference_py.sim.calibration import PRESETS as TISSUES
+    unknown = [a for a in args if a != "--phases" and a not in TISSUES]
+    if unknown:
+        print(f"usage: config_loop_figures.py [--phases] [PRESET...] (presets: "
+              f"{', '.join(TISSUES)}); not one: {unknown[0]}", file=sys.stderr)
+        raise SystemExit(2)
+    main(args)

@@ -9,12 +9,13 @@ import csv
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from reference_py.tools.cli import main
 from reference_py.tools.csvio import ColumnMap, CsvError, Units, read_trial
 
-from estimate_run import refused
+from estimate_run import estimate as run_estimate, refused
 
 RIG_MAP = "t=time_us,depth=pz,force=fz"
 RIG_HEADER = "time_us,fx,fy,fz,tx,ty,tz,px,py,pz"
@@ -119,6 +120,53 @@ def test_a_mapped_column_the_file_lacks_is_named(rows, tmp_path, capsys, text, m
                    "--time-unit", "us") == [
         f"nte-ref: error: {rig}:1: column '{missing}': missing from the header (have: "
         f"{RIG_HEADER.replace(',', ', ')})"]
+
+
+#: headers that carry a unit in a column's name, the advice the refusal gives ("" none) and
+#: the factors (time, depth, force) that turn the standard file's values into this file's
+UNIT_HEADERS = [
+    ("t_s,depth_mm,force_mN", "read it with --columns t=t_s,depth=depth_mm,force=force_mN "
+     "--force-unit mN", (1.0, 1.0, 1e3)),
+    ("t_ms,depth_mm,force_n", "read it with --columns t=t_ms,depth=depth_mm,force=force_n "
+     "--time-unit ms", (1e3, 1.0, 1.0)),
+    ("t_s,depth_m,force_N", "read it with --columns t=t_s,depth=depth_m,force=force_N "
+     "--depth-unit m", (1.0, 1e-3, 1.0)),
+    ("T_US,Depth_mm,Force_mN", "read it with --columns t=T_US,depth=Depth_mm,force=Force_mN "
+     "--time-unit us --force-unit mN", (1e6, 1.0, 1e3)),
+    # two force columns, or a quantity named otherwise: nothing sure enough to advise
+    ("t_s,depth_mm,force_N,force_mN", "", (1.0, 1.0, 1.0, 1e3)),
+    ("time,depth_mm,force_mN", "", (1.0, 1.0, 1e3)),
+]
+
+
+@pytest.mark.parametrize("header,advice,factors", UNIT_HEADERS,
+                         ids=[h for h, _, _ in UNIT_HEADERS])
+def test_a_unit_in_a_column_name_is_refused_with_the_options_that_read_it(
+        rows, tmp_path, capsys, header, advice, factors):
+    """A header such as force_mN is not guessed at (a column so named may hold anything), but
+    the refusal gives the options that read the file, and with them it estimates as the
+    standard file does (to the rounding of the unit conversion)."""
+    src = tmp_path / "units.csv"
+    with open(src, "w") as fh:
+        fh.write(header + "\n")
+        for r in rows:
+            cells = list(r) + [r[-1]] * (len(factors) - 3)
+            fh.write(",".join(repr(v * k) for v, k in zip(cells, factors)) + "\n")
+    first = header.split(",")
+    missing = next(c for c in ("t_s", "depth_mm", "force_n") if c not in first)
+    want = (f"nte-ref: error: {src}:1: column '{missing}': missing from the header (have: "
+            f"{header.replace(',', ', ')})" + (f"; {advice}" if advice else ""))
+    assert refused(capsys, src, tmp_path / "e.csv", "--model", "2") == [want]
+    if not advice:
+        return
+    std = write_standard(tmp_path / "std.csv", rows)
+    options = advice.removeprefix("read it with ").split()
+    assert run_estimate(capsys, std, tmp_path / "std_e.csv", "--model", "2")[0] == 0
+    assert run_estimate(capsys, src, tmp_path / "u_e.csv", "--model", "2", *options)[0] == 0
+    a = np.loadtxt(tmp_path / "std_e.csv", delimiter=",", skiprows=1)
+    b = np.loadtxt(tmp_path / "u_e.csv", delimiter=",", skiprows=1)
+    assert a.shape == b.shape
+    np.testing.assert_allclose(b[:, 1], a[:, 1], rtol=1e-9, atol=1e-9)   # force_hat_n
 
 
 def test_the_mapped_time_must_increase(tmp_path, capsys):
