@@ -110,5 +110,6 @@ int nte_column_map_parse(const char* text, nte_columns_t* c, char* msg, size_t c
         (void)snprintf(f, NTE_COLUMN_NAME_MAX, "%s", (given[j] != NULL) ? given[j] : "");
     }
     c->velocity_required = c->velocity[0] != '\0';
+    c->mapped = 1;
     return 0;
 }

@@ -1,6 +1,9 @@
 /* Strict CSV reader of the host programs; mirrors reference_py/tools/csvio.py read_trial. */
 #include "csv_in.h"
 
+#include "nte_units.h"
+
+#include <ctype.h>
 #include <errno.h>
 #include <math.h>
 #include <stdarg.h>
@@ -201,6 +204,73 @@ void nte_columns_standard(nte_columns_t* c)
     c->velocity_required = 0;
 }
 
+/* ASCII case-insensitive equality (a header's names are compared as csvio compares them
+ * lowered). */
+static int same_ignoring_case(const char* a, const char* b)
+{
+    while ((*a != '\0') && (*b != '\0')) {
+        if (tolower((unsigned char)*a) != tolower((unsigned char)*b)) {
+            return 0;
+        }
+        a++;
+        b++;
+    }
+    return (*a == '\0') && (*b == '\0');
+}
+
+/* Twin of csvio.unit_suffix_hint: "read it with --columns t=..,depth=..,force=.. [--KIND-unit
+ * U]..." when each of the time, depth and force has exactly one column named QUANTITY_UNIT
+ * (case aside: t_ms, depth_m, force_mN), "" otherwise.  The reader does not guess from a name
+ * (a column so named may hold anything); the refusal says how to read the file. */
+static void unit_suffix_hint(char* const* header, const size_t nc, char* out, const size_t cap)
+{
+    static const nte_unit_t time_units[] = NTE_TIME_UNITS;
+    static const nte_unit_t depth_units[] = NTE_DEPTH_UNITS;
+    static const nte_unit_t force_units[] = NTE_FORCE_UNITS;
+    const struct {
+        const char* key;  /* the --columns key, also the name's first part */
+        const char* kind; /* --KIND-unit */
+        const nte_unit_t* units;
+        size_t n_units;
+    } quantities[3] = {{"t", "time", time_units, NTE_TIME_UNIT_COUNT},
+                       {"depth", "depth", depth_units, NTE_DEPTH_UNIT_COUNT},
+                       {"force", "force", force_units, NTE_FORCE_UNIT_COUNT}};
+    char mapped[512] = "";
+    char options[256] = "";
+    out[0] = '\0';
+    for (size_t q = 0U; q < 3U; q++) {
+        size_t found = 0U;
+        const char* column = NULL;
+        const nte_unit_t* unit = NULL;
+        size_t unit_index = 0U;
+        for (size_t c = 0U; c < nc; c++) {
+            for (size_t u = 0U; u < quantities[q].n_units; u++) {
+                char name[64];
+                (void)snprintf(name, sizeof name, "%s_%s", quantities[q].key,
+                               quantities[q].units[u].name);
+                if (same_ignoring_case(header[c], name) != 0) {
+                    found++;
+                    column = header[c];
+                    unit = &quantities[q].units[u];
+                    unit_index = u;
+                }
+            }
+        }
+        if (found != 1U) {
+            return;
+        }
+        size_t o = strlen(mapped);
+        (void)snprintf(mapped + o, sizeof mapped - o, "%s%s=%s", (q > 0U) ? "," : "",
+                       quantities[q].key, column);
+        if (unit_index != 0U) { /* the first unit of each table is the tools' own */
+            o = strlen(options);
+            (void)snprintf(options + o, sizeof options - o, " --%s-unit %s", quantities[q].kind,
+                           unit->name);
+        }
+    }
+    (void)snprintf(out, cap, "; read it with --columns %s%s", mapped, options);
+}
+
 int nte_trial_read(const char* path, nte_trial_t* tr, char* err, const size_t es)
 {
     nte_columns_t c;
@@ -297,8 +367,12 @@ int nte_trial_read_columns(const char* path, const nte_columns_t* cols, nte_tria
             const size_t n_req = (cols->velocity_required != 0) ? 4U : 3U;
             for (size_t r = 0U; (r < n_req) && (rc == 0); r++) {
                 if (idx[r] < 0) {
-                    fail(err, es, "%s:%zu: column '%s': missing from the header (have: %s)", path,
-                         lineno, req[r], hbuf);
+                    char advice[1024] = "";
+                    if (cols->mapped == 0) {
+                        unit_suffix_hint(header, nc, advice, sizeof advice);
+                    }
+                    fail(err, es, "%s:%zu: column '%s': missing from the header (have: %s)%s", path,
+                         lineno, req[r], hbuf, advice);
                     rc = -1;
                 }
             }

@@ -28,6 +28,7 @@ typedef struct nte_columns_t {
     char force[NTE_COLUMN_NAME_MAX];
     char velocity[NTE_COLUMN_NAME_MAX]; /**< read when the file has it; "": never read */
     int velocity_required;              /**< 1: refused when the file lacks it */
+    int mapped; /**< 1: given by --columns (a missing column then gets no unit advice) */
 } nte_columns_t;
 
 /** The standard names: t_s, depth_mm, force_n, and velocity_mm_s when the file has it. */

@@ -199,6 +199,7 @@ class UnitsError(CsvError):
 #: what a header may name its insertion columns when their unit is not the tools' one: the
 #: quantity, "_", then one of its units (case aside: force_mN, t_ms, depth_m, force_N).  The
 #: reader does not guess (a column named so may hold anything); it says how to read them.
+#: C twin: unit_suffix_hint in firmware/host/csv_in.c (test_run_columns: word for word).
 UNIT_SUFFIX_QUANTITIES = (("t", "time", TIME_UNITS), ("depth", "depth", DEPTH_UNITS),
                           ("force", "force", FORCE_UNITS))
 

@@ -21,7 +21,8 @@ import pytest
 
 from c_twin import ROOT
 from run_records import NEEDS_C, PROGS, body, c_run, reference
-from test_column_map import BAD_MAPS, RIG_HEADER, RIG_MAP, write_rig, write_standard
+from test_column_map import (BAD_MAPS, RIG_HEADER, RIG_MAP, UNIT_HEADERS, write_rig,
+                             write_standard)
 
 pytestmark = NEEDS_C
 
@@ -132,3 +133,18 @@ def test_help_names_the_map():
     for exe in PROGS.values():
         r = subprocess.run([str(exe), "--help"], capture_output=True, text=True)
         assert "--columns MAP" in r.stdout and "t=time_us,depth=pz,force=fz" in r.stdout
+
+
+@pytest.mark.parametrize("header,advice", [(h, a) for h, a, _ in UNIT_HEADERS],
+                         ids=[h for h, _, _ in UNIT_HEADERS])
+def test_a_unit_in_a_column_name_gets_the_same_advice(tmp_path, header, advice):
+    """nte-run's reader gives the refusal of test_column_map's table word for word (its twin
+    of csvio.unit_suffix_hint in csv_in.c), and none when a --columns map was given."""
+    src = tmp_path / "units.csv"
+    src.write_text(header + "\n" + ",".join(["0"] * header.count(",")) + ",0\n")
+    want = _refused_alike(src, tmp_path)
+    assert want.endswith(f"; {advice}") == bool(advice), want
+    if advice:
+        # a map that misses: the map's column is named, with no advice
+        mapped = _refused_alike(src, tmp_path, "--columns", "t=x,depth=y,force=z")
+        assert "read it with" not in mapped
