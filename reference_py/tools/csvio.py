@@ -217,7 +217,7 @@ def unit_suffix_hint(header: list[str]) -> str:
             return ""
         col, unit = found[0]
         mapped.append(f"{key}={col}")
-        if units[unit] != 1.0:
+        if unit != next(iter(units)):     # the first unit of each table is the tools' own
             options.append(f"--{kind}-unit {unit}")
     return "read it with --columns " + " ".join([",".join(mapped)] + options)
 
