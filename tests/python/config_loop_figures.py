@@ -24,6 +24,9 @@
    measured-like generator on seeds 31-50.  Model III's gate (config.GATE_REOPEN_AFTER) was
    chosen on skin-on-muscle seeds 101-102 and compared on seeds 201-210 and measured-like
    seeds 11-30; these seeds were not looked at.
+5. The atlas of part 3 under other forms of the measured-like generator (rates, noise, a tear
+   that runs on, a stage that backs off, stick-slip, no membrane; held-out seeds 41-50):
+   `config_loop_figures.py --forms` prints this part alone.
 
 The estimator runs are nte-run-double's (bit for bit the reference's: test_config_loop.py), for
 speed.  Tuning seeds 1-5, held-out seeds 101-110.
@@ -201,6 +204,44 @@ def innovation_by_phase(d: Path, presets: list[str]) -> None:
     print_phase_rows("measured-like", rows)
 
 
+#: part 5: the generator's options, each a form of measured insertion the export was not
+#: developed on (MODEL.md §9 ranges: rates, noise, tears that run on, a stage that backs off)
+ATLAS_FORMS: dict[str, dict[str, object]] = {
+    "default": {}, "unload 0.5 mm": {"unload_mm": 0.5}, "stick-slip": {"stick_slip": True},
+    "tear over 1 mm": {"release_mm": 1.0}, "50 Hz": {"rate_hz": 50.0},
+    "200 Hz": {"rate_hz": 200.0}, "noise 50 mN": {"noise": 0.05},
+    "no membrane": {"n_layers": 0}, "membranes x0.3": {"rupture_scale": 0.3}}
+FORM_SEEDS = range(41, 51)
+
+
+def atlas_by_form(d: Path) -> None:
+    """Part 5 (``--forms``): the measured-like atlas of part 3 on held-out seeds 41-50 under
+    each of ATLAS_FORMS: RMSE / peak, median and worst, Model II beside Model III."""
+    from discrepancy_measured_like import make_trial
+    print(f"5. atlas by form of the measured-like generator, seeds {FORM_SEEDS[0]}-"
+          f"{FORM_SEEDS[-1]}: RMSE / peak, median (worst)")
+    for form, kw in ATLAS_FORMS.items():
+        rel: dict[int, list[float]] = {2: [], 3: []}
+        for seed in FORM_SEEDS:
+            tr, truth, sigma, _ = make_trial(seed, **kw)  # type: ignore[arg-type]
+            a, b = d / "form_a.csv", d / "form_b.csv"
+            write_record(a, tr.t_s, tr.depth_mm, tr.force_n)
+            rng = np.random.default_rng(1000 + seed)
+            write_record(b, tr.t_s, tr.depth_mm, truth + rng.normal(0.0, sigma, len(truth)))
+            target = truth - truth[0]
+            for model in (2, 3):
+                cfg = d / "form.json"
+                run(str(a), "--model", str(model), "--contact", "on", "--out",
+                    str(d / "id.csv"), "--export-config", str(cfg))
+                run(str(b), "--config", str(cfg), "--predict-only", "--out", str(d / "pr.csv"))
+                err = column(d / "pr.csv", "force_hat_n") - target
+                rel[model].append(100.0 * float(np.sqrt(np.mean(err ** 2))) /
+                                  float(np.max(np.abs(target))))
+        print(f"   {form:15s} " + "  ".join(
+            f"Model {'I' * m}: {np.median(rel[m]):.1f} % ({np.max(rel[m]):.1f} %)"
+            for m in (2, 3)))
+
+
 def main(presets: list[str]) -> None:
     if not C.exists():
         raise SystemExit(f"{C} missing: make build")
@@ -209,6 +250,9 @@ def main(presets: list[str]) -> None:
         if presets[:1] == ["--phases"]:
             # part 4 alone
             innovation_by_phase(d, presets[1:] or ["skin-on-muscle"])
+            return
+        if presets[:1] == ["--forms"]:
+            atlas_by_form(d)     # part 5 alone
             return
         preset = presets[0]
         tune = [str(phantom(d, preset, s)) for s in TUNING]
@@ -253,9 +297,9 @@ def main(presets: list[str]) -> None:
 if __name__ == "__main__":
     args = sys.argv[1:] or ["skin-on-muscle"]
     from reference_py.sim.calibration import PRESETS as TISSUES
-    unknown = [a for a in args if a != "--phases" and a not in TISSUES]
+    unknown = [a for a in args if a not in ("--phases", "--forms") and a not in TISSUES]
     if unknown:
-        print(f"usage: config_loop_figures.py [--phases] [PRESET...] (presets: "
+        print(f"usage: config_loop_figures.py [--phases | --forms] [PRESET...] (presets: "
               f"{', '.join(TISSUES)}); not one: {unknown[0]}", file=sys.stderr)
         raise SystemExit(2)
     main(args)
