@@ -219,14 +219,61 @@ def fault_table(tmp_path_factory: pytest.TempPathFactory) -> dict:
     return {r["fault"]: r for r in table(str(node_binary()), str(csv), work)}
 
 
-@pytest.mark.parametrize("fault", ["loss 1%", "loss 5%", "loss 20%", "duplicates 5 %",
-                                   "reorder 5 %", "burst (seeded, 2/s)", "depth dropout 1 s",
-                                   "depth dropout 10 s", "clock jump +2 s", "clock jump -1 s"])
-def test_fault_recovers_within_bounds(fault_table: dict, fault: str) -> None:
+#: every row of the fault table, in its order (host_bench.faults.fault_rows)
+FAULT_ROWS = ["loss 1%", "loss 5%", "loss 20%", "duplicates 5 %", "reorder 5 %",
+              "burst (seeded, 2/s)", "depth dropout 1 s", "depth dropout 10 s", "stuck force 1 s",
+              "saturated force 1 s", "stuck force 1 s, SensorFault", "force sensor lost 1 s",
+              "clock jump +2 s", "clock jump -1 s", "bus silent 0.5 s mid-insertion",
+              "node restart mid-insertion", "flood at bus capacity 5 s"]
+RESTART = "node restart mid-insertion"
+FLOOD = "flood at bus capacity 5 s"
+#: rows the node does not yet bring back within bounds (strict: the fix must remove them here)
+FAULT_XFAIL = {RESTART: "a node restarted mid-insertion starts from nothing (nominal "
+               "parameters, no state): 1165 % of the fault-free error after it is up; the "
+               "node must keep its state across a restart (the 'bus silent 0.5 s "
+               "mid-insertion' row, 100 %, is what it would then see)"}
+
+
+def fault_params() -> list:
+    """FAULT_ROWS as pytest parameters, the rows of FAULT_XFAIL marked strict xfail."""
+    return [pytest.param(f, marks=pytest.mark.xfail(strict=True, reason=FAULT_XFAIL[f]))
+            if f in FAULT_XFAIL else f for f in FAULT_ROWS]
+
+
+def assert_within_bounds(r: dict) -> None:
     """Recovery within 2 s of the fault's end, error after it at most 110 % of fault-free."""
-    r = fault_table[fault]
     assert r["recovery_s"] is None or r["recovery_s"] <= 2.0, r
     assert r["error_pct"] <= 110.0, r
+
+
+def test_fault_table_rows(fault_table: dict) -> None:
+    """FAULT_ROWS is the table: a row added to host_bench.faults is asserted here too."""
+    assert list(fault_table) == FAULT_ROWS
+
+
+@pytest.mark.parametrize("fault", fault_params())
+def test_fault_recovers_within_bounds(fault_table: dict, fault: str) -> None:
+    """Recovery within 2 s of the fault's end, error after it at most 110 % of fault-free."""
+    assert_within_bounds(fault_table[fault])
+
+
+def test_flood_at_capacity_costs_nothing(fault_table: dict) -> None:
+    """Foreign frames at the bus's capacity (4 000/s) for 5 s, half on the node's Depth and
+    Force ids: the node publishes exactly the fault-free run's estimates; the others are
+    counted as unknown ids (no kernel filter in a replay), all 10 011 of them."""
+    r = fault_table[FLOOD]
+    assert r["same_as_fault_free"] and r["error_pct"] == 100.0, r
+    c = r["counters"]
+    assert c["unknown_id"] == 10011 and c["bad_crc"] > 9000, c
+
+
+def test_restart_mid_insertion_publishes_at_once(fault_table: dict) -> None:
+    """The node killed at 2.5 s, a fresh one up 0.5 s (of sensor time) later: it publishes
+    fresh estimates from its first one, counts nothing unusual; what it publishes is far off
+    (FAULT_XFAIL) -- where the bus silent for the same 0.5 s costs a running node nothing."""
+    r, silent = fault_table[RESTART], fault_table["bus silent 0.5 s mid-insertion"]
+    assert r["recovery_s"] == 0.0 and r["counters"] == {}, r
+    assert r["error_pct"] > 500.0 and silent["error_pct"] <= 101.0, (r, silent)
 
 
 @pytest.mark.parametrize("fault,event", [("stuck force 1 s", "sensor_stuck"),
