@@ -146,15 +146,14 @@ def play_on_vcan(node: str, runs: list[NodeRun], work: Path, speed: float,
         played[r.tag] = fr
         write_candump(bus_dir / f"{r.tag}.in.log", fr, "vcan0", 1.0 if r.realtime else speed)
     (bus_dir / "plan").write_text("".join(f"{r.tag} {r.end}\n" for r in runs))
-    timing = work / "with-vcan.timing"
-    env = dict(os.environ, WITH_VCAN_TIMING=str(timing),
+    env = dict(os.environ,
                WITH_VCAN_TIMEOUT=os.environ.get("WITH_VCAN_TIMEOUT", str(BUS_TIMEOUT_S)))
     p = subprocess.run([str(WITH_VCAN), "bash", str(BUS_SCRIPT), node, str(bus_dir)], cwd=ROOT,
                        env=env, capture_output=True, text=True)
     vehicle = next((ln.split("vehicle ", 1)[1] for ln in p.stderr.splitlines()
                     if ln.startswith("with-vcan: vehicle ")), None)
-    if vehicle is None and timing.exists():
-        vehicle = timing.read_text().split()[0].split("=", 1)[1]
+    if vehicle is None and os.environ.get("WITH_VCAN_CHANNEL"):
+        vehicle = f"the kernel served at {os.environ['WITH_VCAN_CHANNEL']}"
     failed = sorted(bus_dir.glob("*.failed"))
     if p.returncode == 125:
         reasons = [ln.strip() for ln in p.stderr.splitlines() if ln.startswith("  ")]
