@@ -20,6 +20,7 @@ arrival times, so a kernel under QEMU's TCG, several times slower, gives the sam
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import subprocess
@@ -83,11 +84,32 @@ def estimates(db: NteDatabase, sent: list[can.Message],
 
 @dataclass
 class NodeRun:
-    """One fresh node fed `frames`; ``end`` "stop" (SIGTERM) or "kill" (SIGKILL, a crash)."""
+    """One fresh node fed `frames`; ``end`` "stop" (SIGTERM) or "kill" (SIGKILL, a crash);
+    the frames of the `realtime` span (s), if any, played in real time whatever the speed."""
     tag: str
     frames: list[tuple[float, can.Message]]
     end: str = "stop"
-    realtime: bool = False     #: played in real time whatever the table's speed
+    realtime: tuple[float, float] | None = None
+
+
+def paced(frames: list[tuple[float, can.Message]], speed: float,
+          realtime: tuple[float, float] | None = None) -> list[tuple[float, can.Message]]:
+    """The frames at the times canplayer is to send them: `speed` times real time, but real
+    time within the `realtime` span (s)."""
+    a, b = realtime if realtime is not None else (0.0, 0.0)
+
+    def at(t: float) -> float:
+        fast = min(t, a) + max(0.0, t - b)
+        return fast / speed + min(max(t - a, 0.0), b - a)
+
+    return [(at(t), m) for t, m in frames]
+
+
+def received_digest(frames: list[tuple[float, can.Message]]) -> str:
+    """"COUNT MD5" of the frames as the node logs what it received: "ID#DATA" a line (the
+    third field of its candump lines), in order (fault_bus.sh writes the same of its log)."""
+    text = "".join(f"{m.arbitration_id:03X}#{bytes(m.data).hex().upper()}\n" for _, m in frames)
+    return f"{len(frames)} {hashlib.md5(text.encode()).hexdigest()}"
 
 
 @dataclass
@@ -103,7 +125,7 @@ class BusRun:
     replay_stats: dict
     sent_equal: bool | None             #: Estimate and Params frames equal the replay's
     counters_equal: bool                #: the counters equal the replay's (see _same_counters)
-    bus_s: list[float]                  #: wall s inside the kernel: run, start, play, reading
+    bus_s: list[float]                  #: wall s in the kernel: run, start, play, reading, stop, copy
     est: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
 
 
@@ -133,10 +155,11 @@ class BusError(RuntimeError):
 
 
 def play_on_vcan(node: str, runs: list[NodeRun], work: Path, speed: float,
-                 db: NteDatabase) -> tuple[dict[str, BusRun], str]:
+                 db: NteDatabase, keep: bool = False) -> tuple[dict[str, BusRun], str]:
     """Every run on vcan0, in order, in one with-vcan command: {tag: BusRun}, and the vehicle
-    with-vcan used (its own words).  Logs are played at `speed` times real time (a run marked
-    realtime at 1).  Raises BusError when the bus half fails."""
+    with-vcan used (its own words).  Logs are played at `speed` times real time (`paced`).
+    `keep`: the nodes' received logs are copied here too (work/bus/TAG.recv.log).  Raises
+    BusError when the bus half fails."""
     bus_dir = work / "bus"
     bus_dir.mkdir(exist_ok=True)
     marker = drain_marker(db)
@@ -144,12 +167,13 @@ def play_on_vcan(node: str, runs: list[NodeRun], work: Path, speed: float,
     for r in runs:
         fr = list(r.frames) + [(r.frames[-1][0], marker)]
         played[r.tag] = fr
-        write_candump(bus_dir / f"{r.tag}.in.log", fr, "vcan0", 1.0 if r.realtime else speed)
+        write_candump(bus_dir / f"{r.tag}.in.log", paced(fr, speed, r.realtime), "vcan0", 1.0)
     (bus_dir / "plan").write_text("".join(f"{r.tag} {r.end}\n" for r in runs))
     env = dict(os.environ,
                WITH_VCAN_TIMEOUT=os.environ.get("WITH_VCAN_TIMEOUT", str(BUS_TIMEOUT_S)))
-    p = subprocess.run([str(WITH_VCAN), "bash", str(BUS_SCRIPT), node, str(bus_dir)], cwd=ROOT,
-                       env=env, capture_output=True, text=True)
+    p = subprocess.run([str(WITH_VCAN), "bash", str(BUS_SCRIPT), node, str(bus_dir)]
+                       + (["keep"] if keep else []), cwd=ROOT, env=env, capture_output=True,
+                       text=True)
     vehicle = next((ln.split("vehicle ", 1)[1] for ln in p.stderr.splitlines()
                     if ln.startswith("with-vcan: vehicle ")), None)
     if vehicle is None and os.environ.get("WITH_VCAN_CHANNEL"):
@@ -177,11 +201,10 @@ def play_on_vcan(node: str, runs: list[NodeRun], work: Path, speed: float,
                      counters_equal=_same_counters(stats, st_r),
                      bus_s=[float(x) for x in (bus_dir / f"{r.tag}.done").read_text().split()])
         if r.end == "stop":
-            recv = list(can.CanutilsLogReader(str(bus_dir / f"{r.tag}.recv.log")))
+            got = (bus_dir / f"{r.tag}.recv").read_text().split()
             sent = list(can.CanutilsLogReader(str(bus_dir / f"{r.tag}.sent.log")))
-            res.received = len(recv)
-            res.received_equal = ([(m.arbitration_id, bytes(m.data)) for m in recv]
-                                  == [(m.arbitration_id, bytes(m.data)) for _, m in inputs])
+            res.received = int(got[0])
+            res.received_equal = " ".join(got) == received_digest(inputs)
             res.sent_equal = _outputs(db, sent) == _outputs(db, sent_r)
             # the bus node's Estimates at the times its replay published them (when equal)
             t_rep = estimates(db, sent_r)[:, 0]

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# fault_bus.sh NODE DIR: the bus half of the fault table over vcan0 (python -m host_bench.faults
+# fault_bus.sh NODE DIR [keep]: the bus half of the fault table over vcan0 (python -m host_bench.faults
 # --bus vcan), run where vcan0 exists -- inside the kernel host_bench/with-vcan provides.  Only
 # what needs AF_CAN runs here (nte-node and can-utils' canplayer): the faulted input logs were
 # written on the host beforehand and the scoring runs on the host afterwards
@@ -17,14 +17,17 @@
 #      logs' unwritten buffers are lost with it; its counters were read in step 3).
 # The node writes what it received and sent (--received, --record) and its counters (--stats)
 # to a directory in /dev/shm (a file system in memory: in a kernel under TCG every write to the
-# shared host file system costs milliseconds), copied to DIR/TAG.* after the run.
+# shared host file system costs milliseconds); after the run DIR/TAG.stats.json, .sent.log,
+# .node.err, .exit (its exit status) and .recv ("COUNT MD5": the frames it received, and the
+# MD5 of their "ID#DATA" fields one a line, in order) are written; .recv.log too with "keep".
 # DIR/pids lists the node's process group ids, one per run started.
 # Every process started here is stopped by its own id: the nodes by their process groups, also
 # when a run fails or this script is stopped (SIGTERM, SIGINT: the groups get SIGKILL at once).
-# DIR/TAG.done (seconds: the run, the node's start, the play, the node's reading after it) or DIR/TAG.failed (why) per run; exit status 0 when every
+# DIR/TAG.done (seconds: the run, the node's start, the play, its reading after it, its stop, the
+# copy of its logs) or DIR/TAG.failed (why) per run; exit status 0 when every
 # run is done, 1 otherwise (the runs after a failed one are not started).
 set -uo pipefail
-NODE="$1"; DIR="$2"
+NODE="$1"; DIR="$2"; KEEP="${3:-}"
 READY_S=60        # a kernel under TCG on a loaded host starts a process slowly
 DRAIN_S=600       # and may read a flooded log slowly: a limit, not a measure
 
@@ -97,21 +100,29 @@ run() {           # TAG END
     local t_played=$EPOCHREALTIME
     stats_show "$pid" "$base.stats.json" '"commands_applied": 1,' || return 1
     local t_read=$EPOCHREALTIME
-    cp "$base.stats.json" "$DIR/$tag.stats.json"
     if [[ "$end" == kill ]]; then
+        cp "$base.stats.json" "$DIR/$tag.stats.json"    # the counters it had read all with
         stop_group "$pid" KILL
     else
         stop_group "$pid" TERM
         cp "$base.stats.json" "$DIR/$tag.stats.json"    # the final counters, written at exit
     fi
     echo "$stopped" >"$DIR/$tag.exit"
-    for f in sent.log recv.log node.err; do
+    local t_stopped=$EPOCHREALTIME
+    # what it received, as a count and a digest of its "ID#DATA" fields in order (the whole log
+    # would cross to the host file system for nothing: the host knows what was played)
+    echo "$(wc -l <"$base.recv.log") $(cut -d' ' -f3 "$base.recv.log" | md5sum | cut -c1-32)" \
+        >"$DIR/$tag.recv"
+    local f
+    for f in sent.log node.err ${KEEP:+recv.log}; do
         [[ -f "$base.$f" ]] && cp "$base.$f" "$DIR/$tag.$f"
     done
     rm -f "$base".*
-    # seconds: the whole run, the node's start, canplayer, the node's reading after it
-    awk -v a="$t0" -v r="$t_ready" -v p="$t_played" -v d="$t_read" -v b="$EPOCHREALTIME" \
-        'BEGIN { printf "%.2f %.2f %.2f %.2f\n", b - a, r - a, p - r, d - p }' >"$DIR/$tag.done"
+    # seconds: the whole run, the node's start, canplayer, the node's reading after it, its
+    # stop, the copy of its logs
+    awk -v a="$t0" -v r="$t_ready" -v p="$t_played" -v d="$t_read" -v s="$t_stopped" \
+        -v b="$EPOCHREALTIME" 'BEGIN { printf "%.2f %.2f %.2f %.2f %.2f %.2f\n", b - a, r - a,
+        p - r, d - p, s - d, b - s }' >"$DIR/$tag.done"
 }
 
 rm -f "$DIR/pids"

@@ -186,14 +186,14 @@ class FaultRow:
     """A row of the table: the faulted stream as `segments`, each fed to a freshly started
     node (one segment but for the restart), the fault's span [a, b] s, and whether the error is
     taken over the whole run (a fault that spans it, or the flood: its estimates during the
-    flood are what it is about).  A `realtime` row is played on the bus in real time whatever
-    the table's speed (the flood: its rate is its point)."""
+    flood are what it is about).  The flood's span is played on the bus in real time whatever
+    the table's speed: its rate is its point (`realtime`)."""
     name: str
     segments: list[list[tuple[float, can.Message]]]
     a: float
     b: float
     whole: bool = False
-    realtime: bool = False
+    realtime: tuple[float, float] | None = None
 
 
 def fault_rows(frames: list[tuple[float, can.Message]], db: NteDatabase,
@@ -259,7 +259,7 @@ def fault_rows(frames: list[tuple[float, can.Message]], db: NteDatabase,
         RESTART_AT_S, up))
     t0, t1 = FLOOD_SPAN_S
     rows.append(FaultRow(f"flood at bus capacity {t1 - t0:.0f} s",
-                         [flood(frames, db, t0, t1)], t0, t1, whole=True, realtime=True))
+                         [flood(frames, db, t0, t1)], t0, t1, whole=True, realtime=(t0, t1)))
     return rows
 
 
@@ -303,10 +303,10 @@ def _moved(stats: list[dict], st0: dict) -> dict[str, int]:
 
 
 def table(node: str, csv: str, work: Path, rows: list[str] | None = None, bus: str = "replay",
-          speed: float = 1.0, info: dict | None = None) -> list[dict]:
+          speed: float = 1.0, info: dict | None = None, keep: bool = False) -> list[dict]:
     """Every fault row (or those named in rows), each stream fed to a fresh node -- through
     nte-node --replay (bus "replay") or live on vcan0 (bus "vcan", host_bench.fault_bus, at
-    `speed` times real time) -- and scored by `score` against the fault-free run on the same
+    `speed` times real time; `keep`: the nodes' received logs kept in work/bus) -- and scored by `score` against the fault-free run on the same
     vehicle, with the counters that moved.  Over vcan each row also carries "bus": its runs'
     checks (host_bench.fault_bus.BusRun), and `info` (when given) receives the vehicle, the
     fault-free run's checks and the bus half's wall time."""
@@ -330,7 +330,7 @@ def table(node: str, csv: str, work: Path, rows: list[str] | None = None, bus: s
                  for j, seg in enumerate(r.segments)]
     if bus == "vcan":
         t_wall = time.monotonic()
-        done, vehicle = play_on_vcan(node, runs, work, speed, db)
+        done, vehicle = play_on_vcan(node, runs, work, speed, db, keep)
         found = {tag: (b.est, b.stats) for tag, b in done.items()}
         if info is not None:
             info.update(vehicle=vehicle, clean=asdict_run(done["clean"]),
@@ -402,7 +402,7 @@ def main(argv: list[str] | None = None) -> int:
           (natively, user-mode Linux, or QEMU; WITH_VCAN_MODE, WITH_VCAN_CHANNEL apply) and
           runs host_bench/fault_bus.sh there: per run a fresh nte-node (kernel filters on)
           started in its own process group, the stream played by canplayer at --speed times
-          real time (the flood row always in real time), the node stopped by its group --
+          real time (the flood itself always in real time), the node stopped by its group --
           killed for the restart row.  Checked per run: the node received exactly the frames
           played on its ids, and its Estimate and Params frames equal nte-node --replay's on
           them, which also times them (scenario time, never arrival time).
@@ -456,7 +456,7 @@ or the bus half could not run, 2 bad arguments.""")
                             "--cycles", "2", "--out", csv], check=True, stdout=subprocess.DEVNULL)
         info: dict = {}
         try:
-            rows = table(a.node, csv, work, a.row, a.bus, a.speed, info)
+            rows = table(a.node, csv, work, a.row, a.bus, a.speed, info, a.keep is not None)
         except BusError as e:
             print(f"{prog}: error: {e}", file=sys.stderr)
             return 1
