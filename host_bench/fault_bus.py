@@ -23,6 +23,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import shutil
 import subprocess
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -161,7 +162,8 @@ def play_on_vcan(node: str, runs: list[NodeRun], work: Path, speed: float,
     `keep`: the nodes' received logs are copied here too (work/bus/TAG.recv.log).  Raises
     BusError when the bus half fails."""
     bus_dir = work / "bus"
-    bus_dir.mkdir(exist_ok=True)
+    shutil.rmtree(bus_dir, ignore_errors=True)       # nothing of an earlier table (--keep DIR)
+    bus_dir.mkdir()
     marker = drain_marker(db)
     played: dict[str, list[tuple[float, can.Message]]] = {}
     for r in runs:
