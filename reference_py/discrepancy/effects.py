@@ -48,6 +48,7 @@ effect: subtract the term from the measurement before the update (bank.py is lef
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -142,6 +143,9 @@ class TrialGrid:
     ruptures: list[float] = field(default_factory=list)
     #: time (s) the tare refers to (middle of the samples before contact): drift is 0 there
     t_ref: float | None = None
+    #: the trial's largest force (N, tare removed, every sample): a layer's tenting terms k1 u
+    #: and k2 u^2 (u in [0, 1]) are each at most this (LAYER_LOAD_MAX_X times it)
+    peak_n: float = float("inf")
 
     @property
     def t_mid(self) -> float:
@@ -200,20 +204,35 @@ def nl_specs(effects: tuple[str, ...]) -> list[NLParam]:
 
 
 class StateCache:
-    """Remembers the last zh per trial so fits that move only output parameters skip the ODE."""
+    """Remembers the last few zh per trial so fits that move only output parameters skip the ODE.
+
+    A few per trial, not one: a finite-difference Jacobian moves one trial's surface, then the
+    next one's, and every move returns the others to the values before it."""
+
+    #: states kept per trial (most recent first)
+    KEEP = 4
 
     def __init__(self, substeps: int = 10) -> None:
         #: RK3 sub-steps per sample for the fits (fewer than the reference's 10 is accurate to
         #: ~1e-5 relative on the strided fitting grid and 2.5x faster)
         self.substeps = substeps
-        self._key: dict[int, tuple[float, ...]] = {}
-        self._val: dict[int, tuple[Array, Array, Array, Array]] = {}
+        self._val: dict[object, list[tuple[tuple, object]]] = {}
 
-    def get(self, i: int, key: tuple[float, ...]) -> tuple[Array, Array, Array, Array] | None:
-        return self._val[i] if self._key.get(i) == key else None
+    def get(self, i: object, key: tuple) -> Any:
+        """The value kept for slot ``i`` (a trial index; ("design", i) for its design rows)
+        under ``key``, or None."""
+        kept = self._val.get(i, [])
+        for j, (k, v) in enumerate(kept):
+            if k == key:
+                if j:
+                    kept.insert(0, kept.pop(j))
+                return v
+        return None
 
-    def put(self, i: int, key: tuple[float, ...], val: tuple[Array, Array, Array, Array]) -> None:
-        self._key[i], self._val[i] = key, val
+    def put(self, i: object, key: tuple, val: object) -> None:
+        kept = self._val.setdefault(i, [])
+        kept.insert(0, (key, val))
+        del kept[self.KEEP:]
 
 
 def trial_inputs(tr: TrialGrid, i: int, effects: tuple[str, ...], nl: dict[str, Array],
@@ -258,6 +277,14 @@ def design(trials: list[TrialGrid], effects: tuple[str, ...], nl: dict[str, Arra
 
     force = design @ coefficients; the coefficients are the linear parameters named by the labels.
     """
+    blocks, labels = design_blocks(trials, effects, nl, cache)
+    return np.vstack(blocks), labels
+
+
+def design_blocks(trials: list[TrialGrid], effects: tuple[str, ...], nl: dict[str, Array],
+                  cache: StateCache | None = None) -> tuple[list[Array], list[str]]:
+    """:func:`design`'s rows trial by trial (with a cache, a trial whose values did not change
+    gets the very array of the last call: callers may key work on it by identity; read only)."""
     n_tr = len(trials)
     labels = ["A", "C", "sigma2"]
     for i, tr in enumerate(trials):
@@ -281,6 +308,16 @@ def design(trials: list[TrialGrid], effects: tuple[str, ...], nl: dict[str, Arra
     col = {name: j for j, name in enumerate(labels)}
     blocks = []
     for i, tr in enumerate(trials):
+        # a trial's rows depend on the shared values and its own: a fit that moves another
+        # trial's surface (a Jacobian column) finds them in the cache
+        key: tuple = ()
+        if cache is not None:
+            key = (id(tr), len(tr.t_s), effects, len(labels)) + tuple(
+                (k, float(v[i]) if np.ndim(v) == 1 else float(v)) for k, v in nl.items())
+            hit = cache.get(("design", i), key)
+            if hit is not None:
+                blocks.append(hit)
+                continue
         l, s, zh, bl = trial_inputs(tr, i, effects, nl, cache)
         n = len(l)
         m = np.zeros((n, len(labels)))
@@ -323,8 +360,11 @@ def design(trials: list[TrialGrid], effects: tuple[str, ...], nl: dict[str, Arra
                 for i0, i1 in tr.dwells:
                     c[i0:i1] = -(1.0 - np.exp(-(tr.t_s[i0:i1] - tr.t_s[i0]) / tau))
                 m[:, col[f"relax_{k}[{i}]"]] = c
+        if cache is not None:
+            m.flags.writeable = False
+            cache.put(("design", i), key, m)
         blocks.append(m)
-    return np.vstack(blocks), labels
+    return blocks, labels
 
 
 def _layer_columns(m: Array, col: dict[str, int], i: int, rs: list[float], v: Array, l: Array,

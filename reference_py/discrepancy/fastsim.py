@@ -40,18 +40,15 @@ def state_trajectory(t_s: Array, l_mm: Array, p: float, q: float, alpha: float,
     la, lb = l_mm[:-1], l_mm[1:]
     dl = lb - la
     h = dt / substeps
-    big_a = np.ones(n - 1)
-    big_c = np.zeros(n - 1)
-    # Python floats, as the arrays' own precision is the one to keep
-    for f0, fm, f1 in zip(*(f.tolist() for f in substep_fractions(substeps))):
-        l0 = np.maximum(la + dl * f0, 0.0)
-        lm = np.maximum(la + dl * fm, 0.0)
-        l1 = np.maximum(la + dl * f1, 0.0)
-        d0, dm, d1 = l0 * _b_of_l(l0, p, q, alpha), lm * _b_of_l(lm, p, q, alpha), \
-            l1 * _b_of_l(l1, p, q, alpha)
-        sa, sc = rk3_affine(h, ((l0 * beta, d0), (lm * beta, dm), (l1 * beta, d1)))
-        # the sample's map is the sub-steps' maps composed, first sub-step innermost
-        big_a, big_c = sa * big_a, sa * big_c + sc
+    # every sub-step's three stage depths at once: shape (3, substeps, n - 1)
+    fr = np.stack(substep_fractions(substeps))[:, :, None]
+    ls = np.maximum(la + dl * fr, 0.0)
+    d = ls * _b_of_l(ls, p, q, alpha)
+    sa, sc = rk3_affine(h, ((ls[0] * beta, d[0]), (ls[1] * beta, d[1]), (ls[2] * beta, d[2])))
+    # the sample's map is the sub-steps' maps composed, first sub-step innermost
+    big_a, big_c = sa[0], sc[0]
+    for j in range(1, substeps):
+        big_a, big_c = sa[j] * big_a, sa[j] * big_c + sc[j]
     inside = (l_mm[1:] > 0.0)
     big_a = np.where(inside, big_a, 0.0).tolist()
     big_c = np.where(inside, big_c, 0.0).tolist()

@@ -10,14 +10,15 @@ trials: they are the same needle and tissue; only layers, surfaces and per-trial
 """
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
+from scipy.linalg import lapack, solve_triangular
 from scipy.optimize import least_squares
 
-from scipy.optimize import lsq_linear
-
-from .effects import NLParam, StateCache, TrialGrid, design, lin_bound, nl_specs
+from .effects import NLParam, StateCache, TrialGrid, design, design_blocks, lin_bound, nl_specs
 from ..fmath import Array
 
 
@@ -38,28 +39,248 @@ class Fit:
 
 
 def bounds_of(labels: list[str]) -> tuple[Array, Array]:
+    lo, hi = _bounds_of(tuple(labels))
+    return lo.copy(), hi.copy()
+
+
+#: a layer's tenting coefficients k1, k2 (its force k1 u + k2 u^2, u in [0, 1]) are at most this
+#: multiple of the trial's largest force: k1 + k2 is the force the layer holds at its rupture.
+#: Without the bound a layer that the fitted surface leaves a fraction of a stride thick (one
+#: fitting row at u ~ 1e-3) fits that row with k2 ~ 1e6 N, and the prediction between the rows
+#: reaches it (measured-like seed 38: 1.5e6 N, RMSE to truth 1.9e4 N)
+LAYER_LOAD_MAX_X = 1.0
+_LOAD = re.compile(r"layer\d+_load[12]\[(\d+)\]$")
+
+
+def coef_bounds(labels: list[str], trials: list[TrialGrid]) -> tuple[Array, Array]:
+    """Bounds of the linear coefficients: effects.LIN_BOUNDS, and each layer's tenting
+    coefficients at most LAYER_LOAD_MAX_X times its trial's largest force."""
+    lo, hi = bounds_of(labels)
+    for j, lab in enumerate(labels):
+        hit = _LOAD.match(lab)
+        if hit and int(hit.group(1)) < len(trials):
+            hi[j] = min(hi[j], LAYER_LOAD_MAX_X * trials[int(hit.group(1))].peak_n)
+    return lo, hi
+
+
+@lru_cache(maxsize=64)
+def _bounds_of(labels: tuple[str, ...]) -> tuple[Array, Array]:
     lo, hi = zip(*(lin_bound(lab) for lab in labels))
     return np.array(lo, dtype=float), np.array(hi, dtype=float)
 
 
-def solve_bounded(m: Array, y: Array, labels: list[str], rcond: float = 1e-12) -> Array:
-    """Least squares with the documented coefficient bounds (effects.LIN_BOUNDS).
+def solve_bounded(m: Array, y: Array, labels: list[str], rcond: float = 1e-12,
+                  blocks: list[tuple[int, int]] | None = None, warm: dict | None = None,
+                  bounds: tuple[Array, Array] | None = None) -> Array:
+    """Least squares with the documented coefficient bounds (effects.LIN_BOUNDS, or ``bounds``:
+    see :func:`coef_bounds`).
 
-    The free solution is used when it satisfies them (the common case, fast); otherwise a
-    bounded least-squares solve (scipy lsq_linear, BVLS) on the unit-scaled columns.
+    The free solution is used when it satisfies them (cut-off ``rcond`` on the Gram matrix of the
+    unit-scaled columns, i.e. sqrt(rcond) on their singular values, as :func:`solve_linear`);
+    otherwise a bounded-variable least-squares solve (BVLS, Stark & Parker) on the unit-scaled
+    columns.  Both run on the k x k triangle R of a QR factorisation of the tall system [m y]
+    (computed per row block -- ``blocks``, one per trial -- and stacked: each trial has few
+    non-zero columns), which has the tall matrix's singular values to rounding; the sub-problems
+    of BVLS are cut at the tall least-squares cut-off eps * max(rows, columns) x the largest
+    singular value (numpy's default on the samples x k matrix), not at one scaled to k: a cut
+    scaled to k keeps near-null directions the tall solve drops, and a held-out fit extrapolates
+    them (measured-like seed 38 went 10^3..10^8 N astray).  When every column subset is provably
+    above that cut-off (1/|R^-1|_F > cut |R|_F), the sub-problems are solved by QR, and ``warm``
+    (a dict kept by the caller across calls with the same columns) starts BVLS from the previous
+    call's active set; otherwise by SVD (numpy lstsq), from the clipped minimum-norm solution.
     """
-    c = solve_linear(m, y, rcond)
-    lo, hi = bounds_of(labels)
-    if np.all((c >= lo - 1e-12) & (c <= hi + 1e-12)):
-        return c
-    norms = np.sqrt(np.einsum("ij,ij->j", m, m))
-    used = norms > 0
-    ms = m[:, used] / norms[used]
-    res = lsq_linear(ms, y, bounds=(lo[used] * norms[used], hi[used] * norms[used]),
-                     method="bvls", lsmr_tol=None)
+    lo, hi = bounds_of(labels) if bounds is None else bounds
     out = np.zeros(m.shape[1])
-    out[used] = res.x / norms[used]
+    r = _reduce(m, y, blocks, warm)
+    k = m.shape[1]
+    norms = np.sqrt(np.einsum("ij,ij->j", r[:, :k], r[:, :k]))  # column norms (Q is orthogonal)
+    used = norms > 0
+    if not used.any():
+        return out
+    if not used.all():                  # all-zero columns dropped: R of the others
+        r = _pad(_qr_r(r[:, np.append(np.flatnonzero(used), k)]))
+    k = int(np.count_nonzero(used))
+    r_tri, qy, rho2 = r[:k, :k] / norms[used], r[:k, k], float(r[k, k] ** 2)
+    lo_s, hi_s = lo[used] * norms[used], hi[used] * norms[used]
+    cut = _EPS * max(m.shape[0], k)
+    full_rank, rel_min = _rank_bound(r_tri)
+    gram_cut = float(np.sqrt(rcond))
+    if full_rank and rel_min > gram_cut:
+        x = solve_triangular(r_tri, qy, check_finite=False)
+    else:
+        x = np.linalg.lstsq(r_tri, qy, rcond=gram_cut)[0]
+    if np.all((x >= lo_s - 1e-12 * norms[used]) & (x <= hi_s + 1e-12 * norms[used])):
+        out[used] = x / norms[used]
+        return out
+    key = tuple(np.flatnonzero(used).tolist()) + (len(labels),)
+    start = None
+    fast = full_rank and rel_min > cut
+    if fast and warm is not None and warm.get("key") == key:
+        start = warm["on_bound"]
+    if not fast:
+        # start from the minimum-norm solution at the same cut-off (scipy's lsq_linear starts
+        # at rcond = eps, where a direction at eps-level either stays or goes by rounding)
+        x = np.linalg.lstsq(r_tri, qy, rcond=cut)[0]
+    x, on_bound = bvls(r_tri, qy, lo_s, hi_s, x, cut, fast, start, rho2)
+    if warm is not None and fast:
+        warm["key"], warm["on_bound"] = key, on_bound
+    out[used] = x / norms[used]
     return out
+
+
+_EPS = float(np.finfo(float).eps)
+#: BVLS stops when no variable violates the optimality conditions by more than this (gradient of
+#: the unit-scaled problem), or when an iteration lowers the cost by less than this fraction
+BVLS_TOL = 1e-10
+
+
+def _pad(r: Array) -> Array:
+    """A QR triangle with fewer rows than columns (fewer samples than columns) padded square."""
+    return r if r.shape[0] >= r.shape[1] else np.vstack([r, np.zeros((r.shape[1] - r.shape[0],
+                                                                      r.shape[1]))])
+
+
+def _reduce(m: Array, y: Array, blocks: list[tuple[int, int]] | None,
+            memo: dict | None = None) -> Array:
+    """The (k+1) x (k+1) triangle of the QR factorisation of [m y] (k = columns of m): its k x k
+    block R, last column Q^T y and corner rho give min |m x - y|^2 = min |R x - Q^T y|^2 + rho^2.
+    With row ``blocks``, each block is factorised on its non-zero columns and the triangles are
+    stacked and factorised again (a tall-skinny QR: as backward stable as one factorisation).
+    Householder QR is backward stable column by column, so R of the unit-scaled columns is this
+    R's columns scaled, and an all-zero column of m stays an all-zero column of R.  ``memo``
+    (kept by a fit, whose y does not change) holds ``parts``, the design's arrays of the blocks,
+    and the triangles of the last ones seen: a block whose array is the same object is not
+    factorised again (a Jacobian column that moves one trial's surface changes one block)."""
+    k = m.shape[1]
+    if blocks is None or len(blocks) < 2:
+        return _pad(_qr_r(np.column_stack([m, y])))
+    parts = memo.get("parts") if memo is not None else None
+    if parts is not None and len(parts) != len(blocks):
+        parts = None
+    tri = []
+    for i, (a, b) in enumerate(blocks):
+        hit = None
+        if parts is not None:
+            kept = memo.setdefault(("qr", i), [])   # type: ignore[union-attr]
+            hit = next((r for part, r in kept if part is parts[i]), None)
+        if hit is None:
+            blk = m[a:b]
+            nz = np.flatnonzero(np.any(blk != 0.0, axis=0))
+            rb = _qr_r(np.column_stack([blk[:, nz], y[a:b]]))
+            hit = np.zeros((rb.shape[0], k + 1))
+            hit[:, np.append(nz, k)] = rb
+            if parts is not None:
+                kept.insert(0, (parts[i], hit))
+                del kept[_QR_KEEP:]
+        tri.append(hit)
+    return _pad(_qr_r(np.vstack(tri)))
+
+
+#: triangles kept per trial block (the design cache keeps as many arrays per trial)
+_QR_KEEP = 4
+
+
+def _qr_r(a: Array) -> Array:
+    """R of a Householder QR factorisation (LAPACK dgeqrf), min(rows, columns) x columns."""
+    qr, _, info = _geqrf(a)
+    if info != 0:
+        raise np.linalg.LinAlgError(f"dgeqrf: info {info}")
+    return np.triu(qr[:min(a.shape)])
+
+
+def _geqrf(a: Array) -> tuple[Array, Array, int]:
+    qr, tau, _, info = lapack.dgeqrf(a)
+    return qr, tau, int(info)
+
+
+def _rank_bound(r_tri: Array) -> tuple[bool, float]:
+    """Whether R is invertible, and a lower bound on sigma_min / sigma_max of R -- and of every
+    subset of its columns, whose smallest singular value is no smaller and largest no larger:
+    1 / (|R^-1|_F |R|_F)."""
+    k = r_tri.shape[1]
+    d = np.abs(np.diag(r_tri))
+    if k == 0 or not np.all(d > 0):
+        return False, 0.0
+    with np.errstate(all="ignore"):
+        inv = solve_triangular(r_tri, np.eye(k), check_finite=False)
+        bound = 1.0 / (np.linalg.norm(inv) * np.linalg.norm(r_tri))
+    return (bool(np.isfinite(bound)) and bound > 0), float(bound) if np.isfinite(bound) else 0.0
+
+
+def _free_solve(a: Array, b: Array, cut: float, fast: bool) -> Array:
+    """Least squares on the free columns: QR when they are known to be well above the tall
+    cut-off, else the SVD with it (numpy lstsq)."""
+    if fast:
+        q, rr = np.linalg.qr(a)
+        return solve_triangular(rr, q.T @ b, check_finite=False)
+    return np.linalg.lstsq(a, b, rcond=cut)[0]
+
+
+def bvls(a: Array, b: Array, lo: Array, hi: Array, x0: Array, cut: float, fast: bool,
+         start: Array | None = None, const: float = 0.0) -> tuple[Array, Array]:
+    """Bounded-variable least squares, min |a x - b|^2 + const with lo <= x <= hi (Stark &
+    Parker 1995; the steps of scipy's lsq_linear method 'bvls', written for the reduced system).
+
+    ``x0``: an unconstrained solution, clipped to the bounds to start; or ``start``, an active set
+    (-1 at the lower bound, +1 at the upper, 0 free) from a previous solve.  Returns x and the
+    final active set."""
+    n = a.shape[1]
+    on_bound = np.zeros(n)
+    x = x0.copy()
+    if start is not None:
+        on_bound = start.copy()
+        x = np.where(on_bound < 0, lo, np.where(on_bound > 0, hi, np.clip(x, lo, hi)))
+    else:
+        on_bound[x <= lo] = -1.0
+        on_bound[x >= hi] = 1.0
+        x = np.clip(x, lo, hi)
+    free = np.flatnonzero(on_bound == 0)
+    # until the least-squares solution on the free variables is feasible: violators to bounds
+    while free.size:
+        bound = on_bound != 0
+        z = _free_solve(a[:, free], b - a[:, bound] @ x[bound], cut, fast)
+        low, up = z < lo[free], z > hi[free]
+        x[free[low]], on_bound[free[low]] = lo[free[low]], -1.0
+        x[free[up]], on_bound[free[up]] = hi[free[up]], 1.0
+        ok = ~(low | up)
+        x[free[ok]] = z[ok]
+        if ok.all():
+            break
+        free = free[ok]
+    r = a @ x - b
+    cost = 0.5 * (float(r @ r) + const)
+    g = a.T @ r
+    for _ in range(n):
+        viol = g * on_bound
+        viol[on_bound == 0] = np.abs(g[on_bound == 0])
+        if np.max(viol, initial=0.0) < BVLS_TOL:
+            break
+        on_bound[int(np.argmax(g * on_bound))] = 0.0
+        while True:
+            free = np.flatnonzero(on_bound == 0)
+            bound = on_bound != 0
+            xf = x[free]
+            z = _free_solve(a[:, free], b - a[:, bound] @ x[bound], cut, fast)
+            low = np.flatnonzero(z < lo[free])
+            up = np.flatnonzero(z > hi[free])
+            if low.size or up.size:
+                v = np.concatenate([low, up])
+                steps = np.concatenate([lo[free][low] - xf[low], hi[free][up] - xf[up]]) / \
+                    (z[v] - xf[v])
+                j = int(np.argmin(steps))
+                x[free] = xf + steps[j] * (z - xf)
+                on_bound[free[v[j]]] = -1.0 if j < low.size else 1.0
+            else:
+                x[free] = z
+                break
+        r = a @ x - b
+        new = 0.5 * (float(r @ r) + const)
+        done = cost - new < BVLS_TOL * cost
+        cost = new
+        g = a.T @ r
+        if done:
+            break
+    return x, on_bound
 
 
 def solve_linear(m: Array, y: Array, rcond: float = 1e-12) -> Array:
@@ -75,6 +296,12 @@ def solve_linear(m: Array, y: Array, rcond: float = 1e-12) -> Array:
     gram = ms.T @ ms
     coef, *_ = np.linalg.lstsq(gram, ms.T @ y, rcond=rcond)
     return coef * scale
+
+
+def trial_rows(trials: list[TrialGrid]) -> list[tuple[int, int]]:
+    """Row range of each trial in the stacked design matrix."""
+    s = np.cumsum([0] + [len(g.t_s) for g in trials])
+    return [(int(s[i]), int(s[i + 1])) for i in range(len(trials))]
 
 
 def _slots(specs: list[NLParam], free: set[str], n_tr: int) -> list[tuple[NLParam, int | None]]:
@@ -119,7 +346,8 @@ def evaluate(trials: list[TrialGrid], y: Array, effects: tuple[str, ...], nl: di
     """Solve the linear coefficients for fixed nonlinear values (optionally on ``rows`` only)."""
     m, labels = design(trials, effects, nl, cache)
     mm, yy = (m, y) if rows is None else (m[rows], y[rows])
-    c = solve_bounded(mm, yy, labels)
+    c = solve_bounded(mm, yy, labels, blocks=trial_rows(trials) if rows is None else None,
+                      bounds=coef_bounds(labels, trials))
     resid = y - m @ c
     used = np.any(mm != 0, axis=0)
     n_nl = sum(len(trials) if p.per_trial else 1 for p in nl_specs(effects))
@@ -136,13 +364,21 @@ def fit(trials: list[TrialGrid], y: Array, effects: tuple[str, ...], nl0: dict[s
     if not slots:
         return evaluate(trials, y, effects, nl0, cache)
     x0, lo, hi = _pack(nl0, slots)
+    blocks = trial_rows(trials)
+    warm: dict = {}          # the bounded solve's last active set: the next call starts there
+    lims: dict = {}
 
     def res(x: Array) -> Array:
         nl = _unpack(x, nl0, slots)
-        m, labels = design(trials, effects, nl, cache)
+        parts, labels = design_blocks(trials, effects, nl, cache)
+        m = np.vstack(parts)
+        warm["parts"] = parts
         if not np.all(np.isfinite(m)):
             return np.full_like(y, 10.0)     # a failed simulation is a very bad fit
-        return y - m @ solve_bounded(m, y, labels)
+        if lims.get("labels") != labels:
+            lims["labels"], lims["bounds"] = labels, coef_bounds(labels, trials)
+        return y - m @ solve_bounded(m, y, labels, blocks=blocks, warm=warm,
+                                     bounds=lims["bounds"])
 
     sol = least_squares(res, x0, bounds=(lo, hi), method="trf", x_scale=1.0, diff_step=1e-5,
                         max_nfev=max_nfev, xtol=1e-6, ftol=1e-8)

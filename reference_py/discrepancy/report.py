@@ -187,7 +187,8 @@ def bounds_table() -> dict[str, Any]:
            for k, v in LIN_BOUNDS.items()}
     return {"nonlinear": nl, "linear": lin,
             "layer_depth": "0 < rupture depth <= deepest inserted depth",
-            "layer_drop": "0 < drop < insertion peak"}
+            "layer_drop": "0 < drop < insertion peak",
+            "layer_load": "k1, k2 of each layer <= the trial's largest force (N)"}
 
 
 def bound_violations(res: Result) -> list[str]:

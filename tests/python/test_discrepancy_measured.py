@@ -129,7 +129,11 @@ def test_a_rank_deficient_fit_stays_bounded() -> None:
     on the fitted rows.  The bounded solve must cut the near-null directions as a least-squares
     solve over the samples does; a reduced k x k system keeps them (numpy's cut-off scales with
     the row count) and its predictions went 10^3..10^8 N astray off the fitted rows -- two
-    faster solves tried this stop did, so this guards the next one."""
+    faster solves tried this stop did, so this guards the next one.  The reduced solve that
+    carries the tall cut-off over (fit.solve_bounded) found a second way astray here: a surface
+    correction that leaves trial 2's first layer one fitting row thick (u = 8e-4), fitted there
+    by k2 = 1.5e6 N (RMSE to truth 1.9e4 N); a layer's k1, k2 are now at most the trial's
+    largest force (measured: 0.30 -> 0.15 N)."""
     from discrepancy_measured_like import grade
     r = grade(38, trials=3)
     assert r["truth_before"] < 1.0 and r["truth_after"] < 0.5 * r["truth_before"] + 0.05, r
