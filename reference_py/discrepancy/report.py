@@ -11,6 +11,8 @@ import numpy as np
 
 from .effects import EFFECT_MEANING, EFFECT_NL, EFFECT_PHASES, LIN_BOUNDS, NONE, lin_bound
 from .prep import PHASES
+from .nextsteps import render as render_next
+from .nextsteps import what_next
 from .workflow import UNEXPLAINED_WINDOW_S, UNEXPLAINED_X, Result, base_paramset
 
 
@@ -286,10 +288,12 @@ def build(res: Result, inputs: list[str]) -> dict[str, Any]:
                "surface_fitted_mm": export["surface_mm"][i],
                "tare_n": export["tare_n"][i], "noise_n": p.noise_n,
                "puncture_depth_mm": p.puncture_mm, "speed_mm_s": p.speed_mm_s,
+               "rate_hz": 1.0 / float(np.median(np.diff(p.t_s))),
+               "cycles": _reversals(p.phase),
                "phase_samples": {ph: int(np.count_nonzero(p.phase == j))
                                  for j, ph in enumerate(PHASES)}}
               for i, p in enumerate(res.preps)]
-    return _clean({
+    rep = _clean({
         "inputs": inputs, "named": res.named, "effects": effects,
         "verdict": verdict(res), "bounds": bounds_table(),
         "bound_violations": bound_violations(res), "flags": parameter_flags(res),
@@ -311,6 +315,14 @@ def build(res: Result, inputs: list[str]) -> dict[str, Any]:
         "residual_stats_before": res.stats_before, "residual_stats_after": res.stats_after,
         "speed_direction": res.speed_dir, "notes": res.notes, "runtime_s": res.runtime_s,
         "export": export})
+    rep["what_next"] = _clean(what_next(rep))     # read off the report itself
+    return rep
+
+
+def _reversals(phase: np.ndarray) -> int:
+    """Insertion-to-retraction reversals in a trial (runs of the reversal phase)."""
+    rev = (phase == PHASES.index("reversal")).astype(int)
+    return int(np.count_nonzero(np.diff(np.concatenate([[0], rev])) == 1))
 
 
 def _flag_lines(flags: list[dict[str, Any]]) -> list[str]:
@@ -436,6 +448,8 @@ def render_md(rep: dict[str, Any], figures: list[str]) -> str:
                 cells.append("-")
         if any(c != "-" for c in cells):
             L.append(f"| {ph} | " + " | ".join(cells) + " |")
+    if "what_next" in rep:
+        L += [""] + render_next(rep["what_next"])
     L += ["", "## Figures", ""] + [f"![{Path(f).stem}]({f})" for f in figures]
     L += ["", f"Run time: {rep['runtime_s']:.2f} s", ""]
     return "\n".join(L)

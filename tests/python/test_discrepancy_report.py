@@ -265,3 +265,31 @@ def test_unexplained_stretches_say_what_they_look_like(phantom):
     assert len(rows) == min(len(described), 5)
     for row, w in zip(rows, described):
         assert row[0] == w["trial"] and row[1] == w["phase"] and row[5] == w["description"]
+
+
+def test_what_next_is_read_off_the_report(phantom):
+    """report.json's "what_next" is the advice of the report's own numbers (recomputed from the
+    other fields it is the same), report.md renders it, and it follows the record: one speed
+    here, so another speed is asked for -- and not once the evidence has two."""
+    import copy
+
+    from reference_py.discrepancy.nextsteps import render, what_next
+    rep, md = phantom["rep"], phantom["md"]
+    src = {k: v for k, v in rep.items() if k not in ("what_next", "figures", "estimator_config")}
+    assert rep["what_next"] == what_next(src)
+    sec = "\n".join(["## What next"] + _section(md, "## What next")).strip()
+    assert sec == "\n".join(render(rep["what_next"])).strip()
+    speeds = {t["speed_mm_s"] for t in rep["trials"]}
+    assert rep["local_evidence"]["distinct_speeds"] == 1 and len(speeds) == 1
+    ask = [d for d in rep["what_next"]["data"] if d["source"] == "local_evidence.distinct_speeds"]
+    assert len(ask) == 1 and f"{speeds.pop():.3g} mm/s" in ask[0]["suggest"]
+    assert ask[0]["candidates"] == ["velocity_friction"]
+    # the verdict is "unexplained": each effect to try that cites a stretch quotes it
+    assert rep["verdict"]["unexplained"] and rep["what_next"]["effects"]
+    for d in rep["what_next"]["effects"]:
+        if d["source"].startswith("verdict.where["):
+            w = rep["verdict"]["where"][int(d["source"][len("verdict.where["):-1])]
+            assert w["description"] in d["because"] and w["looks_like"] != "no simple shape"
+    two = copy.deepcopy(src)
+    two["local_evidence"]["distinct_speeds"] = 2
+    assert all(d["source"] != "local_evidence.distinct_speeds" for d in what_next(two)["data"])
