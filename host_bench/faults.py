@@ -306,8 +306,9 @@ def table(node: str, csv: str, work: Path, rows: list[str] | None = None, bus: s
           speed: float = 1.0, info: dict | None = None, keep: bool = False) -> list[dict]:
     """Every fault row (or those named in rows), each stream fed to a fresh node -- through
     nte-node --replay (bus "replay") or live on vcan0 (bus "vcan", host_bench.fault_bus, at
-    `speed` times real time; `keep`: the nodes' received logs kept in work/bus) -- and scored by `score` against the fault-free run on the same
-    vehicle, with the counters that moved.  Over vcan each row also carries "bus": its runs'
+    `speed` times real time; `keep`: the nodes' received logs kept in work/bus) -- and scored
+    by `score` against the fault-free run on the same vehicle, with the counters that moved.
+    A killed node's outputs die with it on the bus: a row's score starts after its fault.  Over vcan each row also carries "bus": its runs'
     checks (host_bench.fault_bus.BusRun), and `info` (when given) receives the vehicle, the
     fault-free run's checks and the bus half's wall time."""
     db = NteDatabase()
@@ -323,11 +324,12 @@ def table(node: str, csv: str, work: Path, rows: list[str] | None = None, bus: s
                          f"{', '.join(repr(r.name) for r in every)})")
     chosen = [(k, r) for k, r in enumerate(every) if rows is None or r.name in rows]
     runs = [NodeRun("clean", frames)]
+    tags: dict[int, list[str]] = {}     # a row's runs: one per segment, all but the last killed
     for k, r in chosen:
         last = len(r.segments) - 1
-        runs += [NodeRun(f"row{k}" + (f"s{j}" if last else ""), seg,
-                         "kill" if j < last else "stop", r.realtime)
-                 for j, seg in enumerate(r.segments)]
+        tags[k] = [f"row{k}" + (f"s{j}" if last else "") for j in range(last + 1)]
+        runs += [NodeRun(tag, seg, "kill" if j < last else "stop", r.realtime)
+                 for j, (tag, seg) in enumerate(zip(tags[k], r.segments))]
     if bus == "vcan":
         t_wall = time.monotonic()
         done, vehicle = play_on_vcan(node, runs, work, speed, db, keep)
@@ -343,12 +345,11 @@ def table(node: str, csv: str, work: Path, rows: list[str] | None = None, bus: s
     clean, st0 = found["clean"]
     out = []
     for k, r in chosen:
-        tags = [run.tag for run in runs if run.tag == f"row{k}" or run.tag.startswith(f"row{k}s")]
-        est = np.concatenate([found[tag][0] for tag in tags])
+        est = np.concatenate([found[tag][0] for tag in tags[k]])
         res = score(est, clean, r, t_true, f_true)
-        res["counters"] = _moved([found[tag][1] for tag in tags], st0)
+        res["counters"] = _moved([found[tag][1] for tag in tags[k]], st0)
         if bus == "vcan":
-            res["bus"] = [asdict_run(done[tag]) for tag in tags]
+            res["bus"] = [asdict_run(done[tag]) for tag in tags[k]]
         out.append(res)
     return out
 

@@ -22,7 +22,8 @@ lose frames -- which the frame-for-frame check would catch -- never change a fig
 22.7 s streams take 5.7 s each; the flood's 5 s are played in real time (its rate is its point).
 The node read ~9 000 frames/s under QEMU's TCG on this loaded host (a 16x play), so 4x (about
 4 800 frames/s, 5 200 during the flood) leaves it twice that, and its 8 MB receive queue.
-Measured on this 2-core host: the command ~160 s under user-mode Linux, ~6 min under QEMU TCG.
+Measured on this 2-core host (load 4 from other work): this module 177 s under user-mode Linux
+(the bus half 132 s, canplayer 116 s of it), 279 s under QEMU TCG (bus half 218 s).
 """
 from __future__ import annotations
 
