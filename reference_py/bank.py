@@ -561,7 +561,8 @@ class FilterBank:
             # a layer tore: the drop is the tissue's, not the parameters' (layers.tear_prior)
             P_pred, hrow = tear_prior(R, P_pred, hrow, tear, self._p0(len(hrow)))
             open_gate = open_gate | tear
-        upd = joseph_update(R, x, P_pred, hrow, innovation, r_eff, c.gate2, open_gate)
+        upd = joseph_update(R, x, P_pred, hrow, innovation, r_eff, c.gate2, open_gate,
+                            c.u_step_max if cfg.u_step_max > 0.0 else None)
         gated = active & ~upd.accepted
         status |= np.where(gated, np.uint32(STATUS_GATED), np.uint32(0))
         self.gated_run[i] = np.where(gated, self.gated_run[i] + 1,
@@ -683,6 +684,7 @@ class _Constants:
         self.p0_u = R.c(cfg.p0_u)
         self.gate2 = R.c(cfg.gate_sigma) * R.c(cfg.gate_sigma)
         self.u_max = R.c(cfg.u_max)
+        self.u_step_max = R.c(cfg.u_step_max)
         self.var_floor_z = R.c(cfg.var_floor_z)
         self.var_floor_u = R.c(cfg.var_floor_u)
         self.v_still = R.c(cfg.v_still_mm_s)

@@ -50,12 +50,14 @@ class Update:
 
 
 def joseph_update(R: Real, x: list[Array], P: Matrix, h: list[Array], innovation: Array,
-                  r: Array, gate2: Array, open_gate: Array | bool = False) -> Update:
+                  r: Array, gate2: Array, open_gate: Array | bool = False,
+                  step: Array | None = None) -> Update:
     """Scalar measurement update in Joseph form, behind an innovation gate.
 
     S = h P h^T + r,  K = P h^T / S,  x += K y,  P = (I - K h) P (I - K h)^T + K r K^T.
     When y^2 / S > gate2 the measurement is rejected and x, P are returned unchanged, unless
-    ``open_gate`` (per batch element) forces it through.
+    ``open_gate`` (per batch element) forces it through.  ``step``: the update of x[1:] is
+    bounded by bound_step (None: no bound).
     """
     n = len(x)
     pht = [_dot(P[i], h) for i in range(n)]
@@ -74,7 +76,27 @@ def joseph_update(R: Real, x: list[Array], P: Matrix, h: list[Array], innovation
             newP[i][j] = v
             newP[j][i] = v
     newx = [np.where(accepted, x[i] + k[i] * innovation, x[i]) for i in range(n)]
+    if step is not None:
+        newx = bound_step(x, newx, step)
     return Update(newx, newP, innovation, s, nis, accepted)
+
+
+def bound_step(x: list[Array], xu: list[Array], step: Array) -> list[Array]:
+    """The update's step bound on the parameters x[1:] (x[0], the state, keeps its update):
+    where the largest |xu[a] - x[a]| over a >= 1 exceeds ``step``, every xu[a] becomes
+    x[a] + (xu[a] - x[a]) * (step / largest) — the update shortened, its direction kept;
+    elsewhere xu stands bit for bit.  The largest is taken in order a = 1, 2, ... from 0 with a
+    strict comparison, so a NaN difference is passed over; a non-finite update is left to the
+    bank's guard, which resets the filter.  Why a bound (config.U_STEP_MAX): the filters identify log-parameters, and
+    a step far beyond ~0.3 leaves the region where h(u + du) ~ h(u) + h' du."""
+    big = np.zeros_like(x[1])
+    for a in range(1, len(x)):
+        d = np.abs(xu[a] - x[a])
+        big = np.where(d > big, d, big)
+    over = big > step
+    scale = step / big
+    return [xu[0]] + [np.where(over, x[a] + (xu[a] - x[a]) * scale, xu[a])
+                      for a in range(1, len(x))]
 
 
 def positive_definite(R: Real, P: Matrix) -> Array:

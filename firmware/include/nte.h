@@ -79,9 +79,9 @@
  *
  * MEMORY MODEL
  *   The caller owns every instance (static, stack or pool).  sizeof(nte_t) on x86-64 (gcc):
- *   896 bytes (float) / 1672 (double) with NTE_ROBUST_BUFFER_LEN = 0 (the bank and the
+ *   904 bytes (float) / 1680 (double) with NTE_ROBUST_BUFFER_LEN = 0 (the bank and the
  *   contact front end: its state 52 / 88 bytes, its configuration 36 / 64); with the default
- *   96: 3024 (float, +2128) / 5896 (double, +4224), of which the buffer of
+ *   96: 3032 (float, +2128) / 5904 (double, +4224), of which the buffer of
  *   96 x 4 reals is 1536 / 3072 and the LM workspace (J^T J and J^T r at the current and the
  *   trial point, both parameter vectors) 384 / 768.  The refinement's deepest stack frame
  *   (nte_step -> refinement -> lm -> simulate -> rk3) adds about 1.2 KiB (float) / 1.9 KiB
@@ -554,6 +554,13 @@ typedef struct nte_config_t {
     nte_real_t gate_sigma;           /**< [12] innovation gate in standard deviations, > 0; the gate
                                           compares NIS with gate_sigma^2 computed in nte_real_t */
     nte_real_t u_max;                /**< [3.9] |u| clip, log units (3.9 = factor 50), > 0, <= 10 */
+    nte_real_t u_step_max;           /**< [0; Model III 0.3] the largest change of any u one
+                                          update may make, log units, >= 0, <= 10: a larger
+                                          update's parameter part is scaled down whole (z
+                                          keeps its update); 0: no bound.  Keeps every update
+                                          where e^u's linearisation holds (reference_py/
+                                          config.py U_STEP_MAX).  Cost: one pass over the
+                                          filter's parameters per update */
     nte_real_t var_floor_z;          /**< [1e-12] lower bound of var(z), > 0 */
     nte_real_t var_floor_u;          /**< [1e-10] lower bound of var(u), log^2, > 0 */
     nte_real_t v_still_mm_s;   /**< [1e-3] |v| below: a dwell (no sign inflation), mm/s, >= 0 */

@@ -28,6 +28,8 @@ static void set_common(nte_config_t* cfg, const int32_t model, const nte_schedul
     cfg->p0_u = NTE_K_DEF_P0_U;
     cfg->gate_sigma = NTE_K_DEF_GATE_SIGMA;
     cfg->u_max = NTE_K_DEF_U_MAX;
+    /* Model III bounds each update's step in u (reference_py/config.py U_STEP_MAX) */
+    cfg->u_step_max = (model == 3) ? NTE_K_M3_U_STEP_MAX : NTE_C(0.0);
     cfg->var_floor_z = NTE_K_DEF_VAR_FLOOR_Z;
     cfg->var_floor_u = NTE_K_DEF_VAR_FLOOR_U;
     cfg->v_still_mm_s = NTE_K_DEF_V_STILL_MM_S;
@@ -291,6 +293,7 @@ nte_err_t nte_config_check(const nte_config_t* cfg)
     /* upper bounds (config.py UPPER_BOUNDS): beyond them a published estimate or its standard
      * deviation can overflow */
     if ((cfg->u_max > NTE_K_RANGE_U_MAX_MAX) || (cfg->p0_u > NTE_K_RANGE_P0_U_MAX) ||
+        (cfg->u_step_max > NTE_K_RANGE_U_STEP_MAX_MAX) ||
         (cfg->presliding_mm > NTE_K_RANGE_PRESLIDING_MM_MAX) ||
         (cfg->tau_fast_s > NTE_K_RANGE_TAU_FAST_S_MAX) ||
         (cfg->tau_slow_s > NTE_K_RANGE_TAU_SLOW_S_MAX)) {

@@ -32,6 +32,7 @@
 #define NTE_K_DEF_PRESLIDING_MM (0x1.4000000000000p+1)
 #define NTE_K_DEF_TAU_FAST_S (0x1.3333333333333p-2)
 #define NTE_K_DEF_TAU_SLOW_S (0x1.8000000000000p+1)
+#define NTE_K_M3_U_STEP_MAX (0x1.3333333333333p-2)
 #define NTE_K_PAPER_R_N2 (0x1.47ae147ae147bp-7)
 #define NTE_K_PAPER_P0_U (0x1.0000000000000p+0)
 #define NTE_K_PAPER_Q_M1_SIGMA0 (0x1.b7cdfd9d7bdbbp-35)
@@ -52,6 +53,7 @@
 #define NTE_K_EXP_STEP_BOUND (0x1.0000000000000p+0)
 #define NTE_K_RANGE_U_MAX_MAX (0x1.4000000000000p+3)
 #define NTE_K_RANGE_P0_U_MAX (0x1.9000000000000p+6)
+#define NTE_K_RANGE_U_STEP_MAX_MAX (0x1.4000000000000p+3)
 #define NTE_K_RANGE_PRESLIDING_MM_MAX (0x1.f400000000000p+9)
 #define NTE_K_RANGE_TAU_FAST_S_MAX (0x1.c200000000000p+11)
 #define NTE_K_RANGE_TAU_SLOW_S_MAX (0x1.c200000000000p+11)
@@ -111,6 +113,7 @@
 #define NTE_K_DEF_PRESLIDING_MM (0x1.4000000000000p+1f)
 #define NTE_K_DEF_TAU_FAST_S (0x1.3333340000000p-2f)
 #define NTE_K_DEF_TAU_SLOW_S (0x1.8000000000000p+1f)
+#define NTE_K_M3_U_STEP_MAX (0x1.3333340000000p-2f)
 #define NTE_K_PAPER_R_N2 (0x1.47ae140000000p-7f)
 #define NTE_K_PAPER_P0_U (0x1.0000000000000p+0f)
 #define NTE_K_PAPER_Q_M1_SIGMA0 (0x1.b7cdfe0000000p-35f)
@@ -131,6 +134,7 @@
 #define NTE_K_EXP_STEP_BOUND (0x1.0000000000000p+0f)
 #define NTE_K_RANGE_U_MAX_MAX (0x1.4000000000000p+3f)
 #define NTE_K_RANGE_P0_U_MAX (0x1.9000000000000p+6f)
+#define NTE_K_RANGE_U_STEP_MAX_MAX (0x1.4000000000000p+3f)
 #define NTE_K_RANGE_PRESLIDING_MM_MAX (0x1.f400000000000p+9f)
 #define NTE_K_RANGE_TAU_FAST_S_MAX (0x1.c200000000000p+11f)
 #define NTE_K_RANGE_TAU_SLOW_S_MAX (0x1.c200000000000p+11f)
@@ -188,7 +192,7 @@
 #define NTE_RANGE_CON_LEARN_SAMPLES_MIN 1
 #define NTE_RANGE_CON_LEARN_SAMPLES_MAX 100000
 #define NTE_CONFIG_POSITIVE_FIELDS(c) (c)->eps_mm_s, (c)->beta0, (c)->r_n2, (c)->p0_z, (c)->p0_u, (c)->gate_sigma, (c)->u_max, (c)->var_floor_z, (c)->var_floor_u, (c)->dt_max_s, (c)->depth_max_mm, (c)->speed_max_mm_s, (c)->force_max_n, (c)->presliding_mm, (c)->tau_fast_s, (c)->tau_slow_s
-#define NTE_CONFIG_NONNEGATIVE_FIELDS(c) (c)->q_z, (c)->q_u_default, (c)->v_still_mm_s
+#define NTE_CONFIG_NONNEGATIVE_FIELDS(c) (c)->q_z, (c)->q_u_default, (c)->v_still_mm_s, (c)->u_step_max
 #define NTE_ROBUST_POSITIVE_FIELDS(r) (r)->restart_p0_u, (r)->lm_lambda0, (r)->converged_confidence, (r)->converged_change
 #define NTE_CON_DEF_RUN_SAMPLES 5
 #define NTE_CON_DEF_TARE_SAMPLES 200

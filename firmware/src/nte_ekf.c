@@ -35,7 +35,8 @@ void nte_ekf_predict(const size_t n, nte_mat3_t P, nte_mat3_t F, const nte_real_
 nte_ekf_update_t nte_ekf_joseph_update(const size_t n, nte_real_t* x, nte_mat3_t P,
                                        const nte_real_t* h, const nte_real_t innovation,
                                        const nte_real_t r, const nte_real_t gate2,
-                                       const bool open_gate, const bool apply)
+                                       const bool open_gate, const bool apply,
+                                       const nte_real_t step)
 {
     nte_ekf_update_t res;
     nte_real_t pht[NTE_EKF_N_MAX] = {NTE_C(0.0)};
@@ -88,8 +89,18 @@ nte_ekf_update_t nte_ekf_joseph_update(const size_t n, nte_real_t* x, nte_mat3_t
             P[j][i] = v;
         }
     }
+    /* the step bound (ekf.bound_step): the largest change of x[1..n), from 0, strict */
+    nte_real_t xn[NTE_EKF_N_MAX];
+    nte_real_t big = NTE_C(0.0);
     for (size_t i = 0U; i < n; i++) {
-        x[i] = x[i] + (k[i] * innovation);
+        xn[i] = x[i] + (k[i] * innovation);
+        const nte_real_t d = nte_abs(xn[i] - x[i]);
+        big = ((i > 0U) && (d > big)) ? d : big;
+    }
+    const bool over = (step > NTE_C(0.0)) && (big > step);
+    const nte_real_t scale = over ? (step / big) : NTE_C(1.0);
+    for (size_t i = 0U; i < n; i++) {
+        x[i] = (over && (i > 0U)) ? (x[i] + ((xn[i] - x[i]) * scale)) : xn[i];
     }
     return res;
 }

@@ -83,6 +83,8 @@ def lib_header() -> str:
     for f in fields:
         v = float(getattr(cfg, f))
         rows.append(pair("NTE_K_DEF_" + f.upper(), v, v))
+    # Model III's default step bound (config.U_STEP_MAX; Models I and II: 0, no bound)
+    rows.append(pair("NTE_K_M3_U_STEP_MAX", config.U_STEP_MAX[3], config.U_STEP_MAX[3]))
     for model in (1, 2):
         pc = config.paper_config(model)
         rows.append(pair(f"NTE_K_PAPER_R_N2", pc.r_n2, pc.r_n2))
