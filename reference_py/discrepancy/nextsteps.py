@@ -17,8 +17,9 @@ each item against the numbers it cites in ``source``):
     count; a rise or slope change after a rupture is a cutting force that builds up; a step on
     the way out is a layer letting go; an oscillation is tissue motion (0.1-0.6 Hz) or stick-slip;
     a trend in the air is a drift -- and from flagged base values (a surface correction at its
-    bound: the surface moves with the needle, tenting).  An item names a vocabulary effect when
-    one fits and is not named yet, else the pattern, marked "not in the vocabulary".
+    bound: the surface moves with the needle, tenting) and from a named effect whose refit made a
+    phase the model explained worse (report.json effects[].worsens).  An item names a vocabulary
+    effect when one fits and is not named yet, else the pattern, marked "not in the vocabulary".
 """
 from __future__ import annotations
 
@@ -318,6 +319,16 @@ def effect_items(rep: dict[str, Any]) -> list[dict[str, Any]]:
         more = d.pop("more")
         if more:
             d["because"] += f" (and {more} more stretch{'es' if more > 1 else ''} like it)"
+    for k, e in enumerate(rep.get("effects") or []):
+        w = e.get("worsens")
+        if w:
+            out.append(_item(
+                f"{e.get('name')} in another form, or without it: its refit makes the "
+                f"{w.get('phase')} phase worse",
+                f"RMSE {_fmt(_num(w.get('rmse_before_n')))} -> {_fmt(_num(w.get('rmse_after_n')))}"
+                f" N in a phase the model explained (more than "
+                f"{_fmt(_num(w.get('allowance_x_noise')))}x the noise)", [str(e.get("name"))],
+                f"effects[{k}].worsens"))
     surf = _flags(rep, "surface", "at_bound")
     if surf:
         trials = ", ".join(str(f.get("trial")) for f in surf)

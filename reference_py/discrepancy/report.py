@@ -11,6 +11,7 @@ import numpy as np
 
 from .effects import EFFECT_MEANING, EFFECT_NL, EFFECT_PHASES, LIN_BOUNDS, NONE, lin_bound
 from .prep import PHASES
+from .accept import WORSEN_NOISE_X
 from .nextsteps import render as render_next
 from .nextsteps import what_next
 from .workflow import UNEXPLAINED_WINDOW_S, UNEXPLAINED_X, Result, base_paramset
@@ -217,6 +218,18 @@ def bound_violations(res: Result) -> list[str]:
     return out
 
 
+def _worsens(step: Any) -> dict[str, Any] | None:
+    """The phase the model explained (RMSE <= 3x the noise) that this effect's refit made worse
+    by more than accept.WORSEN_NOISE_X times the noise, or None (issue 22 item 4: reported, not
+    refused; accept.py says why)."""
+    row = next((c for c in step.candidates if c.get("name") == step.effect), {})
+    ratio = row.get("worst_phase_ratio")
+    if ratio is None or not ratio > 1.0:
+        return None
+    return {"phase": row["worst_phase"], "rmse_before_n": row["worst_phase_rmse_before_n"],
+            "rmse_after_n": row["worst_phase_rmse_after_n"], "allowance_x_noise": WORSEN_NOISE_X}
+
+
 def _share(res: Result, k: int) -> float:
     gap = res.fits[0].sse - res.fits[-1].sse
     return (res.fits[k].sse - res.fits[k + 1].sse) / gap if gap > 0 else 0.0
@@ -278,7 +291,7 @@ def build(res: Result, inputs: list[str]) -> dict[str, Any]:
                       "own_phase_gain": step.own_phase_gain, "local_evidence": step.local},
             "acts_on_phases": list(EFFECT_PHASES[step.effect]),
             "errors_before": chain[k + off]["errors"], "errors_after": chain[k + off + 1]["errors"],
-            "candidates": step.candidates})
+            "worsens": _worsens(step), "candidates": step.candidates})
     export = _export(res, values)
     base = base_paramset(res.fits[0])
     base_se = res.fits[0].nl_se or {}
@@ -428,6 +441,11 @@ def render_md(rep: dict[str, Any], figures: list[str]) -> str:
             L += [f"- magnitude {_fmt(e['magnitude']['rms_n'])} ± "
                   f"{_fmt(e['magnitude']['standard_error_n'])} N RMS, share of the explained gap "
                   f"{_fmt(e['share_of_explained_gap'])}"]
+        if e.get("worsens"):
+            w = e["worsens"]
+            L += [f"- WARNING: its refit makes the {w['phase']} phase, which the model explained, "
+                  f"worse: RMSE {_fmt(w['rmse_before_n'])} -> {_fmt(w['rmse_after_n'])} N (more "
+                  f"than {_fmt(w['allowance_x_noise'])}x the noise)"]
         L += ["", "Parameters" + (" (final model, as exported):" if "magnitude" in e else ":")]
         L += [f"- {p} = {_fmt(v)}" for p, v in e["parameters"].items()]
         L += _candidate_table(e.get("candidates", []))

@@ -12,6 +12,7 @@ from . import shape as shmod
 from .effects import (EFFECT_NL, EFFECT_PHASES, NONE, VOCABULARY, StateCache, TrialGrid, design,
                       find_dwells, nl_defaults, nl_specs, to_paramset)
 from ..fmath import Array
+from .accept import worst_phase
 from .fit import Fit, evaluate, fit, solve_linear
 from .io import Trial
 from .prep import PHASES, Prepared, TooShort, prepare
@@ -273,6 +274,34 @@ def _motion_over_presliding(scored: list[tuple[float, str, Fit]], raw: dict[str,
     return [(sc + 2e6 if cand == "tissue_motion" else sc, cand, f) for sc, cand, f in scored]
 
 
+def _judge(cur: Fit, f: Fit, cand: str, rows: Array, grids: list[TrialGrid], y: Array,
+           masks: list[Array], cache: StateCache, ph_all: Array, noise: float
+           ) -> dict[str, float | str]:
+    """The acceptance tests of a fitted candidate against the current model, their figures and
+    ``why`` it is refused ('' when it passes): its own phases' error lowered by
+    OWN_PHASE_MIN_GAIN, physically consistent, and the held-out error in its phases lowered.
+    The phase the candidate makes worse most among those the model explains is measured and
+    reported (accept.worst_phase), not a reason to refuse it: see accept.py."""
+    wph, wb, wa, wr = worst_phase(cur, f, ph_all, noise, UNEXPLAINED_X)
+    own = 1.0 - float(np.sum(f.resid[rows] ** 2)) / max(float(np.sum(cur.resid[rows] ** 2)),
+                                                       1e-30)
+    gain = 1.0 - heldout_sse(grids, y, f, masks, cache, rows) / \
+        max(heldout_sse(grids, y, cur, masks, cache, rows), 1e-30)
+    out: dict[str, float | str] = {
+        "heldout_gain": gain, "own_phase_gain": own, "worst_phase": wph,
+        "worst_phase_rmse_before_n": wb, "worst_phase_rmse_after_n": wa,
+        "worst_phase_ratio": wr, "why": ""}
+    if own < OWN_PHASE_MIN_GAIN:
+        out["why"] = "does not improve its own phases"
+    elif _inconsistent(cand, f, grids, y):
+        out["why"] = _inconsistent(cand, f, grids, y)
+    elif gain <= 0.0:
+        out["why"] = (f"does not lower the held-out error in its phases ({100 * gain:+.3g} %)"
+                      if gain > -1.0 else "raises the held-out error in its phases "
+                      f"{1.0 - gain:.3g}-fold")
+    return out
+
+
 def _local_gate(cand: str, ev: dict[str, object]) -> tuple[bool | None, str]:
     """Local verdict for effects that have one: True (seen), False (absent), None (no test)."""
     if cand == "dwell_relaxation":
@@ -480,6 +509,8 @@ def run(trials: list[Trial], max_effects: int = len(VOCABULARY), force_sign: flo
         ys.append(p.force_n[rows])
         phs.append(p.phase[rows])
     y = np.concatenate(ys)
+    ph_all = np.concatenate(phs)
+    noise = float(np.median([p.noise_n for p in preps]))
     bnd = _bounds(grids)
     cache = StateCache(FIT_SUBSTEPS)
     scheme, masks = folds(grids)
@@ -537,29 +568,23 @@ def run(trials: list[Trial], max_effects: int = len(VOCABULARY), force_sign: flo
             if dbic < BIC_MIN:
                 break
             rows = _phase_rows(grids, phs, cand)
-            own = 1.0 - float(np.sum(f.resid[rows] ** 2)) / max(float(np.sum(cur.resid[rows] ** 2)),
-                                                               1e-30)
-            gain = 1.0 - heldout_sse(grids, y, f, masks, cache, rows) / \
-                max(heldout_sse(grids, y, cur, masks, cache, rows), 1e-30)
-            for rs in round_scores:
-                if rs["name"] == cand:
-                    rs.update(heldout_gain=gain, own_phase_gain=own)
-            if own < OWN_PHASE_MIN_GAIN:
-                for rs in round_scores:
-                    if rs["name"] == cand:
-                        rs["rejected"] = "does not improve its own phases"
-                continue
-            why_not = _inconsistent(cand, f, grids, y)
+            rs = next(r for r in round_scores if r["name"] == cand)
+            judged = _judge(cur, f, cand, rows, grids, y, masks, cache, ph_all, noise)
+            rs.update({k: v for k, v in judged.items() if k != "why"})
+            why_not = str(judged["why"])
             if why_not:
-                for rs in round_scores:
-                    if rs["name"] == cand:
-                        rs["rejected"] = why_not
+                rs["rejected"] = why_not
                 continue
-            if gain > 0.0:
-                why = gates[cand][1]
-                accepted = Step(cand, raw.get(cand, dbic), gain, f, round_scores, own,
-                                why)
-                break
+            accepted = Step(cand, raw.get(cand, dbic), float(judged["heldout_gain"]), f,
+                            round_scores, float(judged["own_phase_gain"]), gates[cand][1])
+            break
+        if accepted is None:            # the last round: why nothing more was named
+            for rs in round_scores:
+                if "rejected" not in rs and "delta_bic" in rs:
+                    rs["rejected"] = (f"delta BIC {float(rs['delta_bic']):.1f} below "
+                                      f"{BIC_MIN:g}: not worth its parameters"
+                                      if float(rs["delta_bic"]) < BIC_MIN else
+                                      f"not refitted: below the {REFINE_TOP} best of the round")
         last_round = round_scores
         if accepted is None:
             break

@@ -932,6 +932,11 @@ def run_case(job: tuple[str, int]) -> dict:
                             else (p - case.truth[i]) for p, i in zip(preds, idx)])
         return float(np.sqrt(np.mean(d ** 2))) if len(d) else float("nan")
 
+    # every refusal of every round with its reason (issue 22 item 4: what was not named, and why)
+    rounds = [e.get("candidates") or [] for e in rep.get("effects") or []] + \
+        [rep.get("final_round") or []]
+    row["refused"] = [{"round": j, "name": c.get("name"), "reason": c.get("rejected")}
+                      for j, cands in enumerate(rounds) for c in cands if c.get("rejected")]
     row.update(named=named, first=named[0], unexplained=unexpl,
                violations=bound_check(rep, depth_max, peak), error=None,
                runtime_s=dt, runtime_per_trial_s=dt / len(case.trials),

@@ -265,3 +265,15 @@ def test_rendered_section_lists_every_item():
     explained = what_next(_complete())
     text = "\n".join(render(explained))
     assert "nothing the record lacks" in text and "no structure above the threshold" in text
+
+
+def test_an_effect_that_spoils_an_explained_phase_is_questioned():
+    rep = _complete()
+    rep["effects"][2]["worsens"] = {"phase": "after_exit", "rmse_before_n": 0.026,
+                                    "rmse_after_n": 0.264, "allowance_x_noise": 3.0}
+    wn = what_next(rep)
+    assert [d["source"] for d in wn["effects"]] == ["effects[2].worsens"]
+    item = wn["effects"][0]
+    assert item["suggest"].startswith("reversal_presliding in another form, or without it")
+    assert "after_exit" in item["suggest"] and "0.026 -> 0.264 N" in item["because"]
+    assert item["candidates"] == ["reversal_presliding"]
