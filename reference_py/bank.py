@@ -29,8 +29,8 @@ from .ekf import Matrix, joseph_update, positive_definite, predict_covariance
 from .fmath import Array, Real
 from .identified import dynamic, filter_subsets, identified_names, relax_count
 from .layers import LayerSets, RuptureDetector, tear_prior
-from .model import (DepthTerms, Theta, ScaledParams, clamp_depth, depth_terms, exact_sign, output,
-                    output_du, output_dz, smooth_sign, steady_state_z)
+from .model import (BatchScaled, DepthTerms, Theta, clamp_depth, depth_terms, exact_sign,
+                    output, output_du, output_dz, smooth_sign, steady_state_z)
 from .params import ALL_NAMES, IDX, PARAM_NAMES, RELAX_NAMES, RELAX_NOMINAL
 from .rk3 import Rk3Result, rk3_step
 
@@ -112,7 +112,7 @@ class FilterBank:
             nominal = [row[:IDX["beta"]] + [cfg.beta0] + row[IDX["beta"] + 1:] for row in nominal]
         # per-parameter nominal arrays: nominal[b][j] -> column j over b
         cols = list(zip(*nominal))
-        self.scaled = _BatchScaled(R, cols, self.batch)
+        self.scaled = BatchScaled(R, cols, self.batch)
         if self.n_relax:
             self._relax_nominal(R)
         self._nominal0 = ([x.copy() for x in self.scaled.nominal], self.scaled.ex_nominal.copy())
@@ -347,9 +347,12 @@ class FilterBank:
                 nis0 = np.where(active, np.where(in_range, nis, R.c(0.0)), nis0)
 
         z_post = np.where(surface & run, R.c(0.0), z_post)
-        self.z = np.where(run, z_post, np.where(first, R.c(0.0), self.z))
         # posterior output with the final shared model
         d = depth_terms(R, self.th, l)
+        # the first sample's z: its steady state, as after a gap (MODEL.md §2, "The first sample")
+        z_first = steady_state_z(R, self.th, d)
+        self.z = np.where(run, z_post, np.where(first & np.isfinite(z_first), z_first,
+                                                np.where(first, R.c(0.0), self.z)))
         o = output(self.th, d, self.z, s)
         force = o.h
         fe = o.h   # Model III: the elastic force the relaxation memories follow
@@ -653,23 +656,6 @@ class FilterBank:
 
 def _fields(o: StepOutput) -> tuple[Array, ...]:
     return (o.force_hat, o.z, o.innovation, o.nis, o.status, o.params, o.params_sd)
-
-
-class _BatchScaled(ScaledParams):
-    """ScaledParams whose nominal differs per batch element."""
-
-    def __init__(self, R: Real, cols: list[tuple[float, ...]], batch: int) -> None:
-        self.R = R
-        self.nominal = [R.arr(list(col)) for col in cols]
-        f2 = np.asarray(cols[IDX["f2"]], dtype=np.float64)
-        f1 = np.asarray(cols[IDX["f1"]], dtype=np.float64)
-        kappa = np.where(f2 < 0.0, 1.0, 0.0)
-        if len(set(kappa.tolist())) > 1:
-            raise ValueError("every run of a batch must have the same sign of f2")
-        self.kappa = R.c(float(kappa[0]))
-        self.ex_nominal = R.arr(f1 - kappa * (-f2))
-        if np.any(self.ex_nominal <= 0):
-            raise ValueError("nominal f1 must exceed -f2 (g(0) = f1 + f2 must be positive)")
 
 
 class _Constants:

@@ -91,6 +91,24 @@ class ScaledParams:
         return th.ex if name == "f1" else getattr(th, name)
 
 
+class BatchScaled(ScaledParams):
+    """ScaledParams whose nominal differs per batch element (the bank's: ``cols[j]`` holds
+    parameter j's nominal value of every run)."""
+
+    def __init__(self, R: Real, cols: list[tuple[float, ...]], batch: int) -> None:
+        self.R = R
+        self.nominal = [R.arr(list(col)) for col in cols]
+        f2 = np.asarray(cols[IDX["f2"]], dtype=np.float64)
+        f1 = np.asarray(cols[IDX["f1"]], dtype=np.float64)
+        kappa = np.where(f2 < 0.0, 1.0, 0.0)
+        if len(set(kappa.tolist())) > 1:
+            raise ValueError("every run of a batch must have the same sign of f2")
+        self.kappa = R.c(float(kappa[0]))
+        self.ex_nominal = R.arr(f1 - kappa * (-f2))
+        if np.any(self.ex_nominal <= 0):
+            raise ValueError("nominal f1 must exceed -f2 (g(0) = f1 + f2 must be positive)")
+
+
 @dataclass
 class DepthTerms:
     """Quantities that depend on depth and parameters only, shared by rate and output."""

@@ -659,9 +659,7 @@ void nte_bank_advance(nte_t* self, const bool first, const nte_real_t dt, const 
     uint32_t status = c.surface ? NTE_STATUS_OUT_OF_TISSUE : 0U;
     nte_real_t innovation0 = NTE_C(0.0);
     nte_real_t nis0 = NTE_C(0.0);
-    if (first) {
-        self->z = NTE_C(0.0);
-    } else {
+    if (!first) {
         if (c.gap) {
             status |= NTE_STATUS_GAP;
             self->counters.gaps++;
@@ -698,6 +696,13 @@ void nte_bank_advance(nte_t* self, const bool first, const nte_real_t dt, const 
     nte_depth_terms_t d;
     nte_output_terms_t o;
     nte_model_depth_terms(&d, &self->th, c.l);
+    if (first) {
+        /* z starts at its steady state, as after a gap (0 out of tissue): a record or a
+         * restarted node that begins inside the tissue does not start from a z the force
+         * contradicts */
+        const nte_real_t z_ss = nte_model_steady_state_z(&self->th, &d);
+        self->z = nte_isfinite(z_ss) ? z_ss : NTE_C(0.0);
+    }
     nte_model_output(&o, &self->th, &d, self->z, c.s);
     nte_real_t force = o.h;
     /* Model III: the branches take their share off the elastic force o.h; mp holds the

@@ -3,8 +3,8 @@ runs it, in the session's one kernel (vcan_session.py: WITH_VCAN_CHANNEL), every
 table (tests/python/test_node_port.py FAULT_ROWS) fed to a fresh nte-node live on the bus.
 
 - Every row within bounds -- recovery within 2 s of the fault's end, error after it at most
-  110 % of the fault-free run's, that run also over vcan -- but the strict xfail of the node
-  restart (test_node_port.FAULT_XFAIL: a restarted node starts from nothing).
+  110 % of the fault-free run's, that run also over vcan (test_node_port.FAULT_XFAIL lists a
+  row that does not yet: none).
 - The bus: every run's node received exactly the frames played on its input ids, in order,
   and sent exactly the Estimate and Params frames nte-node --replay sends for them, counting
   what it counts; so the table over vcan is the replay table, figure for figure (only the

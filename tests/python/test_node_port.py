@@ -228,10 +228,7 @@ FAULT_ROWS = ["loss 1%", "loss 5%", "loss 20%", "duplicates 5 %", "reorder 5 %",
 RESTART = "node restart mid-insertion"
 FLOOD = "flood at bus capacity 5 s"
 #: rows the node does not yet bring back within bounds (strict: the fix must remove them here)
-FAULT_XFAIL = {RESTART: "a node restarted mid-insertion starts from nothing (nominal "
-               "parameters, no state): 1165 % of the fault-free error after it is up; the "
-               "node must keep its state across a restart (the 'bus silent 0.5 s "
-               "mid-insertion' row, 100 %, is what it would then see)"}
+FAULT_XFAIL: dict[str, str] = {}
 
 
 def fault_params() -> list:
@@ -268,12 +265,15 @@ def test_flood_at_capacity_costs_nothing(fault_table: dict) -> None:
 
 
 def test_restart_mid_insertion_publishes_at_once(fault_table: dict) -> None:
-    """The node killed at 2.5 s, a fresh one up 0.5 s (of sensor time) later: it publishes
-    fresh estimates from its first one, counts nothing unusual; what it publishes is far off
-    (FAULT_XFAIL) -- where the bus silent for the same 0.5 s costs a running node nothing."""
+    """The node killed at 2.5 s, a fresh one up 0.5 s (of sensor time) later, 23.5 mm deep:
+    it publishes fresh estimates from its first one, counts nothing unusual, and is as close as
+    a node that kept running through the same 0.5 s of silence -- its first sample starts z at
+    the steady state of its depth (MODEL.md §2, "The first sample"; from z = 0 it stayed at
+    1165 % of the fault-free error)."""
     r, silent = fault_table[RESTART], fault_table["bus silent 0.5 s mid-insertion"]
     assert r["recovery_s"] == 0.0 and r["counters"] == {}, r
-    assert r["error_pct"] > 500.0 and silent["error_pct"] <= 101.0, (r, silent)
+    assert silent["error_pct"] <= 101.0 and r["error_pct"] <= silent["error_pct"] + 2.0, \
+        (r, silent)
 
 
 @pytest.mark.parametrize("fault,event", [("stuck force 1 s", "sensor_stuck"),
