@@ -145,6 +145,8 @@ def main(argv: list[str]) -> int:
             for kind in kinds:
                 idx = [i for i, (k, _) in enumerate(names) if k == kind]
                 print(f"  {kind:20s}{summary(a[idx])}")
+            phantom = [i for i, (k, _) in enumerate(names) if k in PRESET_NAMES]
+            print(f"  {'phantom (pooled)':20s}{summary(a[phantom])}")
             print(f"  {'all':20s}{summary(a)}")
     return 0
 
