@@ -39,7 +39,7 @@ static void put_real(text_t* t, const char* indent, const char* key, double x, i
 {
     char r[40];
     if (isfinite(x)) {
-        nte_py_repr(x, r, sizeof r); /* csv_in.c: Python's repr, the reference's floats */
+        nte_py_repr(x, r, sizeof r); /* name_value.h: Python's repr, the reference's floats */
     } else {
         (void)snprintf(r, sizeof r, "null");
     }

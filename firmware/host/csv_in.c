@@ -1,17 +1,19 @@
-/* Strict CSV reader of the host programs; mirrors reference_py/tools/csvio.py read_trial. */
+/* Strict CSV reader of the host programs: reference_py/tools/csvio.py read_table and read_trial
+ * rule for rule and message for message, with the csv module they read with (the excel
+ * dialect, as CPython 3.11's Modules/_csv.c parses it).  Python's text rules (UTF-8, str.strip,
+ * repr) are name_value.h's. */
 #include "csv_in.h"
+
+#include "name_value.h"
 
 #include "nte_units.h"
 
-#include <ctype.h>
 #include <errno.h>
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-
-#define MAX_COLS 64
 
 static void fail(char* err, size_t size, const char* fmt, ...)
 {
@@ -21,112 +23,215 @@ static void fail(char* err, size_t size, const char* fmt, ...)
     va_end(ap);
 }
 
-void nte_py_repr(const double x, char* buf, const size_t size)
+/* ---- the csv module's reader (excel dialect: ',' between cells, '"' around one) ---------- */
+
+enum { start_record, start_field, in_field, in_quoted, quote_in_quoted, eat_crnl };
+#define EOL 256 /* the end of a line, after its last character */
+#define CSV_OUT_OF_MEMORY (-1)
+#define CSV_FIELD_LIMIT (-2)
+#define CSV_NEWLINE (-3)
+
+/* One record as it is read: the cells' bytes, each followed by '\0', and where each begins. */
+typedef struct record_t {
+    char* text;
+    size_t len;
+    size_t cap;
+    size_t* start;
+    size_t n;
+    size_t n_cap;
+    size_t field; /* where the cell being read begins in text */
+    size_t chars; /* its characters so far (the module's field_len) */
+    int state;
+} record_t;
+
+static int grow(void** p, size_t* cap, const size_t need, const size_t size)
 {
-    if (isnan(x)) {
-        (void)snprintf(buf, size, "nan");
-        return;
+    if (need <= *cap) {
+        return 0;
     }
-    if (isinf(x)) {
-        (void)snprintf(buf, size, (x < 0.0) ? "-inf" : "inf");
-        return;
+    size_t nc = (*cap == 0U) ? 64U : *cap;
+    while (nc < need) {
+        nc *= 2U;
     }
-    char e[40];
-    int prec = 1;
-    for (; prec <= 17; prec++) {
-        (void)snprintf(e, sizeof e, "%.*e", prec - 1, x);
-        const double back = strtod(e, NULL);
-        if (memcmp(&back, &x, sizeof back) == 0) {
-            break;
-        }
+    void* q = realloc(*p, nc * size);
+    if (q == NULL) {
+        return CSV_OUT_OF_MEMORY;
     }
-    /* e = [-]d[.ddd]e[+-]XX : digits and decimal exponent */
-    char digits[24];
-    size_t nd = 0U;
-    const char* p = e;
-    const int neg = (*p == '-');
-    if (neg) {
-        p++;
+    *p = q;
+    *cap = nc;
+    return 0;
+}
+
+static int put_byte(record_t* r, const char c)
+{
+    if (grow((void**)&r->text, &r->cap, r->len + 1U, 1U) != 0) {
+        return CSV_OUT_OF_MEMORY;
     }
-    for (; (*p != 'e') && (*p != '\0'); p++) {
-        if ((*p >= '0') && (*p <= '9') && (nd < (sizeof digits - 1U))) {
-            digits[nd++] = *p;
+    r->text[r->len++] = c;
+    return 0;
+}
+
+/* parse_add_char: the limit counts characters, so a UTF-8 continuation byte is not counted */
+static int add_char(record_t* r, const int c)
+{
+    if ((((unsigned)c) & 0xc0U) != 0x80U) {
+        if (r->chars >= NTE_CSV_FIELD_LIMIT) {
+            return CSV_FIELD_LIMIT;
         }
+        r->chars++;
     }
-    digits[nd] = '\0';
-    const int exp10 = atoi(p + 1);
-    char out[64];
-    size_t o = 0U;
-    if (neg) {
-        out[o++] = '-';
+    return put_byte(r, (char)c);
+}
+
+static int save_field(record_t* r)
+{
+    if ((put_byte(r, '\0') != 0) ||
+        (grow((void**)&r->start, &r->n_cap, r->n + 1U, sizeof *r->start) != 0)) {
+        return CSV_OUT_OF_MEMORY;
     }
-    if ((exp10 < -4) || (exp10 >= 16)) {
-        out[o++] = digits[0];
-        if (nd > 1U) {
-            out[o++] = '.';
-            for (size_t i = 1U; i < nd; i++) {
-                out[o++] = digits[i];
-            }
+    r->start[r->n++] = r->field;
+    r->field = r->len;
+    r->chars = 0U;
+    return 0;
+}
+
+static void record_reset(record_t* r)
+{
+    r->len = 0U;
+    r->n = 0U;
+    r->field = 0U;
+    r->chars = 0U;
+    r->state = start_record;
+}
+
+/* parse_process_char: one character (a byte: the ones that matter are ASCII) or EOL. */
+static int feed(record_t* r, const int c)
+{
+    const int newline = (c == '\n') || (c == '\r') || (c == EOL);
+    int rc = 0;
+    if (r->state == start_record) {
+        if (c == EOL) {
+            return 0; /* an empty line: the record has no cell */
         }
-        (void)snprintf(out + o, sizeof out - o, "e%c%02d", (exp10 < 0) ? '-' : '+', abs(exp10));
-    } else if (exp10 < 0) {
-        out[o++] = '0';
-        out[o++] = '.';
-        for (int i = -1; i > exp10; i--) {
-            out[o++] = '0';
+        if ((c == '\n') || (c == '\r')) {
+            r->state = eat_crnl;
+            return 0;
         }
-        for (size_t i = 0U; i < nd; i++) {
-            out[o++] = digits[i];
-        }
-        out[o] = '\0';
-    } else {
-        const size_t ip = (size_t)exp10 + 1U;
-        for (size_t i = 0U; i < ip; i++) {
-            out[o++] = (i < nd) ? digits[i] : '0';
-        }
-        out[o++] = '.';
-        if (nd > ip) {
-            for (size_t i = ip; i < nd; i++) {
-                out[o++] = digits[i];
-            }
+        r->state = start_field;
+    }
+    switch (r->state) {
+    case start_field:
+        if (newline) {
+            rc = save_field(r);
+            r->state = (c == EOL) ? start_record : eat_crnl;
+        } else if (c == '"') {
+            r->state = in_quoted;
+        } else if (c == ',') {
+            rc = save_field(r);
         } else {
-            out[o++] = '0';
+            rc = add_char(r, c);
+            r->state = in_field;
         }
-        out[o] = '\0';
+        break;
+    case in_field:
+        if (newline) {
+            rc = save_field(r);
+            r->state = (c == EOL) ? start_record : eat_crnl;
+        } else if (c == ',') {
+            rc = save_field(r);
+            r->state = start_field;
+        } else {
+            rc = add_char(r, c);
+        }
+        break;
+    case in_quoted:
+        if (c == '"') {
+            r->state = quote_in_quoted;
+        } else if (c != EOL) {
+            rc = add_char(r, c); /* a line break inside quotes is the cell's */
+        } else {
+            /* the record goes on on the next line */
+        }
+        break;
+    case quote_in_quoted:
+        if (c == '"') {
+            rc = add_char(r, c); /* "" inside quotes is one " */
+            r->state = in_quoted;
+        } else if (c == ',') {
+            rc = save_field(r);
+            r->state = start_field;
+        } else if (newline) {
+            rc = save_field(r);
+            r->state = (c == EOL) ? start_record : eat_crnl;
+        } else {
+            rc = add_char(r, c); /* "a"b is ab */
+            r->state = in_field;
+        }
+        break;
+    default: /* eat_crnl */
+        if (c == EOL) {
+            r->state = start_record;
+        } else if (!newline) {
+            rc = CSV_NEWLINE;
+        } else {
+            /* \r\n */
+        }
+        break;
     }
-    (void)snprintf(buf, size, "%s", out);
+    return rc;
 }
 
-static char* strip(char* s)
+/* ---- csvio.read_table: the header, then one sample a record ------------------------------ */
+
+/* csvio._NUMBER, [+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?, over the whole text. */
+static size_t digits_at(const char* s, const size_t n, size_t* i)
 {
-    while ((*s != '\0') && (strchr(" \t\r\n\v\f", *s) != NULL)) {
+    const size_t from = *i;
+    while ((*i < n) && (s[*i] >= '0') && (s[*i] <= '9')) {
+        (*i)++;
+    }
+    return *i - from;
+}
+
+static int is_number(const char* s, const size_t n)
+{
+    size_t i = ((n > 0U) && ((s[0] == '+') || (s[0] == '-'))) ? 1U : 0U;
+    size_t d = digits_at(s, n, &i);
+    if ((i < n) && (s[i] == '.')) {
+        i++;
+        d += digits_at(s, n, &i);
+    }
+    if (d == 0U) {
+        return 0;
+    }
+    if ((i < n) && ((s[i] == 'e') || (s[i] == 'E'))) {
+        i++;
+        i += ((i < n) && ((s[i] == '+') || (s[i] == '-'))) ? 1U : 0U;
+        if (digits_at(s, n, &i) == 0U) {
+            return 0;
+        }
+    }
+    return i == n;
+}
+
+/* csvio._NOT_FINITE: [+-]?(nan|inf|infinity), case aside. */
+static int is_not_finite(const char* s, size_t n)
+{
+    static const char* const words[3] = {"nan", "inf", "infinity"};
+    if ((n > 0U) && ((s[0] == '+') || (s[0] == '-'))) {
         s++;
+        n--;
     }
-    size_t n = strlen(s);
-    while ((n > 0U) && (strchr(" \t\r\n\v\f", s[n - 1U]) != NULL)) {
-        s[--n] = '\0';
-    }
-    return s;
-}
-
-/* Split `line` in place at commas; returns the number of cells (or MAX_COLS + 1 if more). */
-static size_t split(char* line, char** cells)
-{
-    size_t n = 0U;
-    char* p = line;
-    for (;;) {
-        char* c = strchr(p, ',');
-        if (n < MAX_COLS) {
-            cells[n] = p;
+    for (size_t w = 0U; w < 3U; w++) {
+        size_t i = 0U;
+        while ((i < n) && (words[w][i] != '\0') && ((s[i] | 0x20) == words[w][i])) {
+            i++;
         }
-        n++;
-        if (c == NULL) {
-            break;
+        if ((i == n) && (words[w][i] == '\0')) {
+            return 1;
         }
-        *c = '\0';
-        p = c + 1;
     }
-    return n;
+    return 0;
 }
 
 static int push(nte_trial_t* tr, size_t* cap, const double t, const double l, const double v,
@@ -158,6 +263,7 @@ static int push(nte_trial_t* tr, size_t* cap, const double t, const double l, co
     return 0;
 }
 
+/* The whole file, or NULL with errno set. */
 static char* slurp(const char* path, size_t* len)
 {
     FILE* fh = fopen(path, "rb");
@@ -167,31 +273,34 @@ static char* slurp(const char* path, size_t* len)
     size_t cap = 65536U;
     size_t n = 0U;
     char* buf = malloc(cap);
-    for (;;) {
-        if (buf == NULL) {
-            break;
-        }
-        if ((n + 1U) >= cap) {
+    while (buf != NULL) {
+        if (n == cap) {
             char* b = realloc(buf, cap * 2U);
             if (b == NULL) {
                 free(buf);
                 buf = NULL;
+                errno = ENOMEM;
                 break;
             }
             buf = b;
             cap *= 2U;
         }
-        const size_t got = fread(&buf[n], 1U, cap - n - 1U, fh);
+        const size_t got = fread(&buf[n], 1U, cap - n, fh);
         n += got;
         if (got == 0U) {
+            if (ferror(fh) != 0) { /* a directory: EISDIR, as Python's open() says */
+                const int e = errno;
+                free(buf);
+                buf = NULL;
+                errno = e;
+            }
             break;
         }
     }
+    const int e = errno;
     (void)fclose(fh);
-    if (buf != NULL) {
-        buf[n] = '\0';
-        *len = n;
-    }
+    errno = e;
+    *len = n;
     return buf;
 }
 
@@ -209,7 +318,9 @@ void nte_columns_standard(nte_columns_t* c)
 static int same_ignoring_case(const char* a, const char* b)
 {
     while ((*a != '\0') && (*b != '\0')) {
-        if (tolower((unsigned char)*a) != tolower((unsigned char)*b)) {
+        const int x = ((*a >= 'A') && (*a <= 'Z')) ? (*a + ('a' - 'A')) : *a;
+        const int y = ((*b >= 'A') && (*b <= 'Z')) ? (*b + ('a' - 'A')) : *b;
+        if (x != y) {
             return 0;
         }
         a++;
@@ -218,27 +329,26 @@ static int same_ignoring_case(const char* a, const char* b)
     return (*a == '\0') && (*b == '\0');
 }
 
+static const nte_unit_t force_units[NTE_FORCE_UNIT_COUNT] = NTE_FORCE_UNITS;
+static const nte_unit_t time_units[NTE_TIME_UNIT_COUNT] = NTE_TIME_UNITS;
+static const nte_unit_t depth_units[NTE_DEPTH_UNIT_COUNT] = NTE_DEPTH_UNITS;
+
 /* Twin of csvio.unit_suffix_hint: "read it with --columns t=..,depth=..,force=.. [--KIND-unit
  * U]..." when each of the time, depth and force has exactly one column named QUANTITY_UNIT
  * (case aside: t_ms, depth_m, force_mN), "" otherwise.  The reader does not guess from a name
  * (a column so named may hold anything); the refusal says how to read the file. */
 static void unit_suffix_hint(char* const* header, const size_t nc, char* out, const size_t cap)
 {
-    static const nte_unit_t time_units[] = NTE_TIME_UNITS;
-    static const nte_unit_t depth_units[] = NTE_DEPTH_UNITS;
-    static const nte_unit_t force_units[] = NTE_FORCE_UNITS;
     const struct {
         const char* key;  /* the --columns key, also the name's first part */
         const char* kind; /* --KIND-unit */
         const nte_unit_t* units;
         size_t n_units;
-    } quantities[3] = {{"t", "time", time_units, NTE_TIME_UNIT_COUNT},
-                       {"depth", "depth", depth_units, NTE_DEPTH_UNIT_COUNT},
-                       {"force", "force", force_units, NTE_FORCE_UNIT_COUNT}};
+    } quantities[NTE_UNIT_QUANTITY_COUNT] = NTE_UNIT_QUANTITIES;
     char mapped[512] = "";
     char options[256] = "";
     out[0] = '\0';
-    for (size_t q = 0U; q < 3U; q++) {
+    for (size_t q = 0U; q < NTE_UNIT_QUANTITY_COUNT; q++) {
         size_t found = 0U;
         const char* column = NULL;
         const nte_unit_t* unit = NULL;
@@ -271,6 +381,135 @@ static void unit_suffix_hint(char* const* header, const size_t nc, char* out, co
     (void)snprintf(out, cap, "; read it with --columns %s%s", mapped, options);
 }
 
+/* What the reader knows between records. */
+typedef struct table_t {
+    const char* path;
+    const nte_columns_t* cols;
+    nte_trial_t* tr;
+    char* names;   /* the header's record, each name stripped in place */
+    char** header; /* the names */
+    size_t ncols;  /* 0: no header yet */
+    size_t header_line;
+    int idx[4]; /* t, depth, force, velocity: the column, or -1 */
+    double* row;
+    double prev_t;
+    size_t cap;
+    char* err;
+    size_t es;
+} table_t;
+
+/* The header: names stripped, the required columns there (else the file's names and, for the
+ * standard names, how to read a unit in a name), no name twice. */
+static int take_header(table_t* tb, const record_t* r, const size_t lineno)
+{
+    const nte_columns_t* cols = tb->cols;
+    tb->names = malloc(r->len);
+    tb->header = malloc(r->n * sizeof *tb->header);
+    tb->row = malloc(r->n * sizeof *tb->row);
+    if ((tb->names == NULL) || (tb->header == NULL) || (tb->row == NULL)) {
+        fail(tb->err, tb->es, "%s:%zu: out of memory", tb->path, lineno);
+        return -1;
+    }
+    (void)memcpy(tb->names, r->text, r->len);
+    const char* want[4] = {cols->t, cols->depth, cols->force, cols->velocity};
+    for (size_t c = 0U; c < r->n; c++) {
+        const char* name = tb->names + r->start[c];
+        const size_t n = nte_py_strip(&name, strlen(name));
+        tb->header[c] = (char*)name;
+        tb->header[c][n] = '\0';
+        for (size_t k = 0U; k < 4U; k++) {
+            if ((tb->idx[k] < 0) && (want[k][0] != '\0') && (strcmp(name, want[k]) == 0)) {
+                tb->idx[k] = (int)c;
+            }
+        }
+    }
+    tb->ncols = r->n;
+    tb->header_line = lineno;
+    const size_t n_req = (cols->velocity_required != 0) ? 4U : 3U;
+    for (size_t k = 0U; k < n_req; k++) {
+        if (tb->idx[k] < 0) {
+            int o = snprintf(tb->err, tb->es,
+                             "%s:%zu: column '%s': missing from the header (have: ", tb->path,
+                             lineno, want[k]);
+            for (size_t c = 0U; (c < r->n) && (o >= 0) && ((size_t)o < tb->es); c++) {
+                o += snprintf(tb->err + o, tb->es - (size_t)o, "%s%s", (c > 0U) ? ", " : "",
+                              tb->header[c]);
+            }
+            char advice[1024] = "";
+            if (cols->mapped == 0) {
+                unit_suffix_hint(tb->header, r->n, advice, sizeof advice);
+            }
+            if ((o >= 0) && ((size_t)o < tb->es)) {
+                (void)snprintf(tb->err + o, tb->es - (size_t)o, ")%s", advice);
+            }
+            return -1;
+        }
+    }
+    for (size_t a = 0U; a < r->n; a++) {
+        for (size_t b = a + 1U; b < r->n; b++) {
+            if (strcmp(tb->header[a], tb->header[b]) == 0) {
+                fail(tb->err, tb->es, "%s:%zu: column '%s': duplicate column name in the header",
+                     tb->path, lineno, tb->header[a]);
+                return -1;
+            }
+        }
+    }
+    return 0;
+}
+
+/* A sample: as many cells as the header, each a finite decimal number, the time increasing. */
+static int take_row(table_t* tb, const record_t* r, const size_t lineno)
+{
+    if (r->n != tb->ncols) {
+        fail(tb->err, tb->es, "%s:%zu: expected %zu cells, found %zu", tb->path, lineno, tb->ncols,
+             r->n);
+        return -1;
+    }
+    for (size_t c = 0U; c < r->n; c++) {
+        const char* cell = r->text + r->start[c];
+        const size_t full = ((c + 1U < r->n) ? r->start[c + 1U] : r->len) - r->start[c] - 1U;
+        const size_t n = nte_py_strip(&cell, full);
+        const int number = is_number(cell, n);
+        tb->row[c] = number ? strtod(cell, NULL) : 0.0;
+        if (!number || !isfinite(tb->row[c])) {
+            char shown[512];
+            nte_py_repr_bytes(cell, n, shown, sizeof shown);
+            fail(tb->err, tb->es, "%s:%zu: column '%s': %s: %s", tb->path, lineno, tb->header[c],
+                 (number || is_not_finite(cell, n)) ? "not finite" : "not a number", shown);
+            return -1;
+        }
+    }
+    const double t = tb->row[tb->idx[0]];
+    if (!(t > tb->prev_t)) {
+        char a[40];
+        char b[40];
+        nte_py_repr(t, a, sizeof a);
+        nte_py_repr(tb->prev_t, b, sizeof b);
+        fail(tb->err, tb->es, "%s:%zu: column '%s': time %s does not increase (previous %s)",
+             tb->path, lineno, tb->cols->t, a, b);
+        return -1;
+    }
+    tb->prev_t = t;
+    const int vi = tb->idx[3];
+    if (push(tb->tr, &tb->cap, t, tb->row[tb->idx[1]], (vi >= 0) ? tb->row[vi] : 0.0,
+             tb->row[tb->idx[2]], lineno) != 0) {
+        fail(tb->err, tb->es, "%s:%zu: out of memory", tb->path, lineno);
+        return -1;
+    }
+    return 0;
+}
+
+/* One record: an empty line (no cell, or one blank cell), the header, or a sample. */
+static int take(table_t* tb, const record_t* r, const size_t lineno)
+{
+    const char* first = r->text;
+    if ((r->n == 0U) || ((r->n == 1U) && (nte_py_strip(&first, r->len - 1U) == 0U))) {
+        fail(tb->err, tb->es, "%s:%zu: empty line", tb->path, lineno);
+        return -1;
+    }
+    return (tb->ncols == 0U) ? take_header(tb, r, lineno) : take_row(tb, r, lineno);
+}
+
 int nte_trial_read(const char* path, nte_trial_t* tr, char* err, const size_t es)
 {
     nte_columns_t c;
@@ -290,165 +529,96 @@ int nte_trial_read_columns(const char* path, const nte_columns_t* cols, nte_tria
         fail(err, es, "%s: cannot read: %s", path, strerror((errno != 0) ? errno : EIO));
         return -1;
     }
-    if (strlen(text) != len) {
-        fail(err, es, "%s: not a text file", path);
-        free(text);
-        return -1;
+    table_t tb;
+    (void)memset(&tb, 0, sizeof tb);
+    tb.path = path;
+    tb.cols = cols;
+    tb.tr = tr;
+    tb.prev_t = -HUGE_VAL;
+    tb.err = err;
+    tb.es = es;
+    for (size_t k = 0U; k < 4U; k++) {
+        tb.idx[k] = -1;
     }
-    size_t n_lines = 1U;
-    for (size_t i = 0U; i < len; i++) {
-        n_lines += (text[i] == '\n') ? 1U : 0U;
-    }
-    char* header[MAX_COLS];
-    char hbuf[4096];
-    size_t ncols = 0U;
-    size_t header_line = 0U;
-    int ti = -1;
-    int li = -1;
-    int fi = -1;
-    int vi = -1;
-    size_t cap = 0U;
-    double prev_t = -HUGE_VAL;
+    record_t r;
+    (void)memset(&r, 0, sizeof r);
+    record_reset(&r);
     int rc = 0;
-    char* line = text;
-    for (size_t lineno = 1U; (lineno <= n_lines) && (rc == 0); lineno++) {
-        char* nl = strchr(line, '\n');
-        if (nl != NULL) {
-            *nl = '\0';
+    size_t lineno = 0U;
+    /* csvio's lines: split after every '\n', decoded (the first without its BOM), a comment
+     * skipped wherever it stands; each fed to the csv reader, character by character */
+    for (size_t pos = 0U; (pos < len) && (rc == 0);) {
+        const char* line = text + pos;
+        const char* nl = memchr(line, '\n', len - pos);
+        size_t n = (nl != NULL) ? ((size_t)(nl - line) + 1U) : (len - pos);
+        pos += n;
+        lineno++;
+        if ((lineno == 1U) && (n >= 3U) && (memcmp(line, "\xef\xbb\xbf", 3U) == 0)) {
+            line += 3;
+            n -= 3U;
         }
-        char* next = (nl != NULL) ? (nl + 1) : (line + strlen(line));
-        size_t ll = strlen(line);
-        while ((ll > 0U) && (line[ll - 1U] == '\r')) {
-            line[--ll] = '\0';
-        }
-        if (line[0] == '#') {
-            line = next;
-            continue;
-        }
-        if (ll == 0U) {
-            if (lineno != n_lines) {
-                fail(err, es, "%s:%zu: empty line", path, lineno);
-                rc = -1;
-            }
-            line = next;
-            continue;
-        }
-        char* cells[MAX_COLS];
-        const size_t nc = split(line, cells);
-        if (ncols == 0U) {
-            if (nc > MAX_COLS) {
-                fail(err, es, "%s:%zu: more than %d columns", path, lineno, MAX_COLS);
-                rc = -1;
-                break;
-            }
-            size_t o = 0U;
-            for (size_t c = 0U; c < nc; c++) {
-                header[c] = strip(cells[c]);
-                const int w = snprintf(hbuf + o, sizeof hbuf - o, "%s%s", (c > 0U) ? ", " : "",
-                                       header[c]);
-                if ((w > 0) && ((size_t)w < (sizeof hbuf - o))) {
-                    o += (size_t)w;
-                }
-                if (strcmp(header[c], cols->t) == 0) {
-                    ti = (int)c;
-                }
-                if (strcmp(header[c], cols->depth) == 0) {
-                    li = (int)c;
-                }
-                if (strcmp(header[c], cols->force) == 0) {
-                    fi = (int)c;
-                }
-                if ((cols->velocity[0] != '\0') && (strcmp(header[c], cols->velocity) == 0)) {
-                    vi = (int)c;
-                }
-            }
-            const char* req[4] = {cols->t, cols->depth, cols->force, cols->velocity};
-            const int idx[4] = {ti, li, fi, vi};
-            const size_t n_req = (cols->velocity_required != 0) ? 4U : 3U;
-            for (size_t r = 0U; (r < n_req) && (rc == 0); r++) {
-                if (idx[r] < 0) {
-                    char advice[1024] = "";
-                    if (cols->mapped == 0) {
-                        unit_suffix_hint(header, nc, advice, sizeof advice);
-                    }
-                    fail(err, es, "%s:%zu: column '%s': missing from the header (have: %s)%s", path,
-                         lineno, req[r], hbuf, advice);
-                    rc = -1;
-                }
-            }
-            for (size_t a = 0U; (a < nc) && (rc == 0); a++) {
-                for (size_t b = a + 1U; (b < nc) && (rc == 0); b++) {
-                    if (strcmp(header[a], header[b]) == 0) {
-                        fail(err, es, "%s:%zu: column '%s': duplicate column name in the header",
-                             path, lineno, header[a]);
-                        rc = -1;
-                    }
-                }
-            }
-            ncols = nc;
-            header_line = lineno;
-            line = next;
-            continue;
-        }
-        if (nc != ncols) {
-            fail(err, es, "%s:%zu: expected %zu cells, found %zu", path, lineno, ncols, nc);
+        if (!nte_py_utf8(line, n)) {
+            fail(err, es, "%s:%zu: not UTF-8 text", path, lineno);
             rc = -1;
             break;
         }
-        double row[MAX_COLS];
-        for (size_t c = 0U; (c < nc) && (rc == 0); c++) {
-            char* cell = strip(cells[c]);
-            char* end = NULL;
-            const int hex = (strchr(cell, 'x') != NULL) || (strchr(cell, 'X') != NULL);
-            row[c] = strtod(cell, &end);
-            if ((cell[0] == '\0') || (end == NULL) || (*end != '\0') || hex) {
-                fail(err, es, "%s:%zu: column '%s': not a number: '%s'", path, lineno, header[c],
-                     cell);
-                rc = -1;
-            } else if (!isfinite(row[c])) {
-                fail(err, es, "%s:%zu: column '%s': not finite: '%s'", path, lineno, header[c],
-                     cell);
-                rc = -1;
-            } else {
-                /* a valid number */
-            }
+        if ((n > 0U) && (line[0] == NTE_CSV_COMMENT)) {
+            continue;
         }
+        int e = 0;
+        for (size_t i = 0U; (i < n) && (e == 0); i++) {
+            e = feed(&r, (unsigned char)line[i]);
+        }
+        e = (e == 0) ? feed(&r, EOL) : e;
+        if (e == CSV_FIELD_LIMIT) {
+            fail(err, es, "%s:%zu: field larger than field limit (%u)", path, lineno,
+                 (unsigned)NTE_CSV_FIELD_LIMIT);
+        } else if (e != 0) {
+            fail(err, es, "%s:%zu: %s", path, lineno,
+                 (e == CSV_NEWLINE) ? "new-line character seen in unquoted field - do you need "
+                                      "to open the file in universal-newline mode?"
+                                    : "out of memory");
+        } else {
+            /* the line was read */
+        }
+        if (e != 0) {
+            rc = -1;
+            break;
+        }
+        if (r.state == start_record) {
+            rc = take(&tb, &r, lineno);
+            record_reset(&r);
+        }
+    }
+    /* the end of the file inside quotes (or a cell): that record is the last */
+    if ((rc == 0) && ((r.chars != 0U) || (r.state == in_quoted))) {
+        rc = save_field(&r);
         if (rc != 0) {
-            break;
-        }
-        const double t = row[ti];
-        if (!(t > prev_t)) {
-            char a[40];
-            char b[40];
-            nte_py_repr(t, a, sizeof a);
-            nte_py_repr(prev_t, b, sizeof b);
-            fail(err, es, "%s:%zu: column '%s': time %s does not increase (previous %s)", path,
-                 lineno, cols->t, a, b);
-            rc = -1;
-            break;
-        }
-        prev_t = t;
-        if (push(tr, &cap, t, row[li], (vi >= 0) ? row[vi] : 0.0, row[fi], lineno) != 0) {
             fail(err, es, "%s:%zu: out of memory", path, lineno);
-            rc = -1;
+        } else {
+            rc = take(&tb, &r, lineno);
         }
-        line = next;
     }
     free(text);
-    if ((rc == 0) && (ncols == 0U)) {
+    free(r.text);
+    free(r.start);
+    free(tb.names);
+    free(tb.header);
+    free(tb.row);
+    if ((rc == 0) && (tb.ncols == 0U)) {
         fail(err, es, "%s:1: no header line", path);
         rc = -1;
     }
     if ((rc == 0) && (tr->n == 0U)) {
-        fail(err, es, "%s:%zu: no samples after the header", path, header_line + 1U);
+        fail(err, es, "%s:%zu: no samples after the header", path, tb.header_line + 1U);
         rc = -1;
     }
     if (rc != 0) {
         nte_trial_free(tr);
         return -1;
     }
-    tr->velocity_given = (vi >= 0);
-    if (vi < 0) {
+    tr->velocity_given = (tb.idx[3] >= 0);
+    if (tb.idx[3] < 0) {
         nte_central_difference(tr->t_s, tr->depth_mm, tr->n, tr->velocity_mm_s);
     }
     return 0;

@@ -1,10 +1,14 @@
 /*
  * Strict reader of insertion CSV files for the host programs (the C twin of
- * reference_py/tools/csvio.py read_trial).  Host only: uses malloc and double.
+ * reference_py/tools/csvio.py read_trial, with the rules of its docstring and the csv module's
+ * excel dialect: UTF-8 with or without a BOM, '#' comments, quoted cells, "" inside quotes, a
+ * quoted cell across lines; the same refusals word for word).  The rules' constants are
+ * generated from the Python reader into nte_units.h.  Host only: uses malloc and double.
  */
 #ifndef NTE_CSV_IN_H
 #define NTE_CSV_IN_H
 
+#include "name_value.h"
 #include "nte.h"
 
 #include <stddef.h>
@@ -67,7 +71,4 @@ void nte_trial_convert(nte_trial_t* trial, const nte_units_t* units);
 void nte_trial_sample(const nte_trial_t* tr, size_t k, int force_ignored, nte_sample_t* s);
 /** Central differences in double, one-sided at the ends (csvio.central_difference). */
 void nte_central_difference(const double* t, const double* x, size_t n, double* v);
-/** Python's repr() of a double (shortest round-trip text). */
-void nte_py_repr(double x, char* buf, size_t size);
-
 #endif /* NTE_CSV_IN_H */

@@ -1,8 +1,10 @@
 /*
- * A comma-separated NAME=VALUE list as the Python tools split one (--start, --columns): the
- * items at every ',', each partitioned at its first '=', every part stripped of whitespace
- * (str.split, str.partition, str.strip); and Python's repr() of a text, for the messages.
- * Host only.
+ * Python's text rules, for the host programs' messages: repr() of a float and of a text,
+ * str.strip(), UTF-8 as Python decodes it (the tables they need are generated from Python into
+ * nte_units.h; tests/python/test_py_text.py holds them to Python's).  And a comma-separated
+ * NAME=VALUE list as the Python tools split one (--start, --columns): the items at every ',',
+ * each partitioned at its first '=', every part stripped (str.split, str.partition,
+ * str.strip).  Host only.
  */
 #ifndef NTE_NAME_VALUE_H
 #define NTE_NAME_VALUE_H
@@ -25,9 +27,23 @@ typedef struct nte_nv_t {
  *  longer list is refused within the items split. */
 size_t nte_nv_split(const char* text, nte_nv_t* items, size_t max);
 
-/** Python's repr() of a text: in single quotes, or double ones when it holds a single quote
- *  and no double; backslashes and that quote escaped, control characters as \n, \r, \t,
- *  \xNN. */
+/** Python's repr() of a double (shortest round-trip text; json.dumps writes the same). */
+void nte_py_repr(double x, char* buf, size_t size);
+/** Python's repr() of the text s[0..n) (UTF-8; a byte that is not is shown as Python's
+ *  surrogateescape reads it, \udcNN): in single quotes, or double ones when it holds a single
+ *  quote and no double; backslashes and that quote escaped, \n, \r, \t, and what repr
+ *  escapes as \xNN or \uNNNN (ASCII's controls, nte_units.h NTE_TEXT_UNPRINTABLE).  Limit:
+ *  an unassigned code point, or one beyond U+FFFF that repr escapes, is shown as it is.  Cut
+ *  to fit cap, quotes kept. */
+void nte_py_repr_bytes(const char* s, size_t n, char* buf, size_t cap);
+/** nte_py_repr_bytes of a terminated text. */
 void nte_py_repr_text(const char* s, char* buf, size_t cap);
+/** str.strip(): moves *s past the leading characters str.isspace names and returns the length
+ *  of s[0..n) without them at either end. */
+size_t nte_py_strip(const char** s, size_t n);
+
+/** 1 when s[0..n) is UTF-8 as Python's strict decoder reads it (no overlong form, no
+ *  surrogate, nothing above U+10FFFF), else 0. */
+int nte_py_utf8(const char* s, size_t n);
 
 #endif /* NTE_NAME_VALUE_H */

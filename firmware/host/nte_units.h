@@ -3,6 +3,17 @@
 #ifndef NTE_UNITS_H
 #define NTE_UNITS_H
 
+/* The text: a comment line's mark, the csv module's limit on a cell (characters) */
+/* and the characters Python's str.strip strips (str.isspace, code points). */
+#define NTE_CSV_COMMENT '#'
+#define NTE_CSV_FIELD_LIMIT 131072U
+#define NTE_TEXT_SPACE_COUNT 29
+#define NTE_TEXT_SPACES { 0x9U, 0xaU, 0xbU, 0xcU, 0xdU, 0x1cU, 0x1dU, 0x1eU, 0x1fU, 0x20U, 0x85U, 0xa0U, 0x1680U, 0x2000U, 0x2001U, 0x2002U, 0x2003U, 0x2004U, 0x2005U, 0x2006U, 0x2007U, 0x2008U, 0x2009U, 0x200aU, 0x2028U, 0x2029U, 0x202fU, 0x205fU, 0x3000U }
+/* The characters of the Basic Multilingual Plane above U+007F that Python's repr */
+/* escapes, unassigned ones aside (str.isprintable; first and last of each run). */
+#define NTE_TEXT_UNPRINTABLE_COUNT 18
+#define NTE_TEXT_UNPRINTABLE { { 0x80U, 0xa0U }, { 0xadU, 0xadU }, { 0x600U, 0x605U }, { 0x61cU, 0x61cU }, { 0x6ddU, 0x6ddU }, { 0x70fU, 0x70fU }, { 0x890U, 0x891U }, { 0x8e2U, 0x8e2U }, { 0x1680U, 0x1680U }, { 0x180eU, 0x180eU }, { 0x2000U, 0x200fU }, { 0x2028U, 0x202fU }, { 0x205fU, 0x2064U }, { 0x2066U, 0x206fU }, { 0x3000U, 0x3000U }, { 0xe000U, 0xf8ffU }, { 0xfeffU, 0xfeffU }, { 0xfff9U, 0xfffbU } }
+
 typedef struct nte_unit_t {
     const char* name;
     double factor; /* to the tools' unit: N, s or mm */
@@ -15,6 +26,11 @@ typedef struct nte_unit_t {
 #define NTE_DEPTH_UNIT_COUNT 2
 #define NTE_DEPTH_UNITS { { "mm", 0x1.0000000000000p+0 }, { "m", 0x1.f400000000000p+9 } }
 #define NTE_TIME_UNIT_WORDS { "", "milliseconds", "microseconds" } /* a time step's hint */
+/* csvio.UNIT_SUFFIX_QUANTITIES: a column named KEY_UNIT holds a quantity in UNIT,
+ * read with --KIND-unit (key, kind, its table: the arrays force_units, time_units
+ * and depth_units that the including file initialises from NTE_*_UNITS) */
+#define NTE_UNIT_QUANTITY_COUNT 3
+#define NTE_UNIT_QUANTITIES { { "t", "time", time_units, NTE_TIME_UNIT_COUNT }, { "depth", "depth", depth_units, NTE_DEPTH_UNIT_COUNT }, { "force", "force", force_units, NTE_FORCE_UNIT_COUNT } }
 
 /* --columns KEY=NAME: each key and the standard column it stands for */
 #define NTE_COLUMN_KEY_COUNT 4

@@ -53,9 +53,12 @@ COLUMN_KEYS = {"t": "t_s", "depth": "depth_mm", "force": "force_n", "velocity": 
 #: the keys --columns must give (velocity is optional)
 COLUMN_KEYS_REQUIRED = ("t", "depth", "force")
 
-_NUMBER = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?")
-_NOT_FINITE = re.compile(r"[+-]?(nan|inf|infinity)", re.IGNORECASE)
-_NAN = re.compile(r"[+-]?nan", re.IGNORECASE)
+#: a line that starts with this is a comment
+COMMENT = "#"
+#: a cell's number, ASCII only (the C reader, firmware/host/csv_in.c, reads the same grammar)
+_NUMBER = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?", re.ASCII)
+_NOT_FINITE = re.compile(r"[+-]?(nan|inf|infinity)", re.IGNORECASE | re.ASCII)
+_NAN = re.compile(r"[+-]?nan", re.IGNORECASE | re.ASCII)
 
 
 class CsvError(ValueError):
@@ -122,7 +125,7 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
                 text = raw.decode("utf-8-sig" if lineno == 1 else "utf-8")
             except UnicodeDecodeError:
                 raise CsvError(f"{name}:{lineno}: not UTF-8 text") from None
-            if text.startswith("#"):
+            if text.startswith(COMMENT):
                 continue
             yield text
 
@@ -317,6 +320,16 @@ TARE_SAMPLES = 20
 #: ... on the samples taken while inserting where it departs from the tare by more than this
 #: share of its largest departure there (the air gap's samples sit at the tare, either sign)
 SIGN_DEPART_SHARE = 0.1
+#: Inserting: the velocity above this (and the depth > 0); the sign is judged on at least
+#: INSERTING_MIN_SAMPLES such samples.
+INSERTING_SPEED_MM_S = 0.5
+INSERTING_MIN_SAMPLES = 10
+#: Above this share of negative depths the depth is probably measured the other way.
+NEGATIVE_DEPTH_SHARE = 0.5
+#: A force beyond this many times the configured range is not a force in N.
+FORCE_IMPLAUSIBLE_FACTOR = 1000.0
+#: The words a time step's hint gives the smaller units it proposes.
+TIME_UNIT_WORDS = {"ms": "milliseconds", "us": "microseconds"}
 
 
 def _pct(x: float) -> str:
@@ -329,8 +342,7 @@ def _time_hint(dt: float, unit: str, dt_max: float) -> str:
     units = list(TIME_UNITS)
     for smaller in units[units.index(unit) + 1:]:
         if dt * TIME_UNITS[smaller] / TIME_UNITS[unit] <= dt_max:
-            what = {"ms": "milliseconds", "us": "microseconds"}[smaller]
-            return f"probably {what}: convert with --time-unit {smaller}"
+            return f"probably {TIME_UNIT_WORDS[smaller]}: convert with --time-unit {smaller}"
     return "too coarse for the estimator"
 
 
@@ -360,7 +372,7 @@ def check_units(tr: "Trial", units: Units = Units(), limits: Limits = Limits()) 
         raise UnitsError(f"{name}: column '{cd}': the depth spans only {stroke:.4g} mm "
                          f"(less than {MIN_STROKE_MM:g} mm): {hint}")
     neg = float(np.mean(d < 0.0))
-    if neg > 0.5:
+    if neg > NEGATIVE_DEPTH_SHARE:
         raise UnitsError(f"{name}: column '{cd}': {_pct(neg)} of the depths are negative "
                          f"(down to {float(np.min(d)):.4g} mm): probably measured the other "
                          f"way: convert with --depth-sign -1")
@@ -378,12 +390,12 @@ def check_units(tr: "Trial", units: Units = Units(), limits: Limits = Limits()) 
             raise UnitsError(f"{name}: column '{cf}': {_pct(out)} of the forces exceed the "
                              f"configured range ±{fmax:g} N (up to {peak:.4g}): {hint}")
         k = int(np.argmax(np.where(present, np.abs(f), -1.0)))
-        if abs(float(f[k])) > 1000.0 * fmax:
+        if abs(float(f[k])) > FORCE_IMPLAUSIBLE_FACTOR * fmax:
             line = f":{tr.lines[k]}" if tr.lines else ""
             raise UnitsError(f"{name}{line}: column '{cf}': {float(f[k]):.4g} N is not a "
                              f"plausible force (the configured range is ±{fmax:g} N)")
-        inserting = present & (tr.velocity_mm_s > 0.5) & (d > 0.0)
-        if np.count_nonzero(inserting) >= 10:
+        inserting = present & (tr.velocity_mm_s > INSERTING_SPEED_MM_S) & (d > 0.0)
+        if np.count_nonzero(inserting) >= INSERTING_MIN_SAMPLES:
             # judged on the force less its tare, where it departs from the tare: a record
             # starts in the air, and a negative tare over a long air gap is no sign
             tare = float(np.median(f[present][:TARE_SAMPLES]))
@@ -391,7 +403,7 @@ def check_units(tr: "Trial", units: Units = Units(), limits: Limits = Limits()) 
             top = float(np.max(np.abs(rel[inserting])))
             judged = inserting & (np.abs(rel) > SIGN_DEPART_SHARE * top)
             fi = rel[judged]
-            if len(fi) >= 10 and float(np.median(fi)) < 0.0:
+            if len(fi) >= INSERTING_MIN_SAMPLES and float(np.median(fi)) < 0.0:
                 raise UnitsError(f"{name}: column '{cf}': the force less its tare ({tare:.4g} "
                                  f"N) is negative in {_pct(float(np.mean(fi < 0.0)))} of the "
                                  f"samples taken while inserting: probably the sensor's "

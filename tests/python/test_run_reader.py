@@ -1,0 +1,179 @@
+"""nte-run reads a file as `nte-ref estimate` does: one table of cases for both readers.
+
+The Python reader (reference_py/tools/csvio.py read_trial, with the csv module) is the
+specification; firmware/host/csv_in.c is its twin (README: "It reads the input as nte-ref
+estimate does").  Every case of the Python reader's own tables (test_safe_writer.READER_CASES,
+test_cli.BAD_CASES) and of the table below -- a BOM, quoted cells and "" inside quotes, a
+quoted cell across lines and to the end of the file, CRLF and a lone CR, comments, blank and
+white-space lines, text that is not UTF-8, a NUL, Unicode spaces around a number, the number
+grammar's edges, more columns than the C reader once held, the csv module's cell limit -- goes
+through the reference and through nte-run and nte-run-double (--no-units-check: the reader
+alone; test_run_units.py holds the units check): both refuse with the same message (one line
+but where a quoted name holds a line break), or both
+read it, and then nte-run-double writes the reference's float64 estimates byte for byte (the
+same times, depths and forces were read).  A seeded random table of a few hundred files
+built from the characters that matter to a CSV reader does the same.
+
+Documented limits of the C reader, left out of the random table: a NUL inside a header name
+(the C message stops at it), and a message longer than nte-run's 4 KiB buffer.
+
+Requires build/host/bin/nte-run{,-double} (``make build``).
+"""
+from __future__ import annotations
+
+import random
+from pathlib import Path
+
+import pytest
+
+from reference_py.tools.cli import main
+from reference_py.tools.csvio import CsvError, Units, read_trial
+from run_records import NEEDS_C, PROGS, c_run
+from test_cli import BAD_CASES
+from test_safe_writer import READER_CASES
+
+pytestmark = NEEDS_C
+
+H = b"t_s,depth_mm,force_n\n"
+LIMIT = 131072      # the csv module's cell limit, characters
+
+EXTRA: list[tuple[str, bytes]] = [
+    ("bom, quotes, comment", b'\xef\xbb\xbf# rig\n"t_s", depth_mm ,"force_n"\n0,"0.0",0.01\n'
+                             b'0.01,0.1,"0.02"\n0.02,0.3,0.03\n'),
+    ("bom only", b"\xef\xbb\xbf\n" + H),
+    ("bom on line 2", H + b"\xef\xbb\xbf0,0,0\n"),
+    ("crlf", b"t_s,depth_mm,force_n\r\n0,0,0\r\n0.01,0.1,0\r\n"),
+    ("lone cr", b"t_s,depth_mm,force_n\r0,0,0\r"),
+    ("cr inside a cell", H + b"0,1\r2,0\n"),
+    ("no final newline", H + b"0,0,0\n0.01,0.1,0"),
+    ("trailing blank line", H + b"0,0,0\n\n"),
+    ("white-space line", H + b"0,0,0\n  \t\n"),
+    ("quoted empty line", H + b'0,0,0\n""\n'),
+    ("comment between samples", H + b"0,0,0\n# note\n0.01,0.1,0\n"),
+    ("indented comment", H + b"0,0,0\n #x\n"),
+    ("doubled quote", H + b'0,"1""",0\n'),
+    ("text after a closing quote", H + b'0,"1"5,0\n0.1,1,0\n'),
+    ("quote inside a cell", H + b'0,1"5,0\n'),
+    ("space before a quote", H + b'0, "1",0\n'),
+    ("quoted cell across lines", H + b'0,"1\n2",0\n'),
+    ("quoted name across lines", b't_s,"depth\n_mm",force_n\n0,1,0\n'),
+    ("comment inside quotes", H + b'0,"1\n# c\n",0\n'),
+    ("end of file in quotes", H + b'0,1,"0'),
+    ("end of file after a quote", H + b'0,1,"'),
+    ("not UTF-8", H + b"0,0,0\n0.1,\xff,0\n"),
+    ("not UTF-8 in a comment", H + b"# \xc3\n0,0,0\n"),
+    ("surrogate", H + b"0,\xed\xa0\x80,0\n"),
+    ("overlong", H + b"0,\xc0\xaf,0\n"),
+    ("NUL in a cell", H + b"0,0\x00,0\n"),
+    ("no-break space around a number", H + "0,\u00a01\u3000,0\n".encode()),
+    ("information separator", H + b"0,\x1c1,0\n0.1,1,0\n"),
+    ("format character", H + "0,1\ufeff,0\n".encode()),
+    ("quote in a bad cell", H + b"0,a'b,0\n"),
+    ("both quotes", H + b"0,a'b\"\"c,0\n"),
+    ("backslash", H + b"0,a\\b,0\n"),
+    ("emoji", H + "0,\U0001f600,0\n".encode()),
+    ("Arabic-Indic digit", H + "0,\u0663,0\n".encode()),
+    ("nan with payload", H + b"0,nan(1),0\n"),
+    ("Infinity", H + b"0,-Infinity,0\n"),
+    ("infinit", H + b"0,infinit,0\n"),
+    ("number edges", H + b"0,1.,0\n0.5,.5,+1e+2\n1,-0.0,1E-3\n"),
+    ("exponent without digits", H + b"0,1e,0\n"),
+    ("lone dot", H + b"0,.,0\n"),
+    ("underflow", H + b"0,1e-999,0\n0.5,4.9e-324,0\n"),
+    ("time repr", H + b"1e16,0,0\n1e-5,0,0\n"),
+    ("time repr, negative zero", H + b"1e22,0,0\n-0.0,0,0\n"),
+    ("time repr, subnormal", H + b"5e-324,0,0\n0,0,0\n"),
+    ("velocity given", b"t_s,depth_mm,velocity_mm_s,force_n\n0,0,1.5,0\n0.01,0.1,2.5,0\n"),
+    ("70 columns", b"t_s,depth_mm,force_n," + b",".join(b"c%d" % i for i in range(67)) + b"\n"
+                   + b"0,1,2," + b",".join(b"%d" % i for i in range(67)) + b"\n"),
+    ("70 columns, header only", b"t_s,depth_mm,force_n,"
+                                + b",".join(b"c%d" % i for i in range(67)) + b"\n"),
+    ("a cell at the limit", H + b"0,0." + b"0" * (LIMIT - 3) + b"1,0\n"),
+    ("a name of two-byte characters at the limit",
+     b"t_s,depth_mm,force_n," + "\u00e9".encode() * LIMIT + b"\n0,0,0,0\n"),
+    ("a cell over the limit", H + b"0,1" + b"0" * LIMIT + b",0\n"),
+    ("unit in a name", b"t_ms,depth_m,force_mN\n0,0,0\n"),
+    ("only comments", b"# a\n# b\n"),
+    ("blank first line", b"\n" + H),
+]
+
+
+def _cases() -> list[tuple[str, bytes]]:
+    own = [(label, text.encode() if isinstance(text, str) else text)
+           for label, text, _ in READER_CASES + BAD_CASES]
+    return own + EXTRA
+
+
+def _python(path: Path) -> str | None:
+    """The reference reader's refusal of `path`, or None when it reads it."""
+    try:
+        read_trial(path, units=Units(check=False))
+    except CsvError as exc:
+        return str(exc)
+    return None
+
+
+def _same_reading(path: Path, tmp: Path) -> None:
+    """Both readers refuse `path` alike, or both read it and nte-run-double writes the
+    reference's estimates."""
+    want = _python(path)
+    for prog in PROGS:
+        c = c_run(prog, path, tmp / f"{prog}.csv", "--model", "2", "--no-units-check")
+        if want is None:
+            assert c.returncode == 0, (prog, c.stderr)
+        else:
+            assert c.returncode == 2 and c.stderr == f"{prog}: error: {want}\n", (prog, c.stderr,
+                                                                                  want)
+    if want is None:
+        ref = tmp / "ref.csv"
+        assert main(["estimate", str(path), "--model", "2", "--no-units-check",
+                     "--out", str(ref)]) == 0
+        assert (tmp / "nte-run-double.csv").read_bytes() == ref.read_bytes()
+
+
+@pytest.mark.parametrize("label,data", _cases(), ids=[c[0] for c in _cases()])
+def test_one_table_for_both_readers(tmp_path, capsys, label, data):
+    path = tmp_path / "in.csv"
+    path.write_bytes(data)
+    _same_reading(path, tmp_path)
+
+
+def test_the_table_reaches_both_outcomes(tmp_path):
+    """The table is not all refusals: a reader that refused everything would fail here."""
+    read = 0
+    for _, data in _cases():
+        (tmp_path / "in.csv").write_bytes(data)
+        read += _python(tmp_path / "in.csv") is None
+    assert 12 <= read <= len(_cases()) - 40, read
+
+
+def test_missing_file_and_directory(tmp_path):
+    _same_reading(tmp_path / "absent.csv", tmp_path)
+    _same_reading(tmp_path, tmp_path)
+
+
+ATOMS = [b"0", b"1", b"2", b"5", b"9", b".", b"e", b"-", b"+", b",", b",", b",", b'"', b'"',
+         b"\n", b"\n", b"\n", b"\r\n", b"\r", b" ", b"\t", b"#", b"nan", b"inf", b"1e999",
+         b"\xc2\xa0", b"\xef\xbb\xbf", b"\xff", b"'", b"\\", b"x", b"\xe2\x80\x83", b"\xc3\xa9",
+         b"\x1c"]
+HEADS = [H, b'"t_s",depth_mm, force_n\r\n', b"\xef\xbb\xbf# c\nt_s,depth_mm,velocity_mm_s,force_n\n",
+         b"t_s,depth_mm\n", b""]
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_random_files_read_alike(tmp_path, capsys, seed):
+    """150 files a seed: a header, then good rows and runs of CSV-relevant characters."""
+    rng = random.Random(seed)
+    for _ in range(150):
+        data = rng.choice(HEADS)
+        t = 0
+        for _ in range(rng.randint(0, 4)):
+            if rng.random() < 0.6:
+                t += rng.choice([1, 1, 0, -1])
+                data += b"%d,%s,%s\n" % (t, rng.choice([b"1", b"2.5", b" 3 ", b'"4"', b"1e2"]),
+                                         rng.choice([b"0", b"-1", b".5"]))
+            else:
+                data += b"".join(rng.choice(ATOMS) for _ in range(rng.randint(1, 12)))
+        path = tmp_path / "in.csv"
+        path.write_bytes(data)
+        _same_reading(path, tmp_path)
