@@ -18,16 +18,15 @@ static unsigned long utf8_at(const char* text, const size_t n, size_t* len)
 {
     const unsigned char* s = (const unsigned char*)text;
     const unsigned long b = s[0];
-    size_t need = 0U;
-    unsigned long lo = 0x80UL;
-    unsigned long hi = 0xbfUL;
+    *len = 1U;
     if (b < 0x80UL) {
-        *len = 1U;
         return b;
     }
-    if ((b >= 0xc2UL) && (b <= 0xdfUL)) {
-        need = 1U;
-    } else if ((b >= 0xe0UL) && (b <= 0xefUL)) {
+    /* the lead byte: how many continuation bytes follow, and the range of the first one */
+    size_t need = 1U;
+    unsigned long lo = 0x80UL;
+    unsigned long hi = 0xbfUL;
+    if ((b >= 0xe0UL) && (b <= 0xefUL)) {
         need = 2U;
         lo = (b == 0xe0UL) ? 0xa0UL : lo; /* no overlong form */
         hi = (b == 0xedUL) ? 0x9fUL : hi; /* no surrogate */
@@ -35,21 +34,18 @@ static unsigned long utf8_at(const char* text, const size_t n, size_t* len)
         need = 3U;
         lo = (b == 0xf0UL) ? 0x90UL : lo;
         hi = (b == 0xf4UL) ? 0x8fUL : hi; /* nothing above U+10FFFF */
+    } else if ((b < 0xc2UL) || (b > 0xdfUL)) {
+        return 0xdc00UL + b; /* starts no sequence */
     } else {
-        need = 0U;
+        /* two bytes */
     }
     unsigned long cp = b & (0x3fUL >> need);
     for (size_t i = 1U; i <= need; i++) {
         const unsigned long c = (i < n) ? s[i] : 0UL;
         if ((c < ((i == 1U) ? lo : 0x80UL)) || (c > ((i == 1U) ? hi : 0xbfUL))) {
-            need = 0U;
-            break;
+            return 0xdc00UL + b;
         }
         cp = (cp << 6U) | (c & 0x3fUL);
-    }
-    if (need == 0U) {
-        *len = 1U;
-        return 0xdc00UL + b;
     }
     *len = need + 1U;
     return cp;
