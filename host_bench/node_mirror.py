@@ -271,8 +271,8 @@ class NodeMirror:
         zr, c2 = quantise(z, 5e-4, -8.192, 8.1915)
         front_end = self.cfg.contact.enabled
         in_tissue = int(o.contact[0] == CONTACT_TISSUE) if front_end else int(d > 0)
-        e = EstimateOut(fr, ir, zr, in_tissue, int(not po), int(c0 or c1 or c2),
-                        int((st & 2) != 0), 0)
+        e = EstimateOut(fr, ir, zr, in_tissue, int(not po and not self.bank.frozen),
+                        int(c0 or c1 or c2), int((st & 2) != 0), 0)
         self.last = e
         self.last_vals = (fh, inn, z)
         self._publish(e, self._t_s(t), float(force), float(d))
@@ -599,14 +599,15 @@ class NodeMirror:
         if int(sig["EstimatorSel"]):
             estimator = "robust" if int(sig["EstimatorSel"]) == 2 else "bank"
         restart = (model, estimator) != (self.model, self.estimator)
-        if (int(sig["AdaptCmd"]) == 1
-                or ((restart or int(sig["Reset"]))
-                    and (self.last.in_tissue or self.transfer.unapplied))
+        if (((restart or int(sig["Reset"])) and (self.last.in_tissue or self.transfer.unapplied))
                 or (restart and model == 3 and estimator == "robust")):   # nte_init refuses it
             self._count("command_refused")
             return
         if restart:
             self._start(model, estimator)
+        if int(sig["AdaptCmd"]):
+            # accepted in tissue; after the restart: the new estimator's parameters are held
+            self.bank.set_frozen(int(sig["AdaptCmd"]) == 1)
         source = int(sig.get("ForceSource", 0))
         if source:
             # accepted in tissue: a failing sensor is bridged mid-insertion (nte_node.h)

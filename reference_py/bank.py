@@ -53,6 +53,7 @@ STATUS_RUPTURE = 1 << 12        # Model III: a layer's rupture was found at this
 #                                 (layers.py; the layer index advanced)
 STATUS_PREDICT_ONLY = 1 << 13   # processed in predict-only mode (cfg.predict_only or
 #                                 set_predict_only): the model alone, force not read
+STATUS_FROZEN = 1 << 14         # the parameters were held (set_frozen): z updated, no u moved
 
 # Counters of rejected samples, by cause
 REJECT_NONFINITE, REJECT_RANGE, REJECT_TIME = 0, 1, 2
@@ -127,6 +128,7 @@ class FilterBank:
         # mode below each set's start (no sets: nothing switches)
         self.layer_sets = LayerSets(R, self.batch, cfg.layer_sets, layer_values, layer_starts,
                                     self._nominal0, self.scaled.kappa)
+        self.frozen = False     # set_frozen: the parameters held (kept by reset)
         self.reset()
         self.initial_theta = self.th
 
@@ -208,6 +210,12 @@ class FilterBank:
     def predict_only(self) -> bool:
         return bool(self.cfg.predict_only)
 
+    def set_frozen(self, on: bool) -> None:
+        """Hold the parameters (on) or let them adapt again from the next sample, for every
+        run of the batch (nte_set_frozen, nte.h HELD PARAMETERS): every filter still updates
+        z, with its gain's parameter rows 0.  Kept by reset()."""
+        self.frozen = bool(on)
+
     def step(self, t_us: Array, depth: Array, velocity: Array, force: Array) -> StepOutput:
         """One sample: time in integer microseconds, depth mm, velocity mm/s, force N."""
         R, c = self.R, self.c
@@ -250,6 +258,8 @@ class FilterBank:
         status = status | np.where(first, np.uint32(STATUS_INIT), np.uint32(0))
         if po:
             status = status | np.uint32(STATUS_PREDICT_ONLY)
+        if self.frozen:
+            status = status | np.uint32(STATUS_FROZEN)
         out = StepOutput(*(np.where(valid, new, old) if name != "status" else status
                            for name, new, old in zip(StepOutput.__dataclass_fields__,
                                                      _fields(out), _fields(self.last))))
@@ -565,7 +575,7 @@ class FilterBank:
             P_pred, hrow = tear_prior(R, P_pred, hrow, tear, self._p0(len(hrow)))
             open_gate = open_gate | tear
         upd = joseph_update(R, x, P_pred, hrow, innovation, r_eff, c.gate2, open_gate,
-                            c.u_step_max if cfg.u_step_max > 0.0 else None)
+                            c.u_step_max if cfg.u_step_max > 0.0 else None, self.frozen)
         gated = active & ~upd.accepted
         status |= np.where(gated, np.uint32(STATUS_GATED), np.uint32(0))
         self.gated_run[i] = np.where(gated, self.gated_run[i] + 1,

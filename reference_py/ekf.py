@@ -51,18 +51,20 @@ class Update:
 
 def joseph_update(R: Real, x: list[Array], P: Matrix, h: list[Array], innovation: Array,
                   r: Array, gate2: Array, open_gate: Array | bool = False,
-                  step: Array | None = None) -> Update:
+                  step: Array | None = None, hold: bool = False) -> Update:
     """Scalar measurement update in Joseph form, behind an innovation gate.
 
     S = h P h^T + r,  K = P h^T / S,  x += K y,  P = (I - K h) P (I - K h)^T + K r K^T.
     When y^2 / S > gate2 the measurement is rejected and x, P are returned unchanged, unless
     ``open_gate`` (per batch element) forces it through.  ``step``: the update of x[1:] is
-    bounded by bound_step (None: no bound).
+    bounded by bound_step (None: no bound).  ``hold``: the gain's rows 1.. are 0, so x[1:]
+    stays bit for bit and P follows that gain (the Joseph form is right for any gain; the
+    parameters held, FilterBank.set_frozen).
     """
     n = len(x)
     pht = [_dot(P[i], h) for i in range(n)]
     s = _dot(h, pht) + r
-    k = [pht[i] / s for i in range(n)]
+    k = [np.zeros_like(pht[i]) if hold and i > 0 else pht[i] / s for i in range(n)]
     nis = (innovation * innovation) / s
     accepted = (nis <= gate2) | open_gate
     one, zero = R.c(1.0), R.c(0.0)

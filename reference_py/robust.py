@@ -102,6 +102,14 @@ class RobustEstimator:
     def predict_only(self) -> bool:
         return self.bank.predict_only
 
+    def set_frozen(self, on: bool) -> None:
+        """The parameters held or adapting from the next sample (the bank's; nte_set_frozen)."""
+        self.bank.set_frozen(on)
+
+    @property
+    def frozen(self) -> bool:
+        return self.bank.frozen
+
     def reset(self) -> None:
         """Back to the configured nominal: the bank's reset plus an empty record."""
         self.bank.reset()
@@ -143,9 +151,9 @@ class RobustEstimator:
         leaving = at_surface & self.inside
         # a new insertion starts from the last surface sample (z = 0 there)
         self._restart_buffer(entering, t_us)
-        # an insertion during which predict-only was on is neither recorded further nor
-        # refined (nte.h THE PREDICT-ONLY MODE)
-        self.tainted = np.where(entering, False, self.tainted) | po
+        # an insertion during which predict-only was on, or the parameters were held, is
+        # neither recorded further nor refined (nte.h THE PREDICT-ONLY MODE, HELD PARAMETERS)
+        self.tainted = np.where(entering, False, self.tainted) | po | self.bank.frozen
         self._record(valid & (self.inside | entering) & ~self.tainted, t_us, depth, velocity,
                      force)
         self.inside = (self.inside | entering) & ~at_surface

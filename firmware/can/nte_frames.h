@@ -215,8 +215,8 @@ typedef struct {
                              0.4 mN resolution. */
     float z;            /**< Internal state z; clamped to -8.192..8.1915, 5e-4 resolution. */
     bool in_tissue;     /**< Depth > 0. */
-    bool adapting;      /**< Parameter adaptation running (not frozen); false: predict-only,
-                             the force is the model's alone. */
+    bool adapting;      /**< Parameter adaptation running; false: held (AdaptCmd freeze), or
+                             predict-only, the force then the model's alone. */
     bool saturated;     /**< Encode: ORed with "a value was clamped"; decode: as received. */
     bool fault;         /**< The estimator rejected its update. */
     bool stale;         /**< No recent depth: the estimate is held, not updated. */

@@ -220,6 +220,20 @@
  *   gate_reopen_after of them).  Cost in the mode: the bank's predictions without the
  *   updates, less than a normal step.
  *
+ * HELD PARAMETERS (nte_set_frozen: the Command frame's AdaptCmd freeze / resume)
+ *   For a phase whose data should not teach the model (a known disturbance, a tool change,
+ *   a parameter set the user trusts): the parameters stay where they are while the force
+ *   is still read and the state still tracked.  Frozen, every filter's Joseph update runs
+ *   with the parameter rows of its gain set to 0 -- z takes its update, K[0] = (P h')[0] / S
+ *   as usual, every u stays bit for bit -- and the Joseph form, which is right for any gain,
+ *   keeps the covariance consistent with that (P_zz shrinks, the parameters' variances keep
+ *   their prediction F P F' + Q, so the filters re-adapt at once when the freeze ends).  The
+ *   gate, the guard, the layer index and the contact front end run as usual; a tear still
+ *   restarts the covariances.  The robust estimator neither records nor refines an insertion
+ *   during which the parameters were held (as for predict-only).  status carries
+ *   NTE_STATUS_FROZEN.  The freeze lasts until nte_set_frozen(false) or nte_init; nte_reset
+ *   keeps it.  reference_py FilterBank.set_frozen is its twin.  Cost: none.
+ *
  * THE LAYER SETS (Model III, cfg.layer_sets; reference_py/layers.py LayerSets.enter)
  *   A single parameter set averages over the layers a needle crosses; sensorless prediction
  *   needs each layer's own.  cfg.layer_set[k] holds the layer below the first that begins
@@ -430,6 +444,10 @@ typedef enum nte_err_t {
                                                 sample.force_n was not read (THE
                                                 PREDICT-ONLY MODE above); set on rejected
                                                 samples too while the mode is on */
+#define NTE_STATUS_FROZEN (1U << 14U) /**< the parameters were held at this sample
+                                          (nte_set_frozen; HELD PARAMETERS above): no u
+                                          moved, z was updated; set on rejected samples too
+                                          while they are held */
 /* clang-format on */
 
 /* Causes of a rejected sample (same values as reference_py/bank.py REJECT_*). */
@@ -741,6 +759,7 @@ typedef struct nte_t {
     nte_real_t y_max;
     bool initialised;
     uint8_t k_mod3;
+    bool frozen; /* nte_set_frozen: the parameters held (HELD PARAMETERS) */
     nte_output_t last;
     /** Event counters: public, read and clear at will. */
     nte_counters_t counters;
@@ -787,6 +806,19 @@ nte_err_t nte_set_predict_only(nte_t* self, bool on);
 /** Whether predict-only mode is on (cfg.predict_only or the last nte_set_predict_only);
  *  false for NULL.  Cost: O(1). */
 bool nte_predict_only(const nte_t* self);
+
+/**
+ * Hold the parameters (true) or let them adapt again (false) from the next nte_step (HELD
+ * PARAMETERS above): the filters still update z from the force, no u moves.  Nothing else
+ * changes at the call.  Kept by nte_reset, cleared by nte_init.  Cost: O(1).  Returns
+ * nte_err_ok or nte_err_null_argument.  Twin: reference_py FilterBank.set_frozen (and
+ * RobustEstimator.set_frozen); a switch at the same sample gives the same bits.
+ */
+nte_err_t nte_set_frozen(nte_t* self, bool on);
+
+/** Whether the parameters are held (the last nte_set_frozen since nte_init); false for NULL.
+ *  Cost: O(1). */
+bool nte_frozen(const nte_t* self);
 
 /**
  * The identified parameters (Model I: sigma0, sigma1, sigma2, f1, f2, alpha; Model II: sigma0,

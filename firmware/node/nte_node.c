@@ -479,7 +479,7 @@ static void nte_node_step(nte_node_t* self, const nte_node_force_t* f, float dep
     const bool front_end = self->cfg.estimator[self->model - 1].contact.enabled;
     /* with the contact front end the depth is the stage position: its contact state decides */
     e.in_tissue = front_end ? (o.contact == nte_contact_tissue) : (depth_mm > 0.0f);
-    e.adapting = !po;
+    e.adapting = !po && !nte_frozen(&self->est);
     e.fault = (o.status & NTE_STATUS_REJECTED) != 0u;
     e.stale = false;
     self->state = e.fault ? nte_node_state_fault : nte_node_state_running;
@@ -894,13 +894,16 @@ static void nte_node_on_command(nte_node_t* self, const nte_node_frame_t* fr)
                                                                      : nte_estimator_bank;
     }
     const bool restart = (model != self->model) || (estimator != self->estimator);
-    /* freeze: the library has no way to hold the parameters; a restart or reset needs the
-     * needle out of tissue (the last estimate's InTissue clear) */
-    if ((c.adapt_cmd == NTE_FRAMES_ADAPT_FREEZE) ||
-        ((restart || c.reset) && (self->last.in_tissue || self->settings.unapplied)) ||
+    /* a restart or reset needs the needle out of tissue (the last estimate's InTissue clear) */
+    if (((restart || c.reset) && (self->last.in_tissue || self->settings.unapplied)) ||
         (restart && !nte_node_start_model(self, model, estimator))) {
         nte_node_count(self, nte_node_ev_command_refused);
         return;
+    }
+    if (c.adapt_cmd != NTE_FRAMES_ADAPT_KEEP) {
+        /* accepted in tissue; set after a restart the same command asked for, so that it
+         * holds the new estimator's parameters (nte.h HELD PARAMETERS) */
+        (void)nte_set_frozen(&self->est, c.adapt_cmd == NTE_FRAMES_ADAPT_FREEZE);
     }
     if (c.force_source != NTE_FRAMES_FORCE_SOURCE_KEEP) {
         /* accepted in tissue: a failing sensor is bridged mid-insertion (nte_node.h) */

@@ -66,8 +66,10 @@
  *   `command_interval_us` of the port clock (command_rate_limited).  (3) A model or estimator
  *   change and a reset take effect only while the needle is out of tissue (the last estimate's
  *   InTissue bit clear, or no estimate yet): during an insertion they would throw away the
- *   identification in progress; refused (command_refused).  (4) AdaptCmd freeze is refused
- *   (the library cannot hold its parameters); resume is accepted and changes nothing.  E2E
+ *   identification in progress; refused (command_refused).  (4) AdaptCmd freeze holds the
+ *   parameters (nte_set_frozen, nte.h HELD PARAMETERS: the force is still read and z follows
+ *   it; Estimate.Adapting 0) and resume lets them adapt again; both are accepted in tissue.
+ *   The freeze outlives a Reset; a model or estimator change starts adapting.  E2E
  *   protects integrity (corruption, loss, repetition), not authenticity: any sender on the bus
  *   can compute the CRC and follow the counter.  Protect the bus, or add a MAC, if that matters.
  *
@@ -241,8 +243,8 @@ typedef enum nte_node_event_t {
     nte_node_ev_queue_overflow = 8,     /**< force frame dropped: force queue full */
     nte_node_ev_send_failed = 9,        /**< port send() refused an output frame: dropped */
     nte_node_ev_command_refused = 10,   /**< valid command the node may not carry out (model,
-                                             estimator or reset while in tissue; freeze; Model
-                                             III with the robust estimator): ignored */
+                                             estimator or reset while in tissue; Model III
+                                             with the robust estimator): ignored */
     nte_node_ev_stale = 11,             /**< force sample without recent depth: estimate held */
     nte_node_ev_receive_error = 12,     /**< port receive() reported an error */
     nte_node_ev_encode_error = 13,      /**< an output could not be encoded (non-finite): the

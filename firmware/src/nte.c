@@ -1,6 +1,6 @@
 /*
  * The public API of nte.h: nte_init, nte_reset, nte_step (sample validation and dispatch to
- * the estimator), nte_set_predict_only, nte_predict_only, nte_get_params, nte_param_name.  The reference composes the same way:
+ * the estimator), nte_set_predict_only, nte_predict_only, nte_set_frozen, nte_frozen, nte_get_params, nte_param_name.  The reference composes the same way:
  * FilterBank.step validates the sample, passes it through the contact front end when it is
  * on (nte_contact.c: stage -> tissue depth, force -> force - tare) and advances the bank
  * (nte_bank.c; in Model III its filter 1's prior innovation feeds the layer index,
@@ -60,6 +60,7 @@ nte_err_t nte_init(nte_t* self, const nte_config_t* cfg)
     for (size_t j = 0U; j < NTE_PARAM_COUNT; j++) {
         self->q_u[j] = (cfg->q_u[j] < NTE_C(0.0)) ? cfg->q_u_default : cfg->q_u[j];
     }
+    self->frozen = false;
     start(self);
     return nte_err_ok;
 }
@@ -128,6 +129,7 @@ nte_err_t nte_step(nte_t* self, const nte_sample_t* sample, nte_output_t* out)
         self->last.status = NTE_STATUS_REJECTED;
     }
     self->last.status |= cfg->predict_only ? NTE_STATUS_PREDICT_ONLY : 0U;
+    self->last.status |= self->frozen ? NTE_STATUS_FROZEN : 0U;
     publish_contact(self);
 #if NTE_ROBUST_BUFFER_LEN > 0
     if (cfg->estimator == nte_estimator_robust) {
@@ -152,6 +154,17 @@ nte_err_t nte_set_predict_only(nte_t* self, const bool on)
 }
 
 bool nte_predict_only(const nte_t* self) { return (self != NULL) && self->cfg.predict_only; }
+
+nte_err_t nte_set_frozen(nte_t* self, const bool on)
+{
+    if (self == NULL) {
+        return nte_err_null_argument;
+    }
+    self->frozen = on;
+    return nte_err_ok;
+}
+
+bool nte_frozen(const nte_t* self) { return (self != NULL) && self->frozen; }
 
 size_t nte_get_params(const nte_t* self, nte_param_estimate_t* out, const size_t capacity)
 {

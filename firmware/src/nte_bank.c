@@ -498,10 +498,11 @@ static uint32_t update_and_guard(nte_t* self, const size_t i, const nte_depth_te
     }
     /* a gate that refused too many samples in a row would lock the filter out: open it */
     const bool open_gate = (self->gated_run[i] >= (uint32_t)self->cfg.gate_reopen_after) || tear;
-    /* u_step_max: the update's step bound (reference_py/config.py U_STEP_MAX) */
+    /* u_step_max: the update's step bound (reference_py/config.py U_STEP_MAX); frozen: the
+     * parameters held (nte.h HELD PARAMETERS) */
     const nte_ekf_update_t upd = nte_ekf_joseph_update(n, xn, Pn, w->h, w->innovation, w->r_eff,
                                                        self->gate2, open_gate, fo->active,
-                                                       self->cfg.u_step_max);
+                                                       self->cfg.u_step_max, self->frozen);
     if (fo->active) {
         if (upd.accepted) {
             self->gated_run[i] = 0U;

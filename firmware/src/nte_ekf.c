@@ -36,7 +36,7 @@ nte_ekf_update_t nte_ekf_joseph_update(const size_t n, nte_real_t* x, nte_mat3_t
                                        const nte_real_t* h, const nte_real_t innovation,
                                        const nte_real_t r, const nte_real_t gate2,
                                        const bool open_gate, const bool apply,
-                                       const nte_real_t step)
+                                       const nte_real_t step, const bool hold)
 {
     nte_ekf_update_t res;
     nte_real_t pht[NTE_EKF_N_MAX] = {NTE_C(0.0)};
@@ -56,7 +56,8 @@ nte_ekf_update_t nte_ekf_joseph_update(const size_t n, nte_real_t* x, nte_mat3_t
     }
     s = s + r;
     for (size_t i = 0U; i < n; i++) {
-        k[i] = pht[i] / s;
+        /* hold: the parameters' gain rows are 0 (the Joseph form below is right for any gain) */
+        k[i] = (hold && (i > 0U)) ? NTE_C(0.0) : (pht[i] / s);
     }
     res.s = s;
     res.nis = (innovation * innovation) / s;

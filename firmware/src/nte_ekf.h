@@ -27,10 +27,12 @@ typedef struct nte_ekf_update_t {
  *  x and P are updated in place only when `apply` and accepted; s, nis and accepted are always
  *  computed (the reference evaluates them for idle filters too).  step > 0 bounds the update
  *  of x[1..n) (ekf.bound_step): where the largest |change| of x[1..n) exceeds it, that part of
- *  the update is scaled by step / largest (x[0] keeps its update); step <= 0: no bound. */
+ *  the update is scaled by step / largest (x[0] keeps its update); step <= 0: no bound.
+ *  hold: the gain's rows 1..n) are 0, so x[1..n) stays bit for bit and P follows that gain
+ *  (the parameters held, nte.h HELD PARAMETERS). */
 nte_ekf_update_t nte_ekf_joseph_update(size_t n, nte_real_t* x, nte_mat3_t P, const nte_real_t* h,
                                        nte_real_t innovation, nte_real_t r, nte_real_t gate2,
-                                       bool open_gate, bool apply, nte_real_t step);
+                                       bool open_gate, bool apply, nte_real_t step, bool hold);
 
 /** Sylvester's criterion on the leading minors, and every entry finite (P read only; P must be
  *  symmetric, as every covariance of the bank is: only its upper triangle is checked for

@@ -328,9 +328,9 @@ uint32_t nte_robust_step(nte_t* self, const nte_sample_t* sample, const bool val
     if (entering) {
         restart_buffer(rb);
     }
-    /* an insertion during which predict-only was on is neither recorded further nor refined
-     * (nte.h THE PREDICT-ONLY MODE) */
-    if (self->cfg.predict_only) {
+    /* an insertion during which predict-only was on, or the parameters were held, is neither
+     * recorded further nor refined (nte.h THE PREDICT-ONLY MODE, HELD PARAMETERS) */
+    if (self->cfg.predict_only || self->frozen) {
         rb->tainted = true;
     }
     if (valid && (rb->inside || entering) && !rb->tainted) {

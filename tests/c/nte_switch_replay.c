@@ -1,15 +1,16 @@
 /*
- * nte_switch_replay -- drives the library through a record with predict-only switched on and
- * off between samples (nte_set_predict_only), for tests/python/test_predict_only.py, which runs
- * reference_py's FilterBank / RobustEstimator on the same lines and compares the bits.
+ * nte_switch_replay -- drives the library through a record with predict-only and the held
+ * parameters switched on and off between samples (nte_set_predict_only, nte_set_frozen), for
+ * tests/python/test_predict_only.py and test_frozen.py, which run reference_py's FilterBank /
+ * RobustEstimator on the same lines and compare the bits.
  *
  *   nte_switch_replay MODEL SCHEDULE CONTACT ROBUST SURFACE_MM < lines > outputs
  *
  * MODEL 1..3; SCHEDULE all|rotate; CONTACT 0|1 (the contact front end, defaults otherwise);
  * ROBUST 0|1 (the robust estimator); SURFACE_MM a known surface (hex or decimal) or nan.
  * The configuration is nte_config_default's.  Each input line: "t_us depth velocity force
- * mode" with the reals in C99 hex (%a) and mode 0 / 1 = predict-only off / on from this sample
- * on.  Each output line: force_hat z innovation nis confidence tare surface (%a) status
+ * mode" with the reals in C99 hex (%a) and mode's bits from this sample on: 1 predict-only,
+ * 2 the parameters held.  Each output line: force_hat z innovation nis confidence tare surface (%a) status
  * contact layer, then value and sd of every identified parameter (%a).
  */
 #include <math.h>
@@ -52,7 +53,8 @@ int main(int argc, char** argv)
         s.velocity_mm_s = (nte_real_t)strtod(p, &p);
         s.force_n = (nte_real_t)strtod(p, &p);
         const long mode = strtol(p, &p, 10);
-        if (nte_set_predict_only(&est, mode != 0) != nte_err_ok) {
+        if ((nte_set_predict_only(&est, (mode & 1L) != 0) != nte_err_ok) ||
+            (nte_set_frozen(&est, (mode & 2L) != 0) != nte_err_ok)) {
             return 1;
         }
         nte_output_t o;

@@ -780,8 +780,9 @@ static int last_heartbeat_estimator(const fake_port_t* p)
 }
 
 /* Commands: bad CRC ignored; reset, model and estimator changes only out of tissue; a replayed
- * (stale-counter) command has no effect; at most one command per command_interval_us; freeze
- * refused; the robust estimator selected (heartbeat says so). */
+ * (stale-counter) command has no effect; at most one command per command_interval_us; a
+ * freeze with a model change holds the new estimator's parameters, a resume with an estimator
+ * change adapts; the robust estimator selected (heartbeat says so). */
 static void test_commands(void** state)
 {
     nte_node_config_t cfg;
@@ -871,16 +872,19 @@ static void test_commands(void** state)
     assert_int_equal(g_node_a.counters.events[nte_node_ev_command_rate_limited], 1u);
     assert_int_equal(nte_node_model(&g_node_a), 1);
     g_port_a.now += 100000u;
-    /* freeze refused (the whole command: the model stays), robust selected */
+    /* Model II and freeze: the new estimator starts with its parameters held */
     push(&g_port_a, command_frame(&b, false, NTE_FRAMES_MODEL_II, 0u, NTE_FRAMES_ADAPT_FREEZE));
     run_all(&g_node_a, &g_port_a);
-    assert_int_equal(g_node_a.counters.events[nte_node_ev_command_refused], 3u);
-    assert_int_equal(nte_node_model(&g_node_a), 1);
+    assert_int_equal(g_node_a.counters.events[nte_node_ev_command_refused], 2u);
+    assert_int_equal(g_node_a.counters.commands_applied, 3u);
+    assert_int_equal(nte_node_model(&g_node_a), 2);
+    assert_true(nte_frozen(&g_node_a.est));
     g_port_a.now += 200000u;
     push(&g_port_a, command_frame(&b, false, NTE_FRAMES_MODEL_II, NTE_FRAMES_ESTIMATOR_ROBUST,
                                   NTE_FRAMES_ADAPT_RESUME));
     run_all(&g_node_a, &g_port_a);
-    assert_int_equal(g_node_a.counters.commands_applied, 3u);
+    assert_false(nte_frozen(&g_node_a.est));
+    assert_int_equal(g_node_a.counters.commands_applied, 4u);
     assert_int_equal(nte_node_model(&g_node_a), 2);
     assert_int_equal(g_node_a.estimator, nte_estimator_robust);
     assert_int_equal(g_node_a.est.cfg.estimator, nte_estimator_robust);

@@ -160,7 +160,8 @@ def test_replay_commands_rules_and_robust_estimator(tmp_path: Path) -> None:
     in tissue), robust between the insertions (applied: the second runs the robust estimator,
     bit-identical to the mirror's reference_py RobustEstimator), Model I 50 ms later (rate
     limited), the first command replayed (stale counter: no effect; the sender's next command
-    follows the replayed counter and is ignored too), freeze (refused)."""
+    follows the replayed counter and is ignored too), freeze in the second insertion (applied:
+    the parameters held, Adapting 0 from then on, as the mirror's)."""
     csv = tmp_path / "paper2.csv"
     subprocess.run([sys.executable, "-m", "reference_py", "simulate", "--preset", "paper-10mms",
                     "--depth", "20", "--dwell", "0.5", "--seed", "1", "--cycles", "2",
@@ -195,8 +196,8 @@ def test_replay_commands_rules_and_robust_estimator(tmp_path: Path) -> None:
     assert mirror.estimator == "robust"
     assert_node_equals_mirror(sent, mirror)
     ev = st["events"]
-    assert st["commands_applied"] == 1
-    assert ev["command_refused"] == 2          # in tissue; freeze
+    assert st["commands_applied"] == 2         # robust between the insertions; freeze
+    assert ev["command_refused"] == 1          # robust in tissue
     assert ev["command_rate_limited"] == 1
     assert ev["command_stale"] == 2            # the replay; the next one (follows the replay)
     assert ev == {**ev, **{k: v for k, v in mirror.events.items() if k in ev}}
@@ -204,6 +205,11 @@ def test_replay_commands_rules_and_robust_estimator(tmp_path: Path) -> None:
     hb = [rx.decode(m.arbitration_id, bytes(m.data))[1] for m in sent
           if m.arbitration_id == DB.frame_id("Heartbeat")]
     assert hb[0]["ActiveEstimator"] == 0 and hb[-1]["ActiveEstimator"] == 1
+    adapting = [rx.decode(m.arbitration_id, bytes(m.data))[1]["Adapting"] for m in sent
+                if m.arbitration_id == DB.frame_id("Estimate")]
+    # adapting until the freeze, held from then on (one change, in the second insertion)
+    assert mirror.bank.frozen and adapting[0] == 1 and adapting[-1] == 0
+    assert sum(a != b for a, b in zip(adapting, adapting[1:])) == 1
 
 
 # ------------------------------------------------------------------------------------------

@@ -69,7 +69,8 @@ def run_reference(precision: str, model: int, schedule: str, contact: bool, robu
     est, cfg = make_estimator(R, model, schedule, contact, robust, surface)
     rows = []
     for k in range(len(t_us)):
-        est.set_predict_only(bool(mode[k]))
+        est.set_predict_only(bool(mode[k] & 1))
+        est.set_frozen(bool(mode[k] & 2))
         o = est.step(np.array([t_us[k]], dtype=np.int64), R.arr([depth[k]]), R.arr([vel[k]]),
                      R.arr([force[k]]))
         conf = float(est.confidence[0]) if robust else 0.0

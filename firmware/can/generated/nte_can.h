@@ -385,7 +385,7 @@ struct nte_can_command_t {
     uint8_t estimator_sel;
 
     /**
-     * 0 = keep, 1 = freeze parameter adaptation, 2 = resume adaptation.
+     * 0 = keep, 1 = freeze: the parameters are held (the force is still read and the state follows it; Estimate.Adapting 0), 2 = resume adaptation. Accepted in tissue; the freeze outlives resets, not a model or estimator change.
      *
      * Range: 0..2 (0..2 -)
      * Scale: 1
@@ -476,7 +476,7 @@ struct nte_can_estimate_t {
     uint8_t in_tissue;
 
     /**
-     * 1 = parameters are being adapted from the force sensor; 0 = frozen: the node is in predict-only mode and ForceEst is the model's alone with the parameters identified so far, Innovation 0 (by Command.ForceSource = 2, while Force.SensorFault = 1, while no Force frame came within the node's depth timeout as Depth frames go on: a lost sensor, or for a Force reading the node does not believe: at the frame's limit, or repeated exactly while the needle moves in tissue, counted as sensor_saturated and sensor_stuck).
+     * 1 = parameters are being adapted from the force sensor; 0 = they are not: held by Command.AdaptCmd = 1 (the force still read, Innovation published), or the node is in predict-only mode and ForceEst is the model's alone with the parameters identified so far, Innovation 0 (by Command.ForceSource = 2, while Force.SensorFault = 1, while no Force frame came within the node's depth timeout as Depth frames go on: a lost sensor, or for a Force reading the node does not believe: at the frame's limit, or repeated exactly while the needle moves in tissue, counted as sensor_saturated and sensor_stuck).
      *
      * Range: 0..1 (0..1 -)
      * Scale: 1
