@@ -14,7 +14,7 @@ import pytest
 
 from reference_py.bank import STATUS_FROZEN, STATUS_PREDICT_ONLY
 from reference_py.robust import STATUS_REFINED
-from test_predict_only import run_c, run_reference, same_bits, scenario, switch_mode
+from test_predict_only import c_equals_reference, run_reference, scenario, switch_mode
 
 HELD = 2          # nte_switch_replay's mode bit for nte_set_frozen
 PREDICT_ONLY = 1
@@ -45,13 +45,8 @@ def test_freeze_mid_run_c_equals_reference(precision, model, schedule, robust, s
     while held (bit for bit), z does, and the parameters move again after the resume."""
     t, d, v, f = scenario("p10_d50")
     mode = switch_mode(len(t), spans) * HELD
-    args = (precision, model, schedule, False, robust, math.nan, t, d, v,
-            np.asarray(f, dtype=np.float64), mode)
-    ref = run_reference(*args)
-    c = run_c(*args)
-    assert len(ref) == len(c) == len(t)
-    bad = [k for k, (a, b) in enumerate(zip(ref, c)) if not same_bits(a, b)]
-    assert not bad, (bad[:5], ref[bad[0]], c[bad[0]])
+    ref = c_equals_reference(precision, model, schedule, False, robust, math.nan, t, d, v,
+                             np.asarray(f, dtype=np.float64), mode)
     st = np.array([r[7] for r in ref])
     held = mode == HELD
     assert np.all(((st & STATUS_FROZEN) != 0) == held)

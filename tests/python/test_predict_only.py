@@ -119,6 +119,17 @@ def same_bits(a: tuple, b: tuple) -> bool:
     return True
 
 
+def c_equals_reference(*args) -> list[tuple]:
+    """run_reference and run_c on the same arguments: every output of every sample at 0 ULP
+    (asserted); returns the reference's rows."""
+    ref = run_reference(*args)
+    c = run_c(*args)
+    assert len(ref) == len(c) == len(args[6])
+    bad = [k for k, (a, b) in enumerate(zip(ref, c)) if not same_bits(a, b)]
+    assert not bad, (bad[:5], ref[bad[0]], c[bad[0]])
+    return ref
+
+
 def switch_mode(n: int, spans: list[tuple[float, float]]) -> np.ndarray:
     """1 in each [a, b) fraction of the record."""
     mode = np.zeros(n, dtype=np.int64)
@@ -150,12 +161,8 @@ def test_switch_mid_run_c_equals_reference(precision, model, schedule, robust, s
     mode = switch_mode(len(t), spans)
     f = np.array(f, dtype=np.float64)
     f[mode == 1] = np.where(np.arange(int(mode.sum())) % 7 == 3, math.nan, 99.0)  # broken
-    args = (precision, model, schedule, False, robust, math.nan, t, d, v, f, mode)
-    ref = run_reference(*args)
-    c = run_c(*args)
-    assert len(ref) == len(c) == len(t)
-    bad = [k for k, (a, b) in enumerate(zip(ref, c)) if not same_bits(a, b)]
-    assert not bad, (bad[:5], ref[bad[0]], c[bad[0]])
+    ref = c_equals_reference(precision, model, schedule, False, robust, math.nan, t, d, v, f,
+                             mode)
     st = np.array([r[7] for r in ref])
     assert np.all(((st & STATUS_PREDICT_ONLY) != 0) == (mode == 1))
     assert not np.any(st[mode == 1] & 2), "a broken force rejected a predict-only sample"
@@ -176,7 +183,6 @@ def test_model3_contact_switch_c_equals_reference(phantom, precision, surface):
     sensor back: C = reference at 0 ULP, layers and contact fields included."""
     tr, truth = phantom
     t = time_us(tr.t_s)
-    n = len(t)
     cyc = truth["cycles"][0]
     ts = np.asarray(tr.t_s)
     mode = ((ts > 0.5 * (cyc["start_s"] + cyc["insertion_end_s"]))
@@ -184,12 +190,8 @@ def test_model3_contact_switch_c_equals_reference(phantom, precision, surface):
     f = np.array(tr.force_n, dtype=np.float64)
     f[mode == 1] = 7.5   # a stuck, wrong force: not read
     s = math.nan if surface == "found" else float(truth["surface_mm"])
-    args = (precision, 3, "all", True, False, s, t, tr.depth_mm, tr.velocity_mm_s, f, mode)
-    ref = run_reference(*args)
-    c = run_c(*args)
-    assert len(ref) == len(c) == n
-    bad = [k for k, (a, b) in enumerate(zip(ref, c)) if not same_bits(a, b)]
-    assert not bad, (bad[:5], ref[bad[0]], c[bad[0]])
+    ref = c_equals_reference(precision, 3, "all", True, False, s, t, tr.depth_mm,
+                             tr.velocity_mm_s, f, mode)
     contact = np.array([r[8] for r in ref])
     # the contact ended in predict-only (stage back at the surface) and the tare held
     end = int(np.flatnonzero(mode)[-1])
