@@ -26,7 +26,7 @@ from typing import Iterable, Iterator
 
 import numpy as np
 
-from reference_py.bank import FilterBank, identified_names
+from reference_py.bank import STATUS_REJECTED, FilterBank, identified_names
 from reference_py.bus.dbc import FRAME_LENGTH, PARAM_SIGNALS, NteDatabase
 from reference_py.config import ContactConfig, EstimatorConfig
 from reference_py.contact import CONTACT_TISSUE
@@ -272,7 +272,7 @@ class NodeMirror:
         front_end = self.cfg.contact.enabled
         in_tissue = int(o.contact[0] == CONTACT_TISSUE) if front_end else int(d > 0)
         e = EstimateOut(fr, ir, zr, in_tissue, int(not po and not self.bank.frozen),
-                        int(c0 or c1 or c2), int((st & 2) != 0), 0)
+                        int(c0 or c1 or c2), int((st & STATUS_REJECTED) != 0), 0)
         self.last = e
         self.last_vals = (fh, inn, z)
         self._publish(e, self._t_s(t), float(force), float(d))
