@@ -1,12 +1,13 @@
 /*
  * The public API of nte.h: nte_init, nte_reset, nte_step (sample validation and dispatch to
- * the estimator), nte_set_predict_only, nte_predict_only, nte_set_frozen, nte_frozen, nte_get_params, nte_param_name.  The reference composes the same way:
- * FilterBank.step validates the sample, passes it through the contact front end when it is
- * on (nte_contact.c: stage -> tissue depth, force -> force - tare) and advances the bank
- * (nte_bank.c; in Model III its filter 1's prior innovation feeds the layer index,
- * nte_layers.c, before the updates, so that a tear's sample is treated as one);
- * RobustEstimator.step runs the bank's step, then its own (nte_robust.c) on what the bank was
- * given.  This file uses the four components; of the others the bank knows only the layers.
+ * the estimator), nte_set_predict_only, nte_predict_only, nte_set_frozen, nte_frozen,
+ * nte_get_params, nte_param_name.  The reference composes the same way: FilterBank.step
+ * validates the sample, passes it through the contact front end when it is on (nte_contact.c:
+ * stage -> tissue depth, force -> force - tare) and advances the bank (nte_bank.c; in Model
+ * III its filter 1's prior innovation feeds the layer index, nte_layers.c, before the
+ * updates, so that a tear's sample is treated as one); RobustEstimator.step runs the bank's
+ * step, then its own (nte_robust.c) on what the bank was given.  This file uses the four
+ * components; of the others the bank knows only the layers.
  */
 #include "nte_bank.h"
 #include "nte_contact.h"
