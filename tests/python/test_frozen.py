@@ -14,6 +14,7 @@ import pytest
 
 from reference_py.bank import STATUS_FROZEN, STATUS_PREDICT_ONLY
 from reference_py.robust import STATUS_REFINED
+from test_node_port import paper_frames  # noqa: F401  (the fixture: a 3.5 s paper insertion)
 from test_predict_only import c_equals_reference, run_reference, scenario, switch_mode
 
 HELD = 2          # nte_switch_replay's mode bit for nte_set_frozen
@@ -110,32 +111,23 @@ def test_a_held_insertion_is_not_refined():
     assert not np.any(status["held"] & STATUS_REFINED)
 
 
-def test_node_freezes_and_resumes_mid_insertion(tmp_path) -> None:
+def test_node_freezes_and_resumes_mid_insertion(tmp_path, paper_frames) -> None:
     """On the node (nte-node --replay, Model II, a paper insertion): AdaptCmd freeze at 1.5 s
     and resume at 2.5 s, both in the tissue: both applied, every Estimate and Params frame the
     mirror's (reference_py's FilterBank with set_frozen), the published parameters constant
     while held and moving again after the resume, Adapting 0 exactly while held."""
-    import subprocess
-    import sys
-
     import can
 
     from host_bench.node_mirror import NodeMirror
-    from host_bench.replay import scenario_frames
-    from test_node_port import DB, ROOT, assert_node_equals_mirror, replay_node_args
+    from test_node_port import DB, assert_node_equals_mirror, replay_node_args
 
-    csv = tmp_path / "paper.csv"
-    subprocess.run([sys.executable, "-m", "reference_py", "simulate", "--preset", "paper-10mms",
-                    "--depth", "20", "--dwell", "0.5", "--seed", "1", "--out", str(csv)],
-                   check=True, cwd=ROOT, stdout=subprocess.DEVNULL)
-    frames = scenario_frames(str(csv), DB, 1000.0)
     tx = DB.sender()
 
     def cmd(adapt: int):
         return tx.message("Command", {"Reset": 0, "ModelSel": 0, "EstimatorSel": 0,
                                       "AdaptCmd": adapt})
 
-    merged = sorted(frames + [(1.5, cmd(1)), (2.5, cmd(2))], key=lambda e: e[0])
+    merged = sorted(paper_frames + [(1.5, cmd(1)), (2.5, cmd(2))], key=lambda e: e[0])
     sent, st = replay_node_args(tmp_path, merged, "freeze",
                                 ["--model", "2", "--preset", "paper-10mms"])
     assert st["commands_applied"] == 2 and st["events"]["command_refused"] == 0
