@@ -69,7 +69,8 @@ from reference_py.tools.arguments import (EXIT_BAD_INPUT, OneLineParser, add_uni
                                           bounded, units_from)
 from reference_py.tools.safe_write import Outputs
 
-from .node_mirror import NODE, NodeMirror, compare, contact_outputs, node_outputs
+from .node_mirror import NODE, NodeMirror
+from .node_outputs import compare, contact_outputs, health_outputs, node_outputs
 from .replay import paced, read_scenario, scenario_frames, send_retrying
 
 if TYPE_CHECKING:
@@ -345,8 +346,9 @@ def check_against_reference(a: argparse.Namespace, db: NteDatabase,
     mirror.feed_all(m for _, m in frames)
     est, par, bad = node_outputs(db, messages)
     contacts, bad_c = contact_outputs(db, messages)
-    res = compare(mirror, est, par, contacts)
-    bad += bad_c
+    healths, bad_h = health_outputs(db, messages)
+    res = compare(mirror, est, par, contacts, healths)
+    bad += bad_c + bad_h
     res.update({"frames_sent": record["frames_sent"], "output_frames_received": len(messages),
                 "output_e2e_errors": bad, "wall_s": record["wall_s"],
                 "mirror_events": mirror.events,
@@ -379,10 +381,13 @@ def report(res: dict) -> int:
     if res.get("contact_reference") or res.get("contact_node"):
         print(f"Contact frames: {res['contact_node']} (reference {res['contact_reference']}), "
               f"{res['contact_mismatches']} mismatches")
+    print(f"Health frames: {res['health_node']} (reference {res['health_reference']}), "
+          f"{res['health_mismatches']} mismatches")
     ok = (res["estimate_mismatches"] == 0 and res["param_value_mismatches"] == 0
           and res["estimates_node"] == res["estimates_reference"]
           and res.get("contact_mismatches", 0) == 0
           and res.get("contact_node", 0) == res.get("contact_reference", 0)
+          and res["health_mismatches"] == 0 and res["health_node"] == res["health_reference"]
           and res["output_e2e_errors"] == 0)
     return 0 if ok else 1
 

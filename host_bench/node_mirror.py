@@ -14,7 +14,9 @@ flagged SensorFault, and a lost force sensor bridged by steps on the depth strea
 while the model alone publishes.
 Model III (``model=3`` or a Command with ModelSel 3) runs with the contact front end on, as the
 node does: Params cycle 0..9 (7 g_fast, 8 g_slow, 9 delta), InTissue is the front end's contact state,
-and the Contact frames (``contacts``) follow the node's rule (nte_node.h, MODEL III).
+and the Contact frames (``contacts``) follow the node's rule (nte_node.h, MODEL III).  The
+Health frames (``healths``, every model) follow nte_node.h HEALTH.  The frames' records and
+their reading back from a capture are in node_outputs.py.
 """
 from __future__ import annotations
 
@@ -22,18 +24,22 @@ import math
 import re
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Iterable, Iterator
+from typing import Iterable
 
 import numpy as np
 
-from reference_py.bank import STATUS_REJECTED, FilterBank, identified_names
-from reference_py.bus.dbc import FRAME_LENGTH, PARAM_SIGNALS, NteDatabase
+from reference_py.bank import (STATUS_CLIPPED, STATUS_DIVERGED, STATUS_FILTER_RESET,
+                               STATUS_FLOORED, STATUS_GATED, STATUS_REJECTED,
+                               STATUS_SIGN_UNCERTAIN, FilterBank, identified_names)
+from reference_py.bus.dbc import FRAME_LENGTH, NteDatabase
 from reference_py.config import ContactConfig, EstimatorConfig
 from reference_py.contact import CONTACT_TISSUE
 from reference_py.tools.estimate import make_config
 from reference_py.fmath import real_for
 from reference_py.params import ALL_NAMES, PRESETS, RELAX_NOMINAL
+from reference_py.robust import STATUS_CONVERGED, STATUS_REFINED
 
+from .node_outputs import ContactOut, EstimateOut, HealthOut, ParamOut
 from .setting_transfer import SettingTransfer
 
 F32 = np.float32
@@ -60,6 +66,11 @@ def node_defines(path: Path = NODE_H) -> dict[str, int]:
 NODE = node_defines()
 #: Contact frames: at least every this many sensor ticks when nothing changes (100 ms)
 CONTACT_PERIOD_TICKS = NODE["CONTACT_PERIOD_US"] // TICK_US
+#: Health frames: likewise (nte_node.h HEALTH)
+HEALTH_PERIOD_TICKS = NODE["HEALTH_PERIOD_US"] // TICK_US
+#: a filter's status bits in the order of the Health frame's Filter<i>Flags bits 0..5 (the DBC)
+HEALTH_FILTER_BITS = (STATUS_GATED, STATUS_FILTER_RESET, STATUS_DIVERGED, STATUS_CLIPPED,
+                      STATUS_FLOORED, STATUS_SIGN_UNCERTAIN)
 #: steps on the Depth stream while the force sensor is lost: at least this many sensor ticks
 #: apart (nte_node.h NTE_NODE_PREDICT_PERIOD_US, 5 ms)
 PREDICT_PERIOD_TICKS = NODE["PREDICT_PERIOD_US"] // TICK_US
@@ -82,43 +93,6 @@ def quantise(value: float, scale: float, lo: float, hi: float) -> tuple[int, boo
     return roundf(F32(v / F32(scale))), clamped
 
 
-@dataclass
-class EstimateOut:
-    force_raw: int
-    innovation_raw: int
-    z_raw: int
-    in_tissue: int
-    adapting: int
-    saturated: int
-    fault: int
-    stale: int
-
-    def key(self) -> tuple[int, ...]:
-        return (self.force_raw, self.innovation_raw, self.z_raw, self.in_tissue, self.adapting,
-                self.saturated, self.fault, self.stale)
-
-
-@dataclass
-class ParamOut:
-    index: int
-    value: np.float32
-    std_raw: int
-
-
-@dataclass
-class ContactOut:
-    contact_state: int
-    surface_valid: int
-    active_model: int
-    surface_raw: int
-    tare_raw: int
-    layer: int = 0
-
-    def key(self) -> tuple[int, ...]:
-        return (self.contact_state, self.surface_valid, self.active_model, self.surface_raw,
-                self.tare_raw, self.layer)
-
-
 def param_count(model: int) -> int:
     """Params multiplexer indices cycled by a model: 0..6, Model III 0..9."""
     return 10 if model == 3 else 7
@@ -137,6 +111,7 @@ class NodeMirror:
     estimates: list[EstimateOut] = field(default_factory=list)
     params: list[ParamOut] = field(default_factory=list)
     contacts: list[ContactOut] = field(default_factory=list)
+    healths: list[HealthOut] = field(default_factory=list)
     #: per estimate: (t_s of the force sample, force_n, depth_mm used, params snapshot)
     trace: list[tuple[float, float, float, list[float], list[float]]] = field(default_factory=list)
     events: dict[str, int] = field(default_factory=dict)
@@ -199,6 +174,7 @@ class NodeMirror:
         self.par_vals = [0.0] * len(self.identified)
         self.par_sd = [0.0] * len(self.identified)
         self.contact_last: tuple[int, ContactOut] | None = None   # (ticks, frame) last sent
+        self.health_last: tuple[int, tuple] | None = None          # (ticks, content) last sent
         self._fixed_params()
 
     def _fixed_params(self) -> None:
@@ -279,6 +255,8 @@ class NodeMirror:
         if front_end:
             self._contact(t, F32(o.surface_mm[0]), F32(o.tare_n[0]), int(o.contact[0]),
                           int(o.layer[0]))
+        conf = F32(self.bank.confidence[0]) if self.estimator == "robust" else F32(0.0)
+        self._health(t, st, conf, [int(w) for w in o.filter_status[:, 0]])
 
     def _contact(self, t: int, surface: np.float32, tare: np.float32, state: int,
                  layer: int) -> None:
@@ -303,6 +281,22 @@ class NodeMirror:
             self._count("encode_error")
             return
         self.contacts.append(c)
+
+    def _health(self, t: int, status: int, confidence: np.float32, words: list[int]) -> None:
+        """The node's Health frame rule: on a change of any field, else once
+        HEALTH_PERIOD_TICKS of sensor time have passed (or time went back)."""
+        conf = min(confidence, F32(1.0)) if confidence > 0 else F32(0.0)   # NaN: 0
+        flags = tuple(sum(1 << b for b, bit in enumerate(HEALTH_FILTER_BITS) if w & bit)
+                      for w in words)
+        content = (int((status & STATUS_REFINED) != 0), int((status & STATUS_CONVERGED) != 0),
+                   float(conf), flags)
+        if self.health_last is not None:
+            t0, prev = self.health_last
+            if prev == content and 0 <= t - t0 < HEALTH_PERIOD_TICKS:
+                return
+        self.health_last = (t, content)
+        raw, _ = quantise(conf, 1e-4, 0.0, 1.0)
+        self.healths.append(HealthOut(content[0], content[1], raw, flags))
 
     def _t_s(self, t: int) -> float:
         return (t - 65536) * 1e-4
@@ -618,6 +612,7 @@ class NodeMirror:
             self.last = EstimateOut(0, 0, 0, 0, 1, 0, 0, 0)
             self.last_vals = (0.0, 0.0, 0.0)
             self.contact_last = None
+            self.health_last = None
         self.last_command_us = now
 
     def feed_all(self, frames: Iterable) -> "NodeMirror":
@@ -625,73 +620,3 @@ class NodeMirror:
             self.feed(m.arbitration_id, bytes(m.data), m.is_extended_id, m.is_remote_frame,
                       int(round(m.timestamp * 1e6)))
         return self
-
-
-def _outputs_raw(db: NteDatabase, messages: Iterable, names: tuple[str, ...],
-                 bad: list[int]) -> Iterator[tuple[str, dict]]:
-    """(name, raw signal values) of the node's frames of the given messages, in order; a frame
-    that fails its E2E check is counted in bad[0] and skipped."""
-    rx = db.receiver()
-    for m in messages:
-        name, sig, _ = rx.decode(m.arbitration_id, bytes(m.data))
-        if name not in names:
-            continue
-        if sig is None:
-            bad[0] += 1
-            continue
-        yield name, db.db.get_message_by_name(name).decode(bytes(m.data), scaling=False,
-                                                           decode_choices=False)
-
-
-def node_outputs(db: NteDatabase, messages: Iterable) -> tuple[list[EstimateOut], list[ParamOut], int]:
-    """The node's Estimate and Params frames (in order) as raw values; and the count of output
-    frames that failed their E2E check."""
-    est: list[EstimateOut] = []
-    par: list[ParamOut] = []
-    bad = [0]
-    for name, raw in _outputs_raw(db, messages, ("Estimate", "Params"), bad):
-        if name == "Estimate":
-            est.append(EstimateOut(int(raw["ForceEst"]), int(raw["Innovation"]), int(raw["Z"]),
-                                   int(raw["InTissue"]), int(raw["Adapting"]),
-                                   int(raw["Saturated"]), int(raw["Fault"]), int(raw["Stale"])))
-        else:
-            j = int(raw["ParamIndex"])
-            vname, sname = PARAM_SIGNALS[j]
-            par.append(ParamOut(j, F32(raw[vname]), int(raw[sname])))
-    return est, par, bad[0]
-
-
-def contact_outputs(db: NteDatabase, messages: Iterable) -> tuple[list[ContactOut], int]:
-    """The node's Contact frames (in order) as raw values; and how many failed E2E."""
-    bad = [0]
-    out = [ContactOut(int(raw["ContactState"]), int(raw["SurfaceValid"]), int(raw["ActiveModel"]),
-                      int(raw["Surface"]), int(raw["Tare"]), int(raw["Layer"]))
-           for _, raw in _outputs_raw(db, messages, ("Contact",), bad)]
-    return out, bad[0]
-
-
-def compare(mirror: NodeMirror, est: list[EstimateOut], par: list[ParamOut],
-            contacts: list[ContactOut] | None = None) -> dict:
-    """Mismatch counts between the node's outputs and the mirror's (the Contact frames too
-    when ``contacts``, the node's, is given)."""
-    n = min(len(est), len(mirror.estimates))
-    est_mis = sum(1 for a, b in zip(est, mirror.estimates) if a.key() != b.key())
-    m = min(len(par), len(mirror.params))
-    val_mis = sum(1 for a, b in zip(par, mirror.params)
-                  if a.index != b.index or a.value.tobytes() != b.value.tobytes())
-    std_mis = sum(1 for a, b in zip(par, mirror.params) if a.std_raw != b.std_raw)
-    std_off1 = sum(1 for a, b in zip(par, mirror.params) if abs(a.std_raw - b.std_raw) > 1)
-    first = next((i for i, (a, b) in enumerate(zip(est, mirror.estimates)) if a.key() != b.key()),
-                 None)
-    return {"estimates_node": len(est), "estimates_reference": len(mirror.estimates),
-            "estimates_compared": n, "estimate_mismatches": est_mis,
-            "first_mismatch": first,
-            "params_node": len(par), "params_reference": len(mirror.params),
-            "param_value_mismatches": val_mis, "param_std_mismatches": std_mis,
-            "param_std_beyond_1lsb": std_off1,
-            "stale_reference": sum(e.stale for e in mirror.estimates),
-            "stale_node": sum(e.stale for e in est),
-            **({} if contacts is None else {
-                "contact_node": len(contacts), "contact_reference": len(mirror.contacts),
-                "contact_mismatches": sum(1 for a, b in zip(contacts, mirror.contacts)
-                                          if a.key() != b.key())})}

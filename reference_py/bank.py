@@ -54,6 +54,9 @@ STATUS_RUPTURE = 1 << 12        # Model III: a layer's rupture was found at this
 STATUS_PREDICT_ONLY = 1 << 13   # processed in predict-only mode (cfg.predict_only or
 #                                 set_predict_only): the model alone, force not read
 STATUS_FROZEN = 1 << 14         # the parameters were held (set_frozen): z updated, no u moved
+#: the bits one filter can raise (StepOutput.filter_status; nte.h NTE_STATUS_FILTER_BITS)
+FILTER_BITS = (STATUS_GATED | STATUS_FILTER_RESET | STATUS_DIVERGED | STATUS_CLIPPED
+               | STATUS_FLOORED | STATUS_SIGN_UNCERTAIN)
 
 # Counters of rejected samples, by cause
 REJECT_NONFINITE, REJECT_RANGE, REJECT_TIME = 0, 1, 2
@@ -84,6 +87,8 @@ class StepOutput:
     contact: Array | None = None
     # Model III's layer index (layers.py; 0 for Models I and II and with the layers off)
     layer: Array | None = None
+    # (3, batch) uint32: the FILTER_BITS each filter raised (0 at a rejected and a first sample)
+    filter_status: Array | None = None
 
 
 class FilterBank:
@@ -260,9 +265,10 @@ class FilterBank:
             status = status | np.uint32(STATUS_PREDICT_ONLY)
         if self.frozen:
             status = status | np.uint32(STATUS_FROZEN)
-        out = StepOutput(*(np.where(valid, new, old) if name != "status" else status
-                           for name, new, old in zip(StepOutput.__dataclass_fields__,
-                                                     _fields(out), _fields(self.last))))
+        held = ("force_hat", "z", "innovation", "nis", "params", "params_sd")  # when rejected
+        out = StepOutput(**{n: np.where(valid, getattr(out, n), getattr(self.last, n))
+                            for n in held}, status=status,
+                         filter_status=np.where(valid, out.filter_status, np.uint32(0)))
         if self.contact is not None:
             out.surface_mm, out.tare_n, out.contact = self.contact.published()
         else:
@@ -287,6 +293,7 @@ class FilterBank:
         R, c, cfg = self.R, self.c, self.cfg
         B = self.batch
         status = np.zeros(B, dtype=np.uint32)
+        fstat = np.zeros((len(self.subsets), B), dtype=np.uint32)
         l = clamp_depth(R, l_in)
         l_prev = clamp_depth(R, self.l_prev)
         surface = ~(l > R.c(0.0))
@@ -329,7 +336,7 @@ class FilterBank:
             x, P_pred, z_ss = self._predict(i, names, pred, d, gap | surface, surface)
             innovation, hrow, r_eff, in_range, st = self._measure(names, d, x[0], s, s_du, v,
                                                                   y, active)
-            status |= st
+            fstat[i] |= st
             if i == 0 and self.layers is not None:
                 # the innovation in units of the sensor noise: the front end's, or sqrt(r_n2)
                 sigma = (self.contact.noise_sigma() if self.contact is not None
@@ -340,7 +347,8 @@ class FilterBank:
             u_delta = self.u[IDX["delta"]]
             z_i, nis, st = self._update_and_guard(i, names, x, P_pred, hrow, innovation, r_eff,
                                                   active, run, in_range, z_ss, tear)
-            status |= st
+            fstat[i] |= st
+            status |= fstat[i]
             if "delta" in names:
                 # the direction state of this sample follows its update of delta (first order)
                 s = self._direction_update(s, s_du, self.u[IDX["delta"]] - u_delta)
@@ -412,7 +420,7 @@ class FilterBank:
         innov = np.where(run, innovation0, y - force)
         nis = np.where(run, nis0, R.c(0.0))
         params, sds = self.parameter_estimates()
-        return StepOutput(force, self.z, innov, nis, status, params, sds)
+        return StepOutput(force, self.z, innov, nis, status, params, sds, filter_status=fstat)
 
     def _predict(self, i: int, names: tuple[str, ...], pred: Rk3Result, d: DepthTerms,
                  restart: Array, surface: Array) -> tuple[list[Array], Matrix, Array]:
@@ -662,10 +670,6 @@ class FilterBank:
             vals.append(getattr(th, name))
             sds.append(np.abs(self.scaled.dtheta_du(th, name)) * sd_u)
         return np.stack(vals), np.stack(sds)
-
-
-def _fields(o: StepOutput) -> tuple[Array, ...]:
-    return (o.force_hat, o.z, o.innovation, o.nis, o.status, o.params, o.params_sd)
 
 
 class _Constants:

@@ -22,7 +22,7 @@ and the fit moved the parameters by less than 5 % (log) since the previous refin
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -167,14 +167,9 @@ class RobustEstimator:
         status = out.status | np.where(refined, np.uint32(STATUS_REFINED), np.uint32(0))
         status = status | np.where(self.converged, np.uint32(STATUS_CONVERGED), np.uint32(0))
         params, sds = self.bank.parameter_estimates()
-        if np.any(refined):
-            out = StepOutput(out.force_hat, out.z, out.innovation, out.nis, status,
-                             np.where(refined[None, :], params, out.params),
-                             np.where(refined[None, :], sds, out.params_sd),
-                             out.surface_mm, out.tare_n, out.contact)
-        else:
-            out = StepOutput(out.force_hat, out.z, out.innovation, out.nis, status, out.params,
-                             out.params_sd, out.surface_mm, out.tare_n, out.contact)
+        out = replace(out, status=status,
+                      params=np.where(refined[None, :], params, out.params),
+                      params_sd=np.where(refined[None, :], sds, out.params_sd))
         self.bank.last = out
         return out
 

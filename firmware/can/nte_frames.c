@@ -8,13 +8,13 @@
 static const uint16_t nte_frames_offsets[nte_frames_kind_count] = {
     NTE_FRAMES_OFFSET_DEPTH,    NTE_FRAMES_OFFSET_FORCE,   NTE_FRAMES_OFFSET_COMMAND,
     NTE_FRAMES_OFFSET_ESTIMATE, NTE_FRAMES_OFFSET_PARAMS,  NTE_FRAMES_OFFSET_HEARTBEAT,
-    NTE_FRAMES_OFFSET_CONTACT,  NTE_FRAMES_OFFSET_SETTING,
+    NTE_FRAMES_OFFSET_CONTACT,  NTE_FRAMES_OFFSET_SETTING, NTE_FRAMES_OFFSET_HEALTH,
 };
 
 static const uint16_t nte_frames_data_ids[nte_frames_kind_count] = {
     NTE_FRAMES_DATA_ID_DEPTH,    NTE_FRAMES_DATA_ID_FORCE,   NTE_FRAMES_DATA_ID_COMMAND,
     NTE_FRAMES_DATA_ID_ESTIMATE, NTE_FRAMES_DATA_ID_PARAMS,  NTE_FRAMES_DATA_ID_HEARTBEAT,
-    NTE_FRAMES_DATA_ID_CONTACT,  NTE_FRAMES_DATA_ID_SETTING,
+    NTE_FRAMES_DATA_ID_CONTACT,  NTE_FRAMES_DATA_ID_SETTING, NTE_FRAMES_DATA_ID_HEALTH,
 };
 
 /* Raw value of log10(std) that means std = 0. */
@@ -741,6 +741,65 @@ nte_frames_err_t nte_frames_decode_contact(nte_e2e_rx_t* e2e, const uint8_t* dat
     out->layer = m.layer;
     out->surface_mm = nte_can_contact_surface_decode(m.surface);
     out->tare_n = nte_can_contact_tare_decode(m.tare);
+    return nte_frames_ok;
+}
+
+/* ------------------------------------------------------------------------------ health */
+
+nte_frames_err_t nte_frames_encode_health(const nte_frames_health_t* in, nte_e2e_tx_t* e2e,
+                                          uint8_t* out)
+{
+    struct nte_can_health_t m;
+    if ((in == NULL) || (e2e == NULL) || (out == NULL)) {
+        return nte_frames_err_null;
+    }
+    if (!isfinite(in->confidence)) {
+        return nte_frames_err_not_finite;
+    }
+    if (!nte_frames_within(in->confidence, 0.0f, 1.0f, 0.00005f)) {
+        return nte_frames_err_range;
+    }
+    for (unsigned i = 0u; i < NTE_FRAMES_FILTERS; ++i) {
+        if ((in->filter_flags[i] & ~(unsigned)NTE_FRAMES_FILTER_FLAGS) != 0u) {
+            return nte_frames_err_range;
+        }
+    }
+    (void)nte_can_health_init(&m);
+    m.refined = in->refined ? 1u : 0u;
+    m.converged = in->converged ? 1u : 0u;
+    m.confidence = nte_can_health_confidence_encode(in->confidence);
+    m.filter0_flags = in->filter_flags[0];
+    m.filter1_flags = in->filter_flags[1];
+    m.filter2_flags = in->filter_flags[2];
+    (void)nte_can_health_pack(out, &m, NTE_FRAMES_LENGTH);
+    return nte_frames_protect(e2e, nte_frames_kind_health, out);
+}
+
+nte_frames_err_t nte_frames_decode_health(nte_e2e_rx_t* e2e, const uint8_t* data, size_t length,
+                                          nte_frames_health_t* out, nte_e2e_result_t* e2e_result,
+                                          uint8_t* lost)
+{
+    struct nte_can_health_t m;
+    nte_frames_err_t err;
+    if ((e2e == NULL) || (data == NULL) || (out == NULL)) {
+        return nte_frames_err_null;
+    }
+    err = nte_frames_check(e2e, nte_frames_kind_health, data, length, e2e_result, lost);
+    if (err != nte_frames_ok) {
+        return err;
+    }
+    (void)nte_can_health_unpack(&m, data, length);
+    if (!nte_can_health_confidence_is_in_range(m.confidence) ||
+        (((m.filter0_flags | m.filter1_flags | m.filter2_flags) &
+          ~(unsigned)NTE_FRAMES_FILTER_FLAGS) != 0u)) {
+        return nte_frames_err_range;
+    }
+    out->refined = (m.refined != 0u);
+    out->converged = (m.converged != 0u);
+    out->confidence = nte_can_health_confidence_decode(m.confidence);
+    out->filter_flags[0] = m.filter0_flags;
+    out->filter_flags[1] = m.filter1_flags;
+    out->filter_flags[2] = m.filter2_flags;
     return nte_frames_ok;
 }
 

@@ -15,8 +15,8 @@
  *
  * CAN ids: id = base + offset, base configurable (default NTE_FRAMES_BASE_ID_DEFAULT = 0x200,
  * the ids written in the DBC); offsets: depth 0x00, force 0x01, command 0x02, setting 0x03,
- * estimate 0x10,
- * params 0x11, heartbeat 0x12, contact 0x13. Standard 11-bit ids, so base <= 0x7FF - 0x13 = 0x7EC.
+ * estimate 0x10, params 0x11, heartbeat 0x12, contact 0x13, health 0x14. Standard 11-bit ids,
+ * so base <= 0x7FF - 0x14 = 0x7EB.
  * The DBC attribute
  * NteIdOffset holds the same offsets and NteE2EDataId the data ids below; a test checks that
  * this header and the DBC agree.
@@ -55,6 +55,7 @@ extern "C" {
 #define NTE_FRAMES_OFFSET_PARAMS 0x11u
 #define NTE_FRAMES_OFFSET_HEARTBEAT 0x12u
 #define NTE_FRAMES_OFFSET_CONTACT 0x13u
+#define NTE_FRAMES_OFFSET_HEALTH 0x14u
 
 #define NTE_FRAMES_DATA_ID_DEPTH 0x4E00u
 #define NTE_FRAMES_DATA_ID_FORCE 0x4E01u
@@ -64,6 +65,7 @@ extern "C" {
 #define NTE_FRAMES_DATA_ID_PARAMS 0x4E11u
 #define NTE_FRAMES_DATA_ID_HEARTBEAT 0x4E12u
 #define NTE_FRAMES_DATA_ID_CONTACT 0x4E13u
+#define NTE_FRAMES_DATA_ID_HEALTH 0x4E14u
 
 /** Sender clock tick of SensorTime, s. */
 #define NTE_FRAMES_TICK_S 1.0e-4f
@@ -110,7 +112,8 @@ typedef enum {
     nte_frames_kind_heartbeat = 5,
     nte_frames_kind_contact = 6,
     nte_frames_kind_setting = 7,
-    nte_frames_kind_count = 8
+    nte_frames_kind_health = 8,
+    nte_frames_kind_count = 9
 } nte_frames_kind_t;
 
 /** Command selectors (0 = keep the current setting). */
@@ -258,6 +261,28 @@ typedef struct {
 /** Largest layer index the Contact frame carries (its 3-bit Layer signal). */
 #define NTE_FRAMES_LAYER_MAX 7u
 
+/** Bits of a filter's fault word in the Health frame (Filter<i>Flags). */
+enum {
+    NTE_FRAMES_FILTER_GATED = 1u << 0,          /**< the update was refused by the gate */
+    NTE_FRAMES_FILTER_RESET = 1u << 1,          /**< the filter restarted (covariance lost) */
+    NTE_FRAMES_FILTER_DIVERGED = 1u << 2,       /**< its prediction left the physical range */
+    NTE_FRAMES_FILTER_CLIPPED = 1u << 3,        /**< a parameter is at its clip */
+    NTE_FRAMES_FILTER_FLOORED = 1u << 4,        /**< a variance was raised to its floor */
+    NTE_FRAMES_FILTER_SIGN_UNCERTAIN = 1u << 5, /**< R inflated for the smooth sign */
+    NTE_FRAMES_FILTER_FLAGS = (1u << 6) - 1u    /**< every defined bit */
+};
+/** Filters of the bank, one fault word each. */
+#define NTE_FRAMES_FILTERS 3u
+
+/** The estimator's health (output): the robust refinement and the filters' fault words. */
+typedef struct {
+    bool refined;     /**< The robust estimator adopted a refinement at this step. */
+    bool converged;   /**< Its last refinement agreed with the data. */
+    float confidence; /**< 0 .. 1 (an error beyond or non-finite), 1e-4 resolution. */
+    uint8_t filter_flags[NTE_FRAMES_FILTERS]; /**< NTE_FRAMES_FILTER_* bits (an error beyond
+                                                   NTE_FRAMES_FILTER_FLAGS). */
+} nte_frames_health_t;
+
 /** Sender clock unwrapper: use ONE for all streams stamped by the same clock. */
 typedef struct {
     uint32_t ticks;    /**< Unwrapped count of the last sample. */
@@ -298,6 +323,9 @@ nte_frames_err_t nte_frames_encode_heartbeat(const nte_frames_heartbeat_t* in, n
 /** Non-finite tare (or surface, when valid) and |surface| > 500 mm are errors. */
 nte_frames_err_t nte_frames_encode_contact(const nte_frames_contact_t* in, nte_e2e_tx_t* e2e,
                                            uint8_t* out);
+/** Confidence outside 0..1 or non-finite, and undefined filter bits, are errors. */
+nte_frames_err_t nte_frames_encode_health(const nte_frames_health_t* in, nte_e2e_tx_t* e2e,
+                                          uint8_t* out);
 
 /* Decoders: E2E check with `e2e` (its result goes to *e2e_result if that is not NULL; a skipped
  * counter is accepted, the number lost is in *lost if not NULL), then unpack and range check.
@@ -327,6 +355,9 @@ nte_frames_err_t nte_frames_decode_heartbeat(nte_e2e_rx_t* e2e, const uint8_t* d
 nte_frames_err_t nte_frames_decode_contact(nte_e2e_rx_t* e2e, const uint8_t* data, size_t length,
                                            nte_frames_contact_t* out, nte_e2e_result_t* e2e_result,
                                            uint8_t* lost);
+nte_frames_err_t nte_frames_decode_health(nte_e2e_rx_t* e2e, const uint8_t* data, size_t length,
+                                          nte_frames_health_t* out, nte_e2e_result_t* e2e_result,
+                                          uint8_t* lost);
 
 /** Forget the clock history. */
 void nte_frames_clock_reset(nte_frames_clock_t* self);

@@ -448,6 +448,11 @@ typedef enum nte_err_t {
                                           (nte_set_frozen; HELD PARAMETERS above): no u
                                           moved, z was updated; set on rejected samples too
                                           while they are held */
+/** The bits one filter can raise (nte_output_t.filter_status): its gate, its reset, its
+ *  diverged prior, a parameter at its clip, a variance at its floor, its inflated R. */
+#define NTE_STATUS_FILTER_BITS (NTE_STATUS_GATED | NTE_STATUS_FILTER_RESET | \
+                                NTE_STATUS_DIVERGED | NTE_STATUS_CLIPPED | \
+                                NTE_STATUS_FLOORED | NTE_STATUS_SIGN_UNCERTAIN)
 /* clang-format on */
 
 /* Causes of a rejected sample (same values as reference_py/bank.py REJECT_*). */
@@ -664,6 +669,13 @@ typedef struct nte_output_t {
                                       0..NTE_LAYER_MAX - 1 (0 from the surface to the first
                                       rupture; 0 again out of the tissue); in predict-only
                                       mode with layer sets, the set in use; 0 otherwise */
+    /** The NTE_STATUS_FILTER_BITS each filter of the bank raised at this sample (filter i
+     *  owns the subset i of the parameters); status holds their OR.  0 for a rejected
+     *  sample and the first one.  A filter that did not update at this sample (the rotate
+     *  schedule, predict-only mode) still runs its guard: DIVERGED, CLIPPED, FLOORED or
+     *  FILTER_RESET, never GATED.  One fault word per filter, published on the bus as
+     *  Health.Filter<i>Flags (firmware/can/nte.dbc). */
+    uint32_t filter_status[NTE_FILTER_COUNT];
 } nte_output_t;
 
 /* ---------------------------------------------------------------------------------------- */

@@ -16,6 +16,7 @@
 #define NTE_NODE_OUT_PARAMS 1u
 #define NTE_NODE_OUT_HEARTBEAT 2u
 #define NTE_NODE_OUT_CONTACT 3u
+#define NTE_NODE_OUT_HEALTH 4u
 #define NTE_NODE_MODELS 3
 
 static const char* const nte_node_event_names[NTE_NODE_EVENT_COUNT] = {
@@ -165,7 +166,7 @@ static nte_node_err_t nte_node_check(const nte_node_config_t* cfg, const nte_nod
     if ((port->receive == NULL) || (port->send == NULL) || (port->now_us == NULL)) {
         return nte_node_err_null;
     }
-    if ((nte_frames_can_id(cfg->base_id, nte_frames_kind_contact, &id) != nte_frames_ok) ||
+    if ((nte_frames_can_id(cfg->base_id, nte_frames_kind_health, &id) != nte_frames_ok) ||
         (cfg->model < 1) || (cfg->model > NTE_NODE_MODELS) || (cfg->depth_timeout_us < 100u) ||
         (cfg->depth_timeout_us > 3000000u) || (cfg->heartbeat_period_us < 1000u) ||
         (cfg->heartbeat_period_us > 10000000u) || (cfg->params_per_step < 1u) ||
@@ -191,6 +192,7 @@ static bool nte_node_start_model(nte_node_t* self, int32_t model, nte_estimator_
     (void)memset(&self->last, 0, sizeof self->last);
     self->last.adapting = true;
     self->contact_sent = false;
+    self->health_sent = false;
     return true;
 }
 
@@ -207,9 +209,9 @@ nte_node_err_t nte_node_init(nte_node_t* self, const nte_node_config_t* cfg,
     static const nte_frames_kind_t in_kinds[NTE_NODE_INPUTS] = {
         nte_frames_kind_depth, nte_frames_kind_force, nte_frames_kind_command,
         nte_frames_kind_setting};
-    static const nte_frames_kind_t out_kinds[4] = {nte_frames_kind_estimate, nte_frames_kind_params,
-                                                   nte_frames_kind_heartbeat,
-                                                   nte_frames_kind_contact};
+    static const nte_frames_kind_t out_kinds[NTE_NODE_OUTPUTS] = {
+        nte_frames_kind_estimate, nte_frames_kind_params, nte_frames_kind_heartbeat,
+        nte_frames_kind_contact, nte_frames_kind_health};
     if ((self == NULL) || (cfg == NULL) || (port == NULL)) {
         return nte_node_err_null;
     }
@@ -223,7 +225,7 @@ nte_node_err_t nte_node_init(nte_node_t* self, const nte_node_config_t* cfg,
     for (uint32_t i = 0u; i < NTE_NODE_INPUTS; i++) {
         (void)nte_frames_rx_init(&self->rx[i], in_kinds[i]);
     }
-    for (uint32_t i = 0u; i < 4u; i++) {
+    for (uint32_t i = 0u; i < NTE_NODE_OUTPUTS; i++) {
         (void)nte_frames_tx_init(&self->tx[i], out_kinds[i]);
     }
     nte_frames_clock_reset(&self->clock);
@@ -421,6 +423,53 @@ static void nte_node_publish_contact(nte_node_t* self, uint32_t t, const nte_out
     nte_node_send(self, nte_frames_kind_contact, NTE_NODE_OUT_CONTACT, data);
 }
 
+/* A filter's fault word (nte.h NTE_STATUS_FILTER_BITS) in the Health frame's bits. */
+static uint8_t nte_node_filter_flags(uint32_t s)
+{
+    static const uint32_t from[6] = {NTE_STATUS_GATED,    NTE_STATUS_FILTER_RESET,
+                                     NTE_STATUS_DIVERGED, NTE_STATUS_CLIPPED,
+                                     NTE_STATUS_FLOORED,  NTE_STATUS_SIGN_UNCERTAIN};
+    uint32_t flags = 0u;
+    for (uint32_t b = 0u; b < 6u; b++) {
+        flags |= ((s & from[b]) != 0u) ? (1u << b) : 0u; /* NTE_FRAMES_FILTER_* order */
+    }
+    return (uint8_t)flags;
+}
+
+/* The Health frame after a step at sensor time t (rule in nte_node.h, HEALTH). */
+static void nte_node_publish_health(nte_node_t* self, uint32_t t, const nte_output_t* o)
+{
+    nte_frames_health_t h;
+    uint8_t data[NTE_FRAMES_LENGTH];
+    (void)memset(&h, 0, sizeof h);
+    h.refined = (o->status & NTE_STATUS_REFINED) != 0u;
+    h.converged = (o->status & NTE_STATUS_CONVERGED) != 0u;
+    /* in [0, 1] by construction (nte.h); NaN would fail the encoder: 0 */
+    const float c = (float)o->confidence;
+    h.confidence = (c > 0.0f) ? ((c < 1.0f) ? c : 1.0f) : 0.0f;
+    for (uint32_t i = 0u; i < NTE_FRAMES_FILTERS; i++) {
+        h.filter_flags[i] = nte_node_filter_flags(o->filter_status[i]);
+    }
+    const bool changed =
+        !self->health_sent || (h.refined != self->health.refined) ||
+        (h.converged != self->health.converged) || (h.confidence < self->health.confidence) ||
+        (h.confidence > self->health.confidence) ||
+        (memcmp(h.filter_flags, self->health.filter_flags, sizeof h.filter_flags) != 0);
+    const int32_t since = nte_node_tdiff(t, self->health_t);
+    if (!changed && (since >= 0) &&
+        (since < (int32_t)(NTE_NODE_HEALTH_PERIOD_US / NTE_NODE_TICK_US))) {
+        return;
+    }
+    self->health_sent = true;
+    self->health_t = t;
+    self->health = h;
+    if (nte_frames_encode_health(&h, &self->tx[NTE_NODE_OUT_HEALTH], data) != nte_frames_ok) {
+        nte_node_count(self, nte_node_ev_encode_error);
+        return;
+    }
+    nte_node_send(self, nte_frames_kind_health, NTE_NODE_OUT_HEALTH, data);
+}
+
 /* ------------------------------------------------------------------------------------------ */
 /* Estimation                                                                                   */
 /* ------------------------------------------------------------------------------------------ */
@@ -489,6 +538,7 @@ static void nte_node_step(nte_node_t* self, const nte_node_force_t* f, float dep
     if (front_end) {
         nte_node_publish_contact(self, f->t, &o);
     }
+    nte_node_publish_health(self, f->t, &o);
 }
 
 /* Decide the force sample at the head of the queue: 1 = done (stepped or held), 0 = wait. */
@@ -913,6 +963,7 @@ static void nte_node_on_command(nte_node_t* self, const nte_node_frame_t* fr)
         (void)nte_reset(&self->est);
         self->state = nte_node_state_init;
         self->contact_sent = false;
+        self->health_sent = false;
         (void)memset(&self->last, 0, sizeof self->last);
         self->last.adapting = true;
     }

@@ -24,6 +24,17 @@
  *   the decision uses the frames' SensorTime only, so a replay is deterministic.  Heartbeat
  *   ActiveModel 2.  Models I and II send no Contact frame and cycle Params 0..6 as before.
  *
+ * HEALTH (every model)
+ *   After an estimator step (not after a stale hold) a Health frame is sent when its content
+ *   differs from the last Health frame sent, or when the force sample is at least
+ *   NTE_NODE_HEALTH_PERIOD_US of sensor time after the last one (10 Hz), by SensorTime only as
+ *   for the Contact frame.  It carries the robust estimator's Refined and Converged bits and
+ *   confidence (0 for the bank), and the fault word of each filter of the bank at that step
+ *   (nte.h nte_output_t.filter_status, mapped to the NTE_FRAMES_FILTER_* bits): a gate, a
+ *   reset, a diverged prior, a clip, a floor, an inflated R, per filter.  A step whose words
+ *   are those of the previous step sends nothing new, so a flag that stays up costs one frame
+ *   per 100 ms; every change of any filter's word is on the bus at the step it happened.
+ *
  * TIME
  *   Results depend only on the frames' SensorTime stamps (unwrapped, one clock for both streams),
  *   never on arrival times: a force sample at t_f is processed once a depth sample with
@@ -272,14 +283,17 @@ typedef enum nte_node_event_t {
  *  tissue, is a stuck sensor. */
 #define NTE_NODE_STUCK_TRAVEL_UM 500u
 
+/** Frames the node sends: Estimate, Params, Heartbeat, Contact, Health. */
+#define NTE_NODE_OUTPUTS 5u
+
 /** Counters (monotonic, wrap modulo 2^32); public, the application may clear them. */
 typedef struct nte_node_counters_t {
     uint32_t events[NTE_NODE_EVENT_COUNT]; /**< by nte_node_event_t */
     uint32_t frames_lost;                  /**< frames missed upstream, from counter skips */
     uint32_t rx_accepted[4];               /**< accepted depth, force, command, setting
                                                 frames */
-    uint32_t tx[4];                        /**< sent estimate, params, heartbeat, contact
-                                                frames */
+    uint32_t tx[NTE_NODE_OUTPUTS];         /**< sent estimate, params, heartbeat, contact,
+                                                health frames */
     uint32_t steps;                        /**< estimator steps (non-stale force samples,
                                                 and the depth samples of PREDICT-ONLY (c)) */
     uint32_t commands_applied;             /**< commands carried out */
@@ -292,7 +306,7 @@ typedef struct nte_node_counters_t {
 
 /** Node tuning; fill with nte_node_config_default, then change what you need. */
 typedef struct nte_node_config_t {
-    uint32_t base_id;             /**< CAN id base, 0..0x7FF - 0x13 = 0x7EC (default 0x200) */
+    uint32_t base_id;             /**< CAN id base, 0..0x7FF - 0x14 = 0x7EB (default 0x200) */
     int32_t model;                /**< model at start: 1, 2 or 3 */
     nte_config_t estimator[3];    /**< estimator configuration for Model I [0], II [1] and
                                        III [2] (model fields 1, 2, 3; Model III: the bank
@@ -323,6 +337,8 @@ typedef enum nte_node_err_t {
 
 /** Sensor time between two Contact frames when nothing changes (Model III), us (10 Hz). */
 #define NTE_NODE_CONTACT_PERIOD_US 100000u
+/** Sensor time between two Health frames when nothing changes, us (10 Hz). */
+#define NTE_NODE_HEALTH_PERIOD_US 100000u
 
 /* The node's defaults, written once: nte_node_config_default, the Linux port's options
  * (port/linux/nte_node_main.c) and the bench's node mirror (host_bench/node_mirror.py, which
@@ -385,9 +401,9 @@ typedef struct nte_node_t {
     int32_t model;
     nte_estimator_t estimator;
     bool have_command;
-    uint64_t last_command_us; /* port clock of the last applied command */
-    nte_e2e_rx_t rx[4];       /* depth, force, command, setting */
-    nte_e2e_tx_t tx[4];       /* estimate, params, heartbeat, contact */
+    uint64_t last_command_us;          /* port clock of the last applied command */
+    nte_e2e_rx_t rx[4];                /* depth, force, command, setting */
+    nte_e2e_tx_t tx[NTE_NODE_OUTPUTS]; /* estimate, params, heartbeat, contact, health */
     nte_frames_clock_t clock;
     nte_node_depth_t depth[NTE_NODE_DEPTH_HISTORY];
     uint32_t depth_next; /* ring write index */
@@ -408,6 +424,9 @@ typedef struct nte_node_t {
     bool contact_sent;            /* a Contact frame was sent since the model started */
     uint32_t contact_t;           /* sensor ticks of the force sample of the last one */
     nte_frames_contact_t contact; /* its content */
+    bool health_sent;             /* a Health frame was sent since the model started */
+    uint32_t health_t;            /* sensor ticks of the force sample of the last one */
+    nte_frames_health_t health;   /* its content */
     nte_node_state_t state;
     bool force_cmd_model; /* Command.ForceSource 2 in force (PREDICT-ONLY (a)) */
     bool predicting;      /* the mode of the last step */

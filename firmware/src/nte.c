@@ -128,6 +128,9 @@ nte_err_t nte_step(nte_t* self, const nte_sample_t* sample, nte_output_t* out)
     }
     if (!valid) {
         self->last.status = NTE_STATUS_REJECTED;
+        for (size_t i = 0U; i < NTE_FILTER_COUNT; i++) {
+            self->last.filter_status[i] = 0U; /* no filter ran */
+        }
     }
     self->last.status |= cfg->predict_only ? NTE_STATUS_PREDICT_ONLY : 0U;
     self->last.status |= self->frozen ? NTE_STATUS_FROZEN : 0U;

@@ -208,6 +208,9 @@ void nte_bank_start(nte_t* self)
     self->last.innovation_n = NTE_C(0.0);
     self->last.nis = NTE_C(0.0);
     self->last.status = 0U;
+    for (size_t i = 0U; i < NTE_FILTER_COUNT; i++) {
+        self->last.filter_status[i] = 0U;
+    }
     self->last.confidence = NTE_C(0.0);
     for (size_t c = 0U; c < NTE_REJECT_CAUSES; c++) {
         self->counters.rejected[c] = 0U;
@@ -626,6 +629,9 @@ void nte_bank_advance(nte_t* self, const bool first, const nte_real_t dt, const 
 {
     step_ctx_t c;
     (void)memset(&c, 0, sizeof c);
+    for (size_t i = 0U; i < NTE_FILTER_COUNT; i++) {
+        out->filter_status[i] = 0U;
+    }
     c.l = nte_model_clamp_depth(l_in);
     c.l_prev = nte_model_clamp_depth(self->l_prev);
     c.dt = dt;
@@ -678,7 +684,9 @@ void nte_bank_advance(nte_t* self, const bool first, const nte_real_t dt, const 
         for (size_t i = 0U; i < NTE_FILTER_COUNT; i++) {
             filter_out_t fo;
             const nte_real_t u_delta = self->u[nte_param_delta];
-            status |= run_filter(self, &c, i, &shared, &fo);
+            const uint32_t filter_status = run_filter(self, &c, i, &shared, &fo);
+            status |= filter_status;
+            out->filter_status[i] = filter_status & NTE_STATUS_FILTER_BITS;
             if ((i == 1U) && identifies_delta(self)) {
                 /* the direction state of this sample follows filter 2's update of delta */
                 c.s = direction_update(&c, self->u[nte_param_delta] - u_delta);

@@ -10,8 +10,9 @@
  * ROBUST 0|1 (the robust estimator); SURFACE_MM a known surface (hex or decimal) or nan.
  * The configuration is nte_config_default's.  Each input line: "t_us depth velocity force
  * mode" with the reals in C99 hex (%a) and mode's bits from this sample on: 1 predict-only,
- * 2 the parameters held.  Each output line: force_hat z innovation nis confidence tare surface (%a) status
- * contact layer, then value and sd of every identified parameter (%a).
+ * 2 the parameters held.  Each output line: force_hat z innovation nis confidence tare surface
+ * (%a), status contact layer and the three filters' filter_status (decimal), then value and sd
+ * of every identified parameter (%a).
  */
 #include <math.h>
 #include <stdio.h>
@@ -68,6 +69,9 @@ int main(int argc, char** argv)
         put((double)o.surface_mm);
         (void)printf(" %lu %d %lu", (unsigned long)o.status, (int)o.contact,
                      (unsigned long)o.layer);
+        for (size_t i = 0U; i < (size_t)NTE_FILTER_COUNT; i++) {
+            (void)printf(" %lu", (unsigned long)o.filter_status[i]);
+        }
         nte_param_estimate_t pe[NTE_IDENTIFIED_MAX];
         const size_t n = nte_get_params(&est, pe, NTE_IDENTIFIED_MAX);
         for (size_t k = 0U; (k < n) && (k < (size_t)NTE_IDENTIFIED_MAX); k++) {

@@ -142,6 +142,16 @@ static const signal_t contact_signals[] = {
     ENTRY(contact, contact_state, "ContactState"), ENTRY(contact, surface_valid, "SurfaceValid"),
     ENTRY(contact, active_model, "ActiveModel"), ENTRY(contact, surface, "Surface"),
     ENTRY(contact, tare, "Tare"), ENTRY(contact, layer, "Layer")};
+
+MSG(health)
+SIG(health, crc) SIG(health, counter) SIG(health, refined) SIG(health, converged)
+SIG(health, confidence) SIG(health, filter0_flags) SIG(health, filter1_flags)
+SIG(health, filter2_flags)
+static const signal_t health_signals[] = {
+    ENTRY(health, crc, "Crc"), ENTRY(health, counter, "Counter"),
+    ENTRY(health, refined, "Refined"), ENTRY(health, converged, "Converged"),
+    ENTRY(health, confidence, "Confidence"), ENTRY(health, filter0_flags, "Filter0Flags"),
+    ENTRY(health, filter1_flags, "Filter1Flags"), ENTRY(health, filter2_flags, "Filter2Flags")};
 /* clang-format on */
 
 #define COUNT(a) (sizeof(a) / sizeof((a)[0]))
@@ -162,6 +172,8 @@ static const message_t messages[] = {
      heartbeat_signals, COUNT(heartbeat_signals)},
     {"Contact", nte_frames_kind_contact, init_contact, pack_contact, unpack_contact,
      contact_signals, COUNT(contact_signals)},
+    {"Health", nte_frames_kind_health, init_health, pack_health, unpack_health, health_signals,
+     COUNT(health_signals)},
 };
 
 typedef union {
@@ -173,6 +185,7 @@ typedef union {
     struct nte_can_params_t params;
     struct nte_can_heartbeat_t heartbeat;
     struct nte_can_contact_t contact;
+    struct nte_can_health_t health;
 } any_message_t;
 
 static const message_t* find_message(const char* name)

@@ -32,25 +32,25 @@ static void test_ids(void** state)
     uint32_t id;
     nte_frames_kind_t kind;
     int k;
-    const uint32_t offsets[8] = {0x00, 0x01, 0x02, 0x10, 0x11, 0x12, 0x13, 0x03};
+    const uint32_t offsets[9] = {0x00, 0x01, 0x02, 0x10, 0x11, 0x12, 0x13, 0x03, 0x14};
     (void)state;
     for (k = 0; k < (int)nte_frames_kind_count; ++k) {
         assert_int_equal(nte_frames_can_id(0x200u, (nte_frames_kind_t)k, &id), nte_frames_ok);
         assert_int_equal(id, 0x200u + offsets[k]);
         assert_int_equal(nte_frames_kind_of(0x200u, id, &kind), nte_frames_ok);
         assert_int_equal(kind, k);
-        assert_int_equal(nte_frames_can_id(0x7ECu, (nte_frames_kind_t)k, &id), nte_frames_ok);
-        assert_int_equal(nte_frames_kind_of(0x7ECu, id, &kind), nte_frames_ok);
+        assert_int_equal(nte_frames_can_id(0x7EBu, (nte_frames_kind_t)k, &id), nte_frames_ok);
+        assert_int_equal(nte_frames_kind_of(0x7EBu, id, &kind), nte_frames_ok);
         assert_int_equal(kind, k);
     }
-    assert_int_equal(nte_frames_can_id(0x7EDu, nte_frames_kind_contact, &id),
+    assert_int_equal(nte_frames_can_id(0x7ECu, nte_frames_kind_health, &id),
                      nte_frames_err_bad_config);
-    assert_int_equal(nte_frames_can_id(0x7EDu, nte_frames_kind_heartbeat, &id), nte_frames_ok);
+    assert_int_equal(nte_frames_can_id(0x7ECu, nte_frames_kind_contact, &id), nte_frames_ok);
     assert_int_equal(nte_frames_can_id(0x200u, nte_frames_kind_count, &id),
                      nte_frames_err_bad_config);
     assert_int_equal(nte_frames_kind_of(0x200u, 0x204u, &kind), nte_frames_err_unknown_id);
     assert_int_equal(nte_frames_kind_of(0x200u, 0x1FFu, &kind), nte_frames_err_unknown_id);
-    assert_int_equal(nte_frames_kind_of(0x200u, 0x214u, &kind), nte_frames_err_unknown_id);
+    assert_int_equal(nte_frames_kind_of(0x200u, 0x215u, &kind), nte_frames_err_unknown_id);
 }
 
 static void test_depth_round_trip(void** state)
@@ -588,6 +588,41 @@ static void test_contact(void** state)
     }
 }
 
+static void test_health(void** state)
+{
+    static const float confidences[] = {0.0f, 0.0001f, 0.0042f, 0.5f, 0.75f, 0.99995f, 1.0f};
+    link_t l;
+    nte_frames_health_t out;
+    size_t i;
+    (void)state;
+    link_init(&l, nte_frames_kind_health);
+    for (i = 0; i < sizeof confidences / sizeof confidences[0]; ++i) {
+        nte_frames_health_t in = {
+            (i % 2u) == 0u,
+            (i % 3u) == 1u,
+            confidences[i],
+            {(uint8_t)(1u << (i % 6u)), (uint8_t)NTE_FRAMES_FILTER_FLAGS, (uint8_t)(i * 7u % 64u)}};
+        assert_int_equal(nte_frames_encode_health(&in, &l.tx, l.frame), nte_frames_ok);
+        assert_int_equal(nte_frames_decode_health(&l.rx, l.frame, 8, &out, NULL, NULL),
+                         nte_frames_ok);
+        assert_int_equal(out.refined, in.refined);
+        assert_int_equal(out.converged, in.converged);
+        assert_near(out.confidence, in.confidence, 5e-5 + 1e-7); /* half a 1e-4 step */
+        assert_memory_equal(out.filter_flags, in.filter_flags, sizeof in.filter_flags);
+    }
+    {
+        nte_frames_health_t above = {false, false, 1.0001f, {0u, 0u, 0u}};
+        nte_frames_health_t below = {false, false, -0.0001f, {0u, 0u, 0u}};
+        nte_frames_health_t nan_conf = {false, false, NAN, {0u, 0u, 0u}};
+        nte_frames_health_t bad_bits = {false, false, 0.5f, {0u, 0u, 1u << 6}};
+        assert_int_equal(nte_frames_encode_health(&above, &l.tx, l.frame), nte_frames_err_range);
+        assert_int_equal(nte_frames_encode_health(&below, &l.tx, l.frame), nte_frames_err_range);
+        assert_int_equal(nte_frames_encode_health(&nan_conf, &l.tx, l.frame),
+                         nte_frames_err_not_finite);
+        assert_int_equal(nte_frames_encode_health(&bad_bits, &l.tx, l.frame), nte_frames_err_range);
+    }
+}
+
 static void test_clock_unwrap(void** state)
 {
     nte_frames_clock_t c;
@@ -633,6 +668,7 @@ int main(void)
         cmocka_unit_test(test_params),
         cmocka_unit_test(test_heartbeat),
         cmocka_unit_test(test_contact),
+        cmocka_unit_test(test_health),
         cmocka_unit_test(test_clock_unwrap),
     };
     return cmocka_run_group_tests_name("nte_frames", tests, NULL, NULL);

@@ -240,9 +240,9 @@ static void test_config_errors(void** state)
     cfg.model = 0;
     assert_int_equal(nte_node_init(&g_node_a, &cfg, &port), nte_node_err_bad_config);
     nte_node_config_default(&cfg, 2);
-    cfg.base_id = 0x7EDu; /* the Contact frame (offset 0x13) would leave the 11-bit range */
+    cfg.base_id = 0x7ECu; /* the Health frame (offset 0x14) would leave the 11-bit range */
     assert_int_equal(nte_node_init(&g_node_a, &cfg, &port), nte_node_err_bad_config);
-    cfg.base_id = 0x7ECu;
+    cfg.base_id = 0x7EBu;
     assert_int_equal(nte_node_init(&g_node_a, &cfg, &port), nte_node_ok);
     nte_node_config_default(&cfg, 3);
     assert_int_equal(nte_node_init(&g_node_a, &cfg, &port), nte_node_ok);
@@ -744,7 +744,8 @@ static void test_send_failure(void** state)
     scenario(&g_port_a, &b, 100u, 10u, 10u, 0);
     g_port_a.fail_send = 1;
     run_all(&g_node_a, &g_port_a);
-    assert_int_equal(g_node_a.counters.events[nte_node_ev_send_failed], 20u); /* 10 x (E+P) */
+    /* 10 x (Estimate + Params) and the first step's Health frame (nothing changed after it) */
+    assert_int_equal(g_node_a.counters.events[nte_node_ev_send_failed], 21u);
     assert_int_equal(g_port_a.tx_n, 0u);
     g_port_a.fail_send = 0;
     scenario(&g_port_a, &b, 100u + 10u * 50u, 10u, 5u, 0);
@@ -1151,6 +1152,18 @@ static void m3_push(fake_port_t* p, bench_t* b, uint32_t t0)
     }
 }
 
+/* nte.h's filter bits as the Health frame's (nte_frames.h NTE_FRAMES_FILTER_*), written out
+ * here independently of the node's own mapping. */
+static uint8_t health_flags(uint32_t s)
+{
+    return (uint8_t)(((s & NTE_STATUS_GATED) ? NTE_FRAMES_FILTER_GATED : 0u) |
+                     ((s & NTE_STATUS_FILTER_RESET) ? NTE_FRAMES_FILTER_RESET : 0u) |
+                     ((s & NTE_STATUS_DIVERGED) ? NTE_FRAMES_FILTER_DIVERGED : 0u) |
+                     ((s & NTE_STATUS_CLIPPED) ? NTE_FRAMES_FILTER_CLIPPED : 0u) |
+                     ((s & NTE_STATUS_FLOORED) ? NTE_FRAMES_FILTER_FLOORED : 0u) |
+                     ((s & NTE_STATUS_SIGN_UNCERTAIN) ? NTE_FRAMES_FILTER_SIGN_UNCERTAIN : 0u));
+}
+
 static bool m3_same_float(float a, float b) { return memcmp(&a, &b, sizeof a) == 0; }
 
 /* ModelSel 3 switches a Model II node to Model III out of tissue; every Estimate then equals a
@@ -1191,6 +1204,7 @@ static void test_model3_params_contact(void** state)
     assert_int_equal(g_node_a.counters.commands_applied, 1u);
     assert_int_equal(nte_node_state(&g_node_a), nte_node_state_init);
     const size_t mark = g_port_a.tx_n;
+    const uint32_t health_before = g_node_a.counters.tx[4]; /* sent under Model II */
     const uint32_t t1 = 1000u + 10u * 50u;
     m3_push(&g_port_a, &b, t1);
     run_all(&g_node_a, &g_port_a);
@@ -1235,6 +1249,11 @@ static void test_model3_params_contact(void** state)
     (void)nte_frames_rx_init(&rxe, nte_frames_kind_estimate);
     (void)nte_frames_rx_init(&rxp, nte_frames_kind_params);
     (void)nte_frames_rx_init(&rxc, nte_frames_kind_contact);
+    nte_e2e_rx_t rxhealth;
+    (void)nte_frames_rx_init(&rxhealth, nte_frames_kind_health);
+    bool health_sent[M3_N];
+    memset(health_sent, 0, sizeof health_sent);
+    size_t n_health = 0u;
     (void)nte_frames_tx_init(&txe, nte_frames_kind_estimate);
     (void)nte_frames_rx_init(&rxe2, nte_frames_kind_estimate);
     int32_t step = -1;
@@ -1307,9 +1326,41 @@ static void test_model3_params_contact(void** state)
             }
             assert_true(fabsf(c.tare_n - (float)o->tare_n) <= 0.00005f + 1e-6f);
             assert_int_equal(c.layer, o->layer);
+        } else if (fr->id == BASE + NTE_FRAMES_OFFSET_HEALTH) {
+            nte_frames_health_t h;
+            assert_true(step >= 0);
+            assert_int_equal(nte_frames_decode_health(&rxhealth, fr->data, 8u, &h, NULL, NULL),
+                             nte_frames_ok);
+            assert_false(health_sent[step]);
+            health_sent[step] = true;
+            n_health++;
+            assert_false(h.refined || h.converged); /* the bank */
+            assert_true(h.confidence <= 0.0f);
+            for (uint32_t i = 0u; i < NTE_FRAMES_FILTERS; i++) {
+                assert_int_equal(h.filter_flags[i], health_flags(ro[step].filter_status[i]));
+            }
         } else {
             assert_int_equal(fr->id, BASE + NTE_FRAMES_OFFSET_HEARTBEAT);
         }
+    }
+    /* the Health rule, independently: the first step, a change of any word, else 1000 ticks */
+    {
+        int32_t last = -1;
+        uint32_t flagged = 0u;
+        for (uint32_t i = 0u; i < M3_N; i++) {
+            bool expect = (last < 0) || ((i - (uint32_t)last) * 50u >= 1000u);
+            for (uint32_t f = 0u; f < NTE_FRAMES_FILTERS; f++) {
+                expect = expect ||
+                         (last >= 0 && (ro[i].filter_status[f] != ro[last].filter_status[f]));
+                flagged += (ro[i].filter_status[f] != 0u) ? 1u : 0u;
+            }
+            assert_int_equal(health_sent[i], expect);
+            if (expect) {
+                last = (int32_t)i;
+            }
+        }
+        assert_true(flagged > 0u); /* the scenario raises some flag: the words are exercised */
+        assert_int_equal(g_node_a.counters.tx[4] - health_before, n_health);
     }
     assert_int_equal(step + 1, (int32_t)M3_N);
     for (uint32_t j = 0u; j < 10u; j++) {

@@ -21,7 +21,8 @@ from host_bench.replay import scenario_frames  # noqa: E402
 from reference_py.bus.candump import write_candump  # noqa: E402
 from reference_py.bus.dbc import NteDatabase, TICK_S  # noqa: E402
 from host_bench.faults import burst  # noqa: E402
-from host_bench.node_mirror import NodeMirror, compare, contact_outputs, node_outputs  # noqa: E402
+from host_bench.node_mirror import NodeMirror  # noqa: E402
+from host_bench.node_outputs import compare, contact_outputs, health_outputs, node_outputs  # noqa: E402
 
 DB = NteDatabase()
 INPUT_IDS = {DB.frame_id(n) for n in ("Depth", "Force", "Command")}
@@ -43,7 +44,7 @@ def capture(path: Path) -> list[can.Message]:
     return list(can.CanutilsLogReader(str(path)))
 
 
-OUTPUT_IDS = {DB.frame_id(n) for n in ("Estimate", "Params", "Heartbeat")}
+OUTPUT_IDS = {DB.frame_id(n) for n in ("Estimate", "Params", "Heartbeat", "Contact", "Health")}
 
 
 def _result(out: Path, cap: list[can.Message], tag: str, inputs: list | None = None,
@@ -55,8 +56,9 @@ def _result(out: Path, cap: list[can.Message], tag: str, inputs: list | None = N
         inputs = [m for m in cap if m.arbitration_id not in OUTPUT_IDS]
     mirror.feed_all(inputs)
     est, par, bad = node_outputs(DB, cap)
-    res = compare(mirror, est, par)
-    res["output_e2e_errors"] = bad
+    healths, bad_h = health_outputs(DB, cap)
+    res = compare(mirror, est, par, healths=healths)
+    res["output_e2e_errors"] = bad + bad_h
     res["mirror_events"] = mirror.events
     res["stats"] = json.loads((out / f"{tag}.stats.json").read_text())
     res["inputs_captured"] = sum(1 for m in cap if m.arbitration_id in INPUT_IDS)
@@ -263,8 +265,9 @@ def _exact_bookkeeping(out: Path, tag: str, genuine: list) -> dict:
     sent = capture(out / f"{tag}.sent.log")
     mirror = NodeMirror().feed_all(recv)
     est, par, bad = node_outputs(DB, sent)
-    res = compare(mirror, est, par)
-    res["output_e2e_errors"] = bad
+    healths, bad_h = health_outputs(DB, sent)
+    res = compare(mirror, est, par, healths=healths)
+    res["output_e2e_errors"] = bad + bad_h
     res["mirror_events"] = mirror.events
     res["stats"] = json.loads((out / f"{tag}.stats.json").read_text())
     res["received"] = len(recv)
@@ -337,8 +340,9 @@ def model3(out: Path) -> dict:
     mirror = NodeMirror(model=2).feed_all(recv)
     est, par, bad = node_outputs(DB, sent)
     contacts, bad_c = contact_outputs(DB, sent)
-    res = compare(mirror, est, par, contacts)
-    res["output_e2e_errors"] = bad + bad_c
+    healths, bad_h = health_outputs(DB, sent)
+    res = compare(mirror, est, par, contacts, healths)
+    res["output_e2e_errors"] = bad + bad_c + bad_h
     res["mirror_events"] = mirror.events
     res["mirror_model"] = mirror.model
     res["stats"] = json.loads((out / "model3.stats.json").read_text())
@@ -362,8 +366,9 @@ def predict_only(out: Path) -> dict:
     sent = capture(out / "po.sent.log")
     mirror = NodeMirror(model=2).feed_all(recv)
     est, par, bad = node_outputs(DB, sent)
-    res = compare(mirror, est, par)
-    res["output_e2e_errors"] = bad
+    healths, bad_h = health_outputs(DB, sent)
+    res = compare(mirror, est, par, healths=healths)
+    res["output_e2e_errors"] = bad + bad_h
     res["mirror_events"] = mirror.events
     res["mirror_predict"] = mirror.predict_counts
     res["stats"] = json.loads((out / "po.stats.json").read_text())

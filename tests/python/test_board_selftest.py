@@ -321,7 +321,8 @@ def test_board_node_over_slcan_matches_mirror(built, tmp_path: Path) -> None:
     pytest.importorskip("numpy")
     sys.path.insert(0, str(ROOT))
     from reference_py.bus.dbc import NteDatabase
-    from host_bench.node_mirror import NodeMirror, compare, node_outputs
+    from host_bench.node_mirror import NodeMirror
+    from host_bench.node_outputs import compare, node_outputs
 
     db = NteDatabase()
     frames = _short_insertion_frames(tmp_path, db)
@@ -404,7 +405,8 @@ def test_board_over_python_can_slcan_matches_mirror(built, tmp_path: Path) -> No
     pytest.importorskip("numpy")
     sys.path.insert(0, str(ROOT))
     from reference_py.bus.dbc import NteDatabase
-    from host_bench.node_mirror import NodeMirror, compare, node_outputs
+    from host_bench.node_mirror import NodeMirror
+    from host_bench.node_outputs import compare, node_outputs
 
     db = NteDatabase()
     frames = _short_insertion_frames(tmp_path, db)

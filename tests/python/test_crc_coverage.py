@@ -44,8 +44,8 @@ def figures(tmp_path_factory: pytest.TempPathFactory) -> dict[str, dict[str, flo
          str(ROOT / "firmware" / "can" / "nte_e2e.c"), "-o", str(exe)],
         check=True)
     frames = _frames()
-    # Depth, Force, Command, Setting, Estimate, Params, Heartbeat, Contact
-    assert len(frames) == 8, frames
+    # Depth, Force, Command, Setting, Estimate, Params, Heartbeat, Contact, Health
+    assert len(frames) == 9, frames
     run = subprocess.run([str(exe), str(N_RANDOM)] + [f"{n}:{i}" for n, i in frames],
                          capture_output=True, text=True, timeout=120)
     print(run.stdout)

@@ -15,7 +15,7 @@ import pytest
 from reference_py.bank import STATUS_FROZEN, STATUS_PREDICT_ONLY
 from reference_py.robust import STATUS_REFINED
 from test_node_port import paper_frames  # noqa: F401  (the fixture: a 3.5 s paper insertion)
-from test_predict_only import c_equals_reference, run_reference, scenario, switch_mode
+from test_predict_only import PARAMS_AT, c_equals_reference, run_reference, scenario, switch_mode
 
 HELD = 2          # nte_switch_replay's mode bit for nte_set_frozen
 PREDICT_ONLY = 1
@@ -30,7 +30,7 @@ CASES = [  # (model, schedule, robust, spans) on p10_d50; Model III on the phant
 
 
 def _params(rows: list[tuple]) -> np.ndarray:
-    return np.array([r[10::2] for r in rows])
+    return np.array([r[PARAMS_AT::2] for r in rows])
 
 
 def _runs(mask: np.ndarray) -> list[np.ndarray]:

@@ -68,7 +68,8 @@ from host_bench.replay import scenario_frames  # noqa: E402
 from reference_py.bus.candump import write_candump  # noqa: E402
 from reference_py.bus.dbc import NteDatabase  # noqa: E402
 from host_bench.faults import burst, clock_jump  # noqa: E402
-from host_bench.node_mirror import NodeMirror, compare, node_outputs  # noqa: E402
+from host_bench.node_mirror import NodeMirror  # noqa: E402
+from host_bench.node_outputs import compare, health_outputs, node_outputs  # noqa: E402
 
 DB = NteDatabase()
 
@@ -97,14 +98,18 @@ def replay_node(tmp_path: Path, frames: list, tag: str) -> tuple[list, dict]:
 
 
 def assert_node_equals_mirror(sent: list, mirror: NodeMirror) -> None:
+    """Every Estimate, Params and Health frame of the node equals the mirror's."""
     est, par, bad = node_outputs(DB, sent)
-    res = compare(mirror, est, par)
-    assert bad == 0
+    healths, bad_h = health_outputs(DB, sent)
+    res = compare(mirror, est, par, healths=healths)
+    assert bad == bad_h == 0
     assert res["estimates_node"] == res["estimates_reference"] > 0
     assert res["estimate_mismatches"] == 0, res["first_mismatch"]
     assert res["params_node"] == res["params_reference"]
     assert res["param_value_mismatches"] == 0
     assert res["param_std_beyond_1lsb"] == 0
+    assert res["health_node"] == res["health_reference"] > 0
+    assert res["health_mismatches"] == 0
 
 
 def test_replay_burst_on_input_ids_costs_nothing(tmp_path: Path, paper_frames: list) -> None:
@@ -311,7 +316,7 @@ def test_force_sensor_faults_bridged_by_the_model(fault_table: dict, fault: str)
 # Model III on the node: a phantom record that starts in the air with a tare.
 import math  # noqa: E402
 
-from host_bench.node_mirror import contact_outputs  # noqa: E402
+from host_bench.node_outputs import contact_outputs  # noqa: E402
 
 
 @pytest.fixture(scope="module")

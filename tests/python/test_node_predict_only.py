@@ -21,7 +21,8 @@ from host_bench.cli import sensor_failures  # noqa: E402
 from host_bench.replay import scenario_frames  # noqa: E402
 from reference_py.bus.candump import write_candump  # noqa: E402
 from reference_py.bus.dbc import NteDatabase  # noqa: E402
-from host_bench.node_mirror import NodeMirror, compare, contact_outputs, node_outputs  # noqa: E402
+from host_bench.node_mirror import NodeMirror  # noqa: E402
+from host_bench.node_outputs import compare, contact_outputs, node_outputs  # noqa: E402
 
 DB = NteDatabase()
 

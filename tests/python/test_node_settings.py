@@ -223,7 +223,8 @@ def test_the_mirror_counts_broken_transfers_as_the_node(tmp_path: Path,
     frames; a transfer the node would apply makes the mirror refuse to go on (it runs
     presets)."""
     import random
-    from host_bench.node_mirror import NodeMirror, node_outputs
+    from host_bench.node_mirror import NodeMirror
+    from host_bench.node_outputs import node_outputs
     csv, cfg = exported
     frames = scenario_frames(str(csv), DB, 1000.0)[:4000]
     n = item_numbers(DB)

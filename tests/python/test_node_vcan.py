@@ -92,6 +92,8 @@ def _exact(r: dict) -> None:
     assert r["params_node"] == r["params_reference"]
     assert r["param_value_mismatches"] == 0
     assert r["param_std_beyond_1lsb"] == 0
+    assert r["health_node"] == r["health_reference"] > 0
+    assert r["health_mismatches"] == 0
 
 
 def _events_equal_mirror(r: dict) -> None:

@@ -77,9 +77,15 @@ def run_reference(precision: str, model: int, schedule: str, contact: bool, robu
         rows.append((float(o.force_hat[0]), float(o.z[0]), float(o.innovation[0]),
                      float(o.nis[0]), conf, float(o.tare_n[0]), float(o.surface_mm[0]),
                      int(o.status[0]), int(o.contact[0]), 0 if o.layer is None else int(o.layer[0]),
+                     *[int(x) for x in o.filter_status[:, 0]],
                      *[float(x) for pair in zip(o.params[:, 0], o.params_sd[:, 0])
                        for x in pair]))
     return rows
+
+
+#: a row's layout (run_reference, run_c): 7 reals, status, contact, layer, the 3 filters'
+#: filter_status, then value and sd of every identified parameter
+FILTER_STATUS_AT, PARAMS_AT = 10, 13
 
 
 def _real(tok: str) -> float:
@@ -101,8 +107,8 @@ def run_c(precision: str, model: int, schedule: str, contact: bool, robust: bool
     rows = []
     for ln in r.stdout.splitlines():
         tok = ln.split()
-        rows.append((*[_real(x) for x in tok[:7]], int(tok[7]), int(tok[8]), int(tok[9]),
-                     *[_real(x) for x in tok[10:]]))
+        rows.append((*[_real(x) for x in tok[:7]], *[int(x) for x in tok[7:13]],
+                     *[_real(x) for x in tok[13:]]))
     return rows
 
 
@@ -167,7 +173,7 @@ def test_switch_mid_run_c_equals_reference(precision, model, schedule, robust, s
     assert np.all(((st & STATUS_PREDICT_ONLY) != 0) == (mode == 1))
     assert not np.any(st[mode == 1] & 2), "a broken force rejected a predict-only sample"
     # the parameters do not move while predicting
-    p = np.array([r[10::2] for r in ref])
+    p = np.array([r[PARAMS_AT::2] for r in ref])
     on = np.flatnonzero(mode)
     runs = np.split(on, np.flatnonzero(np.diff(on) > 1) + 1)
     for r in runs:

@@ -2403,3 +2403,220 @@ bool nte_can_contact_layer_is_in_phys_range(float value)
 {
     return ((value >= 0.0f) && (value <= 7.0f));
 }
+
+int nte_can_health_pack(
+    uint8_t *dst_p,
+    const struct nte_can_health_t *src_p,
+    size_t size)
+{
+    if (size < 8u) {
+        return (-EINVAL);
+    }
+
+    memset(&dst_p[0], 0, 8);
+
+    dst_p[0] |= pack_left_shift_u8(src_p->crc, 0u, 0xffu);
+    dst_p[1] |= pack_left_shift_u8(src_p->counter, 0u, 0x0fu);
+    dst_p[1] |= pack_left_shift_u8(src_p->refined, 4u, 0x10u);
+    dst_p[1] |= pack_left_shift_u8(src_p->converged, 5u, 0x20u);
+    dst_p[2] |= pack_left_shift_u16(src_p->confidence, 0u, 0xffu);
+    dst_p[3] |= pack_right_shift_u16(src_p->confidence, 8u, 0x3fu);
+    dst_p[4] |= pack_left_shift_u8(src_p->filter0_flags, 0u, 0xffu);
+    dst_p[5] |= pack_left_shift_u8(src_p->filter1_flags, 0u, 0xffu);
+    dst_p[6] |= pack_left_shift_u8(src_p->filter2_flags, 0u, 0xffu);
+
+    return (8);
+}
+
+int nte_can_health_unpack(
+    struct nte_can_health_t *dst_p,
+    const uint8_t *src_p,
+    size_t size)
+{
+    if (size < 8u) {
+        return (-EINVAL);
+    }
+
+    dst_p->crc = unpack_right_shift_u8(src_p[0], 0u, 0xffu);
+    dst_p->counter = unpack_right_shift_u8(src_p[1], 0u, 0x0fu);
+    dst_p->refined = unpack_right_shift_u8(src_p[1], 4u, 0x10u);
+    dst_p->converged = unpack_right_shift_u8(src_p[1], 5u, 0x20u);
+    dst_p->confidence = unpack_right_shift_u16(src_p[2], 0u, 0xffu);
+    dst_p->confidence |= unpack_left_shift_u16(src_p[3], 8u, 0x3fu);
+    dst_p->filter0_flags = unpack_right_shift_u8(src_p[4], 0u, 0xffu);
+    dst_p->filter1_flags = unpack_right_shift_u8(src_p[5], 0u, 0xffu);
+    dst_p->filter2_flags = unpack_right_shift_u8(src_p[6], 0u, 0xffu);
+
+    return (0);
+}
+
+int nte_can_health_init(struct nte_can_health_t *msg_p)
+{
+    if (msg_p == NULL) return -1;
+
+    memset(msg_p, 0, sizeof(struct nte_can_health_t));
+
+    return 0;
+}
+
+uint8_t nte_can_health_crc_encode(float value)
+{
+    return (uint8_t)(cantools_unsigned_from_double(roundf(value)));
+}
+
+float nte_can_health_crc_decode(uint8_t value)
+{
+    return ((float)value);
+}
+
+bool nte_can_health_crc_is_in_range(uint8_t value)
+{
+    (void)value;
+
+    return (true);
+}
+
+bool nte_can_health_crc_is_in_phys_range(float value)
+{
+    return ((value >= 0.0f) && (value <= 255.0f));
+}
+
+uint8_t nte_can_health_counter_encode(float value)
+{
+    return (uint8_t)(cantools_unsigned_from_double(roundf(value)));
+}
+
+float nte_can_health_counter_decode(uint8_t value)
+{
+    return ((float)value);
+}
+
+bool nte_can_health_counter_is_in_range(uint8_t value)
+{
+    return (value <= 14u);
+}
+
+bool nte_can_health_counter_is_in_phys_range(float value)
+{
+    return ((value >= 0.0f) && (value <= 14.0f));
+}
+
+uint8_t nte_can_health_refined_encode(float value)
+{
+    return (uint8_t)(cantools_unsigned_from_double(roundf(value)));
+}
+
+float nte_can_health_refined_decode(uint8_t value)
+{
+    return ((float)value);
+}
+
+bool nte_can_health_refined_is_in_range(uint8_t value)
+{
+    return (value <= 1u);
+}
+
+bool nte_can_health_refined_is_in_phys_range(float value)
+{
+    return ((value >= 0.0f) && (value <= 1.0f));
+}
+
+uint8_t nte_can_health_converged_encode(float value)
+{
+    return (uint8_t)(cantools_unsigned_from_double(roundf(value)));
+}
+
+float nte_can_health_converged_decode(uint8_t value)
+{
+    return ((float)value);
+}
+
+bool nte_can_health_converged_is_in_range(uint8_t value)
+{
+    return (value <= 1u);
+}
+
+bool nte_can_health_converged_is_in_phys_range(float value)
+{
+    return ((value >= 0.0f) && (value <= 1.0f));
+}
+
+uint16_t nte_can_health_confidence_encode(float value)
+{
+    return (uint16_t)(cantools_unsigned_from_double(roundf(value / 0.0001f)));
+}
+
+float nte_can_health_confidence_decode(uint16_t value)
+{
+    return ((float)value * 0.0001f);
+}
+
+bool nte_can_health_confidence_is_in_range(uint16_t value)
+{
+    return (value <= 10000u);
+}
+
+bool nte_can_health_confidence_is_in_phys_range(float value)
+{
+    return ((value >= 0.0f) && (value <= 1.0f));
+}
+
+uint8_t nte_can_health_filter0_flags_encode(float value)
+{
+    return (uint8_t)(cantools_unsigned_from_double(roundf(value)));
+}
+
+float nte_can_health_filter0_flags_decode(uint8_t value)
+{
+    return ((float)value);
+}
+
+bool nte_can_health_filter0_flags_is_in_range(uint8_t value)
+{
+    return (value <= 63u);
+}
+
+bool nte_can_health_filter0_flags_is_in_phys_range(float value)
+{
+    return ((value >= 0.0f) && (value <= 63.0f));
+}
+
+uint8_t nte_can_health_filter1_flags_encode(float value)
+{
+    return (uint8_t)(cantools_unsigned_from_double(roundf(value)));
+}
+
+float nte_can_health_filter1_flags_decode(uint8_t value)
+{
+    return ((float)value);
+}
+
+bool nte_can_health_filter1_flags_is_in_range(uint8_t value)
+{
+    return (value <= 63u);
+}
+
+bool nte_can_health_filter1_flags_is_in_phys_range(float value)
+{
+    return ((value >= 0.0f) && (value <= 63.0f));
+}
+
+uint8_t nte_can_health_filter2_flags_encode(float value)
+{
+    return (uint8_t)(cantools_unsigned_from_double(roundf(value)));
+}
+
+float nte_can_health_filter2_flags_decode(uint8_t value)
+{
+    return ((float)value);
+}
+
+bool nte_can_health_filter2_flags_is_in_range(uint8_t value)
+{
+    return (value <= 63u);
+}
+
+bool nte_can_health_filter2_flags_is_in_phys_range(float value)
+{
+    return ((value >= 0.0f) && (value <= 63.0f));
+}

@@ -53,6 +53,7 @@ extern "C" {
 #define NTE_CAN_PARAMS_FRAME_ID (0x211u)
 #define NTE_CAN_HEARTBEAT_FRAME_ID (0x212u)
 #define NTE_CAN_CONTACT_FRAME_ID (0x213u)
+#define NTE_CAN_HEALTH_FRAME_ID (0x214u)
 
 /* Frame lengths in bytes. */
 #define NTE_CAN_DEPTH_LENGTH (8u)
@@ -63,6 +64,7 @@ extern "C" {
 #define NTE_CAN_PARAMS_LENGTH (8u)
 #define NTE_CAN_HEARTBEAT_LENGTH (8u)
 #define NTE_CAN_CONTACT_LENGTH (8u)
+#define NTE_CAN_HEALTH_LENGTH (8u)
 
 /* Extended or standard frame types. */
 #define NTE_CAN_DEPTH_IS_EXTENDED (0)
@@ -73,6 +75,7 @@ extern "C" {
 #define NTE_CAN_PARAMS_IS_EXTENDED (0)
 #define NTE_CAN_HEARTBEAT_IS_EXTENDED (0)
 #define NTE_CAN_CONTACT_IS_EXTENDED (0)
+#define NTE_CAN_HEALTH_IS_EXTENDED (0)
 
 /* Frame cycle times in milliseconds. */
 #define NTE_CAN_DEPTH_CYCLE_TIME_MS (1u)
@@ -81,6 +84,7 @@ extern "C" {
 #define NTE_CAN_PARAMS_CYCLE_TIME_MS (10u)
 #define NTE_CAN_HEARTBEAT_CYCLE_TIME_MS (100u)
 #define NTE_CAN_CONTACT_CYCLE_TIME_MS (100u)
+#define NTE_CAN_HEALTH_CYCLE_TIME_MS (100u)
 
 /* Signal choices. */
 #define NTE_CAN_COMMAND_MODEL_SEL_KEEP_CHOICE (0u)
@@ -157,6 +161,7 @@ extern "C" {
 #define NTE_CAN_PARAMS_NAME "Params"
 #define NTE_CAN_HEARTBEAT_NAME "Heartbeat"
 #define NTE_CAN_CONTACT_NAME "Contact"
+#define NTE_CAN_HEALTH_NAME "Health"
 
 /* Signal Names. */
 #define NTE_CAN_DEPTH_CRC_NAME "Crc"
@@ -230,6 +235,14 @@ extern "C" {
 #define NTE_CAN_CONTACT_SURFACE_NAME "Surface"
 #define NTE_CAN_CONTACT_TARE_NAME "Tare"
 #define NTE_CAN_CONTACT_LAYER_NAME "Layer"
+#define NTE_CAN_HEALTH_CRC_NAME "Crc"
+#define NTE_CAN_HEALTH_COUNTER_NAME "Counter"
+#define NTE_CAN_HEALTH_REFINED_NAME "Refined"
+#define NTE_CAN_HEALTH_CONVERGED_NAME "Converged"
+#define NTE_CAN_HEALTH_CONFIDENCE_NAME "Confidence"
+#define NTE_CAN_HEALTH_FILTER0_FLAGS_NAME "Filter0Flags"
+#define NTE_CAN_HEALTH_FILTER1_FLAGS_NAME "Filter1Flags"
+#define NTE_CAN_HEALTH_FILTER2_FLAGS_NAME "Filter2Flags"
 
 /**
  * Signals in message Depth.
@@ -878,6 +891,83 @@ struct nte_can_contact_t {
      * Offset: 0
      */
     uint8_t layer;
+};
+
+/**
+ * Signals in message Health.
+ *
+ * The estimator's health: the robust estimator's refinement and the fault word of each filter of the bank (nte.h nte_output_t.filter_status), in every model: after an estimator step whose fields differ from the last Health frame's, and otherwise every 100 ms of sensor time (the force sample's SensorTime, so a replay is deterministic). Id offset 0x14.
+ *
+ * All signal values are as on the CAN bus.
+ */
+struct nte_can_health_t {
+    /**
+     * Range: 0..255 (0..255 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    uint8_t crc;
+
+    /**
+     * Range: 0..14 (0..14 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    uint8_t counter;
+
+    /**
+     * 1 = the robust estimator adopted a batch refinement at this step (NTE_STATUS_REFINED); 0 for the bank.
+     *
+     * Range: 0..1 (0..1 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    uint8_t refined;
+
+    /**
+     * 1 = the robust estimator's last refinement agreed with the data and with the refinement before it (NTE_STATUS_CONVERGED: by default Confidence >= 0.75 and the parameters moved by less than 5 % since the previous refinement); 0 for the bank and until a second refinement.
+     *
+     * Range: 0..1 (0..1 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    uint8_t converged;
+
+    /**
+     * The robust estimator's confidence in its last refinement, sqrt(r_n2) / max(rms residual, sqrt(r_n2)) in (0, 1], 1e-4 resolution; 0 before the first refinement and for the bank.
+     *
+     * Range: 0..10000 (0..1 -)
+     * Scale: 0.0001
+     * Offset: 0
+     */
+    uint16_t confidence;
+
+    /**
+     * Filter 1 of the bank (index 0: sigma0, with f2 in Model I and the relaxation strengths in Model III) at this step: bit 0 gated (the innovation failed the gate, the update was skipped), bit 1 reset (the covariance lost definiteness or a state went non-finite: the filter restarted from its initial covariance), bit 2 diverged (its predicted force or z left the physical range: z to its steady state), bit 3 clipped (a parameter hit the clip |u| = u_max), bit 4 floored (a variance was raised to its floor), bit 5 sign uncertain (R inflated: the smooth sign may disagree with the motion); bits 6..7 0. A filter that did not update at the step (rotate schedule, predict-only) can still show bits 1..4 from its guard, never bit 0.
+     *
+     * Range: 0..63 (0..63 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    uint8_t filter0_flags;
+
+    /**
+     * Filter 2 of the bank (index 1: f1 and sigma1, with delta in Model III), bits as Filter0Flags.
+     *
+     * Range: 0..63 (0..63 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    uint8_t filter1_flags;
+
+    /**
+     * Filter 3 of the bank (index 2: sigma2 and beta, alpha in Model I), bits as Filter0Flags.
+     *
+     * Range: 0..63 (0..63 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    uint8_t filter2_flags;
 };
 
 /**
@@ -4015,6 +4105,363 @@ bool nte_can_contact_layer_is_in_range(uint8_t value);
  * @return true if in range, false otherwise.
  */
 bool nte_can_contact_layer_is_in_phys_range(float value);
+
+/**
+ * Pack message Health.
+ *
+ * @param[out] dst_p Buffer to pack the message into.
+ * @param[in] src_p Data to pack.
+ * @param[in] size Size of dst_p.
+ *
+ * @return Size of packed data, or negative error code.
+ */
+int nte_can_health_pack(
+    uint8_t *dst_p,
+    const struct nte_can_health_t *src_p,
+    size_t size);
+
+/**
+ * Unpack message Health.
+ *
+ * @param[out] dst_p Object to unpack the message into.
+ * @param[in] src_p Message to unpack.
+ * @param[in] size Size of src_p.
+ *
+ * @return zero(0) or negative error code.
+ */
+int nte_can_health_unpack(
+    struct nte_can_health_t *dst_p,
+    const uint8_t *src_p,
+    size_t size);
+
+/**
+ * Init message fields to default values from Health.
+ *
+ * @param[in] msg_p Message to init.
+ *
+ * @return zero(0) on success or (-1) in case of nullptr argument.
+ */
+int nte_can_health_init(struct nte_can_health_t *msg_p);
+
+/**
+ * Encode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to encode.
+ *
+ * @return Encoded signal.
+ */
+uint8_t nte_can_health_crc_encode(float value);
+
+/**
+ * Decode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to decode.
+ *
+ * @return Decoded signal.
+ */
+float nte_can_health_crc_decode(uint8_t value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_health_crc_is_in_range(uint8_t value);
+
+/**
+ * Check that given physical value is in allowed range before encoding.
+ *
+ * Use this BEFORE calling _encode() to avoid silent integer overflow:
+ *   encode(-1.0) on a [0,100] signal wraps to 255 and passes is_in_range().
+ *   is_in_phys_range(-1.0) correctly returns false.
+ *
+ * @param[in] value Physical signal value to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_health_crc_is_in_phys_range(float value);
+
+/**
+ * Encode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to encode.
+ *
+ * @return Encoded signal.
+ */
+uint8_t nte_can_health_counter_encode(float value);
+
+/**
+ * Decode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to decode.
+ *
+ * @return Decoded signal.
+ */
+float nte_can_health_counter_decode(uint8_t value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_health_counter_is_in_range(uint8_t value);
+
+/**
+ * Check that given physical value is in allowed range before encoding.
+ *
+ * Use this BEFORE calling _encode() to avoid silent integer overflow:
+ *   encode(-1.0) on a [0,100] signal wraps to 255 and passes is_in_range().
+ *   is_in_phys_range(-1.0) correctly returns false.
+ *
+ * @param[in] value Physical signal value to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_health_counter_is_in_phys_range(float value);
+
+/**
+ * Encode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to encode.
+ *
+ * @return Encoded signal.
+ */
+uint8_t nte_can_health_refined_encode(float value);
+
+/**
+ * Decode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to decode.
+ *
+ * @return Decoded signal.
+ */
+float nte_can_health_refined_decode(uint8_t value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_health_refined_is_in_range(uint8_t value);
+
+/**
+ * Check that given physical value is in allowed range before encoding.
+ *
+ * Use this BEFORE calling _encode() to avoid silent integer overflow:
+ *   encode(-1.0) on a [0,100] signal wraps to 255 and passes is_in_range().
+ *   is_in_phys_range(-1.0) correctly returns false.
+ *
+ * @param[in] value Physical signal value to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_health_refined_is_in_phys_range(float value);
+
+/**
+ * Encode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to encode.
+ *
+ * @return Encoded signal.
+ */
+uint8_t nte_can_health_converged_encode(float value);
+
+/**
+ * Decode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to decode.
+ *
+ * @return Decoded signal.
+ */
+float nte_can_health_converged_decode(uint8_t value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_health_converged_is_in_range(uint8_t value);
+
+/**
+ * Check that given physical value is in allowed range before encoding.
+ *
+ * Use this BEFORE calling _encode() to avoid silent integer overflow:
+ *   encode(-1.0) on a [0,100] signal wraps to 255 and passes is_in_range().
+ *   is_in_phys_range(-1.0) correctly returns false.
+ *
+ * @param[in] value Physical signal value to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_health_converged_is_in_phys_range(float value);
+
+/**
+ * Encode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to encode.
+ *
+ * @return Encoded signal.
+ */
+uint16_t nte_can_health_confidence_encode(float value);
+
+/**
+ * Decode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to decode.
+ *
+ * @return Decoded signal.
+ */
+float nte_can_health_confidence_decode(uint16_t value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_health_confidence_is_in_range(uint16_t value);
+
+/**
+ * Check that given physical value is in allowed range before encoding.
+ *
+ * Use this BEFORE calling _encode() to avoid silent integer overflow:
+ *   encode(-1.0) on a [0,100] signal wraps to 255 and passes is_in_range().
+ *   is_in_phys_range(-1.0) correctly returns false.
+ *
+ * @param[in] value Physical signal value to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_health_confidence_is_in_phys_range(float value);
+
+/**
+ * Encode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to encode.
+ *
+ * @return Encoded signal.
+ */
+uint8_t nte_can_health_filter0_flags_encode(float value);
+
+/**
+ * Decode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to decode.
+ *
+ * @return Decoded signal.
+ */
+float nte_can_health_filter0_flags_decode(uint8_t value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_health_filter0_flags_is_in_range(uint8_t value);
+
+/**
+ * Check that given physical value is in allowed range before encoding.
+ *
+ * Use this BEFORE calling _encode() to avoid silent integer overflow:
+ *   encode(-1.0) on a [0,100] signal wraps to 255 and passes is_in_range().
+ *   is_in_phys_range(-1.0) correctly returns false.
+ *
+ * @param[in] value Physical signal value to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_health_filter0_flags_is_in_phys_range(float value);
+
+/**
+ * Encode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to encode.
+ *
+ * @return Encoded signal.
+ */
+uint8_t nte_can_health_filter1_flags_encode(float value);
+
+/**
+ * Decode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to decode.
+ *
+ * @return Decoded signal.
+ */
+float nte_can_health_filter1_flags_decode(uint8_t value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_health_filter1_flags_is_in_range(uint8_t value);
+
+/**
+ * Check that given physical value is in allowed range before encoding.
+ *
+ * Use this BEFORE calling _encode() to avoid silent integer overflow:
+ *   encode(-1.0) on a [0,100] signal wraps to 255 and passes is_in_range().
+ *   is_in_phys_range(-1.0) correctly returns false.
+ *
+ * @param[in] value Physical signal value to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_health_filter1_flags_is_in_phys_range(float value);
+
+/**
+ * Encode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to encode.
+ *
+ * @return Encoded signal.
+ */
+uint8_t nte_can_health_filter2_flags_encode(float value);
+
+/**
+ * Decode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to decode.
+ *
+ * @return Decoded signal.
+ */
+float nte_can_health_filter2_flags_decode(uint8_t value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_health_filter2_flags_is_in_range(uint8_t value);
+
+/**
+ * Check that given physical value is in allowed range before encoding.
+ *
+ * Use this BEFORE calling _encode() to avoid silent integer overflow:
+ *   encode(-1.0) on a [0,100] signal wraps to 255 and passes is_in_range().
+ *   is_in_phys_range(-1.0) correctly returns false.
+ *
+ * @param[in] value Physical signal value to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_health_filter2_flags_is_in_phys_range(float value);
 
 
 #ifdef __cplusplus

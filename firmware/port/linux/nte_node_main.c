@@ -224,17 +224,18 @@ static void write_stats(const nte_node_t* n, const nte_port_socketcan_t* port, F
             "}, \"frames_lost\": %u, \"rx_accepted\": {\"depth\": %u, \"force\": %u, "
             "\"command\": %u, \"setting\": %u}, \"tx\": {\"estimate\": %u, \"params\": %u, "
             "\"heartbeat\": %u, "
-            "\"contact\": %u}, "
+            "\"contact\": %u, \"health\": %u}, "
             "\"steps\": %u, \"commands_applied\": %u, \"predict_on\": %u, "
             "\"predict_off\": %u, \"predict_depth_steps\": %u, \"settings_applied\": %u, "
             "\"model\": %d, "
             "\"state\": %d, \"send_enobufs\": %u, \"last_errno\": %d}\n",
             (unsigned)c->frames_lost, (unsigned)c->rx_accepted[0], (unsigned)c->rx_accepted[1],
             (unsigned)c->rx_accepted[2], (unsigned)c->rx_accepted[3], (unsigned)c->tx[0],
-            (unsigned)c->tx[1], (unsigned)c->tx[2], (unsigned)c->tx[3], (unsigned)c->steps,
-            (unsigned)c->commands_applied, (unsigned)c->predict_on, (unsigned)c->predict_off,
-            (unsigned)c->predict_depth_steps, (unsigned)c->settings_applied, (int)nte_node_model(n),
-            (int)nte_node_state(n), (unsigned)port->send_errors_enobufs, port->last_errno);
+            (unsigned)c->tx[1], (unsigned)c->tx[2], (unsigned)c->tx[3], (unsigned)c->tx[4],
+            (unsigned)c->steps, (unsigned)c->commands_applied, (unsigned)c->predict_on,
+            (unsigned)c->predict_off, (unsigned)c->predict_depth_steps,
+            (unsigned)c->settings_applied, (int)nte_node_model(n), (int)nte_node_state(n),
+            (unsigned)port->send_errors_enobufs, port->last_errno);
 }
 
 static void dump_stats(const char* path, const nte_node_t* n, const nte_port_socketcan_t* port)
@@ -439,7 +440,7 @@ int main(int argc, char** argv)
         const nte_node_err_t err = nte_node_init(&node, &cfg, &probe);
         if (err != nte_node_ok) {
             (void)snprintf(msg, sizeof msg,
-                           "invalid node configuration (nte_node_err %d): base id <= 0x7EC, "
+                           "invalid node configuration (nte_node_err %d): base id <= 0x7EB, "
                            "depth timeout 1..3000 ms, heartbeat 1..10000 ms, params per step "
                            "1..7, resync gap 1..3000 ms",
                            (int)err);
