@@ -146,7 +146,11 @@ def test_node_health_frames_equal_the_mirror(tmp_path):
     assert mirror.estimator == "robust"
     assert_node_equals_mirror(sent, mirror)      # Health frames included
     healths, bad = health_outputs(DB, sent)
-    assert bad == 0 and json.loads(stats.read_text())["tx"]["health"] == len(healths)
+    st = json.loads(stats.read_text())
+    assert bad == 0 and st["tx"]["health"] == len(healths)
+    print(f"\n{st['tx']['estimate']} Estimate frames, {len(healths)} Health frames "
+          f"({sum(any(h.filter_flags) for h in healths)} with a filter flag), refined at "
+          f"confidence {[h.confidence_raw * 1e-4 for h in healths if h.refined]}")
     assert any(any(h.filter_flags) for h in healths), "no filter flag reached the bus"
     refined = [h for h in healths if h.refined]
     assert len(refined) == 1, [h.key() for h in refined]
