@@ -37,7 +37,7 @@ from reference_py.contact import CONTACT_TISSUE
 from reference_py.tools.estimate import make_config
 from reference_py.fmath import real_for
 from reference_py.params import ALL_NAMES, PRESETS, RELAX_NOMINAL
-from reference_py.robust import STATUS_CONVERGED, STATUS_REFINED
+from reference_py.robust import STATUS_CONVERGED, STATUS_REFINED, STATUS_REFINING
 
 from .node_outputs import ContactOut, EstimateOut, HealthOut, ParamOut
 from .setting_transfer import SettingTransfer
@@ -289,14 +289,14 @@ class NodeMirror:
         flags = tuple(sum(1 << b for b, bit in enumerate(HEALTH_FILTER_BITS) if w & bit)
                       for w in words)
         content = (int((status & STATUS_REFINED) != 0), int((status & STATUS_CONVERGED) != 0),
-                   float(conf), flags)
+                   float(conf), flags, int((status & STATUS_REFINING) != 0))
         if self.health_last is not None:
             t0, prev = self.health_last
             if prev == content and 0 <= t - t0 < HEALTH_PERIOD_TICKS:
                 return
         self.health_last = (t, content)
         raw, _ = quantise(conf, 1e-4, 0.0, 1.0)
-        self.healths.append(HealthOut(content[0], content[1], raw, flags))
+        self.healths.append(HealthOut(content[0], content[1], raw, flags, content[4]))
 
     def _t_s(self, t: int) -> float:
         return (t - 65536) * 1e-4

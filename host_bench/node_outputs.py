@@ -60,9 +60,11 @@ class HealthOut:
     converged: int
     confidence_raw: int
     filter_flags: tuple[int, int, int]
+    refining: int = 0
 
     def key(self) -> tuple[int, ...]:
-        return (self.refined, self.converged, self.confidence_raw, *self.filter_flags)
+        return (self.refined, self.converged, self.confidence_raw, *self.filter_flags,
+                self.refining)
 
 
 class MirrorOutputs(Protocol):
@@ -121,7 +123,7 @@ def health_outputs(db: NteDatabase, messages: Iterable) -> tuple[list[HealthOut]
     bad = [0]
     out = [HealthOut(int(raw["Refined"]), int(raw["Converged"]), int(raw["Confidence"]),
                      (int(raw["Filter0Flags"]), int(raw["Filter1Flags"]),
-                      int(raw["Filter2Flags"])))
+                      int(raw["Filter2Flags"])), int(raw["Refining"]))
            for _, raw in _outputs_raw(db, messages, ("Health",), bad)]
     return out, bad[0]
 

@@ -66,6 +66,7 @@ ROBUST_INT_RANGES: dict[str, tuple[int, int]] = {
     "fit_substeps": (1, 16),
     "fit_iterations": (1, 200),
     "min_entries": (2, 4096),
+    "slice_entries": (0, 4096),
 }
 #: the robust estimator's real fields that must be finite and > 0
 ROBUST_POSITIVE_FIELDS = ("restart_p0_u", "lm_lambda0", "converged_confidence",

@@ -55,7 +55,7 @@ def joseph_update(R: Real, x: list[Array], P: Matrix, h: list[Array], innovation
     """Scalar measurement update in Joseph form, behind an innovation gate.
 
     S = h P h^T + r,  K = P h^T / S,  x += K y,  P = (I - K h) P (I - K h)^T + K r K^T.
-    When y^2 / S > gate2 the measurement is rejected and x, P are returned unchanged, unless
+    When y^2 > gate2 S the measurement is rejected and x, P are returned unchanged, unless
     ``open_gate`` (per batch element) forces it through.  ``step``: the update of x[1:] is
     bounded by bound_step (None: no bound).  ``hold``: the gain's rows 1.. are 0, so x[1:]
     stays bit for bit and P follows that gain (the Joseph form is right for any gain; the
@@ -65,9 +65,12 @@ def joseph_update(R: Real, x: list[Array], P: Matrix, h: list[Array], innovation
     pht = [_dot(P[i], h) for i in range(n)]
     s = _dot(h, pht) + r
     k = [np.zeros_like(pht[i]) if hold and i > 0 else pht[i] / s for i in range(n)]
-    nis = (innovation * innovation) / s
-    accepted = (nis <= gate2) | open_gate
+    y2 = innovation * innovation
+    nis = y2 / s
+    # the gate decides without the division (the NIS spans 1e-10..1e4: no fixed-point word
+    # holds it; y^2 and gate2 S fit one, tools/fixedpoint.py); S <= 0 or NaN as y^2 / S did
     one, zero = R.c(1.0), R.c(0.0)
+    accepted = np.where(s > zero, y2 <= gate2 * s, (s < zero) & (y2 >= zero)) | open_gate
     a = [[(one if i == j else zero) - k[i] * h[j] for j in range(n)] for i in range(n)]
     ap = [[_dot(a[i], [P[m][j] for m in range(n)]) for j in range(n)] for i in range(n)]
     newP: Matrix = [[None] * n for _ in range(n)]  # type: ignore[list-item]

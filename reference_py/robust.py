@@ -37,6 +37,7 @@ from .rk3 import rk3_step
 
 STATUS_REFINED = 1 << 9      # a batch refinement ran at this sample and restarted the bank
 STATUS_CONVERGED = 1 << 10   # the last refinement agreed with the data and with the previous one
+STATUS_REFINING = 1 << 15    # a slice of a refinement ran at this sample (C: nte_robust.c)
 COST_HUGE = 1.0e30           # cost of a diverged trial (finite in float32 too)
 
 
@@ -50,6 +51,7 @@ class RobustConfig:
     lm_lambda0: float = 1e-2      # initial LM damping
     converged_confidence: float = 0.75
     converged_change: float = 0.05
+    slice_entries: int = 96       # buffer entries the C library simulates per sample (0: all)
 
     def validate(self) -> None:
         """Raise ValueError naming the first invalid field.  The ranges are config.py's
@@ -58,7 +60,7 @@ class RobustConfig:
         lo, hi = ROBUST_INT_RANGES["buffer_len"]
         if not (lo <= self.buffer_len <= hi and self.buffer_len % 2 == 0):
             raise ValueError(f"robust buffer_len must be even and in {lo}..{hi}")
-        for name in ("fit_substeps", "fit_iterations"):
+        for name in ("fit_substeps", "fit_iterations", "slice_entries"):
             lo, hi = ROBUST_INT_RANGES[name]
             if not lo <= getattr(self, name) <= hi:
                 raise ValueError(f"robust {name} must be in {lo}..{hi}")
@@ -130,6 +132,11 @@ class RobustEstimator:
         # predict-only was on during this insertion: not recorded further, not refined
         self.tainted = np.zeros(B, dtype=bool)
         self.confidence = R.full(B, 0.0)
+        # a refinement in progress (the C library slices it across samples): samples left
+        # until its result is adopted, and that result (theta, confidence, convergence)
+        self.refining = np.zeros(B, dtype=bool)
+        self.slices_left = np.zeros(B, dtype=np.int64)
+        self.pending: tuple[list[Array], Array, Array] | None = None
         # the latest sample at the surface: the anchor (z = 0) of the next insertion's record
         self.last_surface = (np.zeros(B, dtype=np.int64), R.full(B, 0.0), R.full(B, 0.0),
                              R.full(B, 0.0))
@@ -149,22 +156,35 @@ class RobustEstimator:
         at_surface = valid & ~(l > R.c(0.0))
         entering = valid & (l > R.c(0.0)) & ~self.inside
         leaving = at_surface & self.inside
-        # a new insertion starts from the last surface sample (z = 0 there)
-        self._restart_buffer(entering, t_us)
+        # a new insertion starts from the last surface sample (z = 0 there), unless the last
+        # one's refinement still runs on the buffer
+        busy = self.refining
+        self._restart_buffer(entering & ~busy, t_us)
         # an insertion during which predict-only was on, or the parameters were held, is
-        # neither recorded further nor refined (nte.h THE PREDICT-ONLY MODE, HELD PARAMETERS)
-        self.tainted = np.where(entering, False, self.tainted) | po | self.bank.frozen
+        # neither recorded further nor refined (nte.h THE PREDICT-ONLY MODE, HELD PARAMETERS);
+        # nor is one that began while the last one was being fitted
+        self.tainted = np.where(entering, busy, self.tainted) | po | self.bank.frozen
         self._record(valid & (self.inside | entering) & ~self.tainted, t_us, depth, velocity,
                      force)
         self.inside = (self.inside | entering) & ~at_surface
-        refined = leaving & ~self.tainted & (self.count >= self.rcfg.min_entries)
-        if np.any(refined):
+        begin = leaving & ~self.tainted & (self.count >= self.rcfg.min_entries)
+        if np.any(begin):
             with np.errstate(all="ignore"):   # trial steps may overflow; they are rejected
-                self._refine(refined)
+                self._fit(begin)
+        # the C library works on the fit over slices() samples from this one on and adopts it
+        # at the last, unless the parameters are held or predict-only is on by then
+        slicing = self.refining.copy()
+        self.slices_left = np.where(slicing, self.slices_left - 1, self.slices_left)
+        done = slicing & (self.slices_left == 0)
+        self.refining = self.refining & ~done
+        refined = done & ~po & ~self.bank.frozen
+        if np.any(refined):
+            self._adopt(refined)
         self.count = np.where(leaving, 0, self.count)
         # remember the surface sample as the anchor of the next insertion
         self._anchor(at_surface, t_us, depth, velocity, force)
         status = out.status | np.where(refined, np.uint32(STATUS_REFINED), np.uint32(0))
+        status = status | np.where(slicing, np.uint32(STATUS_REFINING), np.uint32(0))
         status = status | np.where(self.converged, np.uint32(STATUS_CONVERGED), np.uint32(0))
         params, sds = self.bank.parameter_estimates()
         out = replace(out, status=status,
@@ -217,7 +237,18 @@ class RobustEstimator:
     def _theta_list(self, th: Theta) -> list[Array]:
         return [getattr(th, name).copy() for name in PARAM_NAMES]
 
-    def _refine(self, mask: Array) -> None:
+    def slices(self) -> int:
+        """Samples a refinement takes in the C library (nte_robust.c refine_slice): its
+        2 (fit_iterations + 1) simulations of buffer_len - 1 entries, slice_entries a sample
+        (0: all at once)."""
+        rc = self.rcfg
+        entries = 2 * (rc.fit_iterations + 1) * (rc.buffer_len - 1)
+        return 1 if rc.slice_entries == 0 else -(-entries // rc.slice_entries)
+
+    def _fit(self, mask: Array) -> None:
+        """The refinement of the runs in ``mask`` from their buffers as they are now: the
+        better of the two starts' fits, its confidence and convergence, kept in ``pending``
+        until the sample that adopts them (_adopt)."""
         R, cfg = self.R, self.cfg
         starts = [self._theta_list(self.bank.th),
                   [np.where(self.has_refined, p, q) for p, q in
@@ -242,6 +273,19 @@ class RobustEstimator:
             change = np.where(rel > change, rel, change)
         conv = self.has_refined & (conf >= R.c(self.rcfg.converged_confidence)) & (
             change <= R.c(self.rcfg.converged_change))
+        if self.pending is not None:
+            old_theta, old_conf, old_conv = self.pending
+            best_theta = [np.where(mask, a, b) for a, b in zip(best_theta, old_theta)]
+            conf, conv = np.where(mask, conf, old_conf), np.where(mask, conv, old_conv)
+        self.pending = (best_theta, conf, conv)
+        self.refining = self.refining | mask
+        self.slices_left = np.where(mask, self.slices(), self.slices_left)
+
+    def _adopt(self, mask: Array) -> None:
+        """The runs in ``mask`` take their pending refinement: the bank restarts from it."""
+        R = self.R
+        assert self.pending is not None
+        best_theta, conf, conv = self.pending
         self.converged = np.where(mask, conv, self.converged)
         self.confidence = np.where(mask, conf, self.confidence)
         self.prev_theta = [np.where(mask, a, b) for a, b in zip(best_theta, self.prev_theta)]

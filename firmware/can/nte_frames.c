@@ -767,6 +767,7 @@ nte_frames_err_t nte_frames_encode_health(const nte_frames_health_t* in, nte_e2e
     (void)nte_can_health_init(&m);
     m.refined = in->refined ? 1u : 0u;
     m.converged = in->converged ? 1u : 0u;
+    m.refining = in->refining ? 1u : 0u;
     m.confidence = nte_can_health_confidence_encode(in->confidence);
     m.filter0_flags = in->filter_flags[0];
     m.filter1_flags = in->filter_flags[1];
@@ -796,6 +797,7 @@ nte_frames_err_t nte_frames_decode_health(nte_e2e_rx_t* e2e, const uint8_t* data
     }
     out->refined = (m.refined != 0u);
     out->converged = (m.converged != 0u);
+    out->refining = (m.refining != 0u);
     out->confidence = nte_can_health_confidence_decode(m.confidence);
     out->filter_flags[0] = m.filter0_flags;
     out->filter_flags[1] = m.filter1_flags;

@@ -281,6 +281,7 @@ typedef struct {
     float confidence; /**< 0 .. 1 (an error beyond or non-finite), 1e-4 resolution. */
     uint8_t filter_flags[NTE_FRAMES_FILTERS]; /**< NTE_FRAMES_FILTER_* bits (an error beyond
                                                    NTE_FRAMES_FILTER_FLAGS). */
+    bool refining;                            /**< A slice of its refinement ran at this step. */
 } nte_frames_health_t;
 
 /** Sender clock unwrapper: use ONE for all streams stamped by the same clock. */

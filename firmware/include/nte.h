@@ -119,8 +119,19 @@
  *   log-parameters (Model I: 6, Model II: 5 = n_p) minimises the squared output error over the
  *   buffer from two starts (the bank's current estimate and the previous refinement, at first
  *   the nominal), keeps the better, and restarts the bank from it (u = 0 around the refined
- *   values, var(u) = restart_p0_u, z and the time line carry on).  That sample is flagged
- *   NTE_STATUS_REFINED; nte_output_t.confidence holds the fit's confidence.
+ *   values, var(u) = restart_p0_u, z and the time line carry on).
+ *   The fit is sliced across samples: the nte_step call of the sample that leaves the tissue
+ *   and the ones after it each simulate at most cfg.robust.slice_entries buffer entries of it
+ *   (on a copy of the bank's estimate of that sample and on the buffer as it was), while the
+ *   bank goes on publishing, and the sample whose slice finishes it adopts the result:
+ *   NTE_STATUS_REFINED there, NTE_STATUS_REFINING on every sample a slice ran,
+ *   nte_output_t.confidence the fit's confidence from then on.  Defaults: 18 samples (90 ms at
+ *   200 Hz), one of its 18 simulations per sample; slice_entries 0 fits within the step that
+ *   ends the insertion.  An insertion that begins before the fit is adopted is neither
+ *   recorded nor refined (the buffer still holds the last one: one buffer of RAM); a fit
+ *   that ends while the parameters are held (nte_set_frozen) or in predict-only mode is
+ *   dropped, so neither ever moves a parameter.  Reference: robust.py fits at once and adopts
+ *   at the same sample (RobustEstimator.slices), bit for bit.
  *   Model III: refused (nte_init returns nte_err_bad_estimator).  The refinement's batch fit
  *   simulates Models I and II only; Model III would need the direction state and both
  *   relaxation memories in that simulation, their sensitivities to the nine-parameter fit
@@ -136,9 +147,9 @@
  *     J^T r; plus per LM iteration one n_p x n_p LDL^T solve (n_p divisions, ~n_p^3/3 flops).
  *     Defaults (96 entries, 2 sub-steps, 8 iterations, Model II, n_p = 5): 18 simulations
  *     x 95 entries x 2 sub-steps = 3420 RK3 sub-steps with 5 sensitivities and 18 x 95 =
- *     1710 output evaluations.  The refinement runs inside the nte_step call of the sample
- *     that leaves the tissue: call nte_step from a context that tolerates that latency once
- *     per insertion (measure it on the target).
+ *     1710 output evaluations, spread over the slices (per sample at most slice_entries
+ *     entries and the LDL^T solves of the simulations finished on the way); a slice of 96
+ *     entries is about 0.4 M cycles on a Cortex-M4 (README, the cycle model).
  *
  * THE CONTACT FRONT END (cfg.contact.enabled; reference_py/contact.py)
  *   Records as measured start with the needle in the air: the depth column is the STAGE
@@ -419,6 +430,9 @@ typedef enum nte_err_t {
 /* Robust estimator only (same values as reference_py/robust.py STATUS_*). */
 #define NTE_STATUS_REFINED (1U << 9U)   /**< a batch refinement ran at this sample and
                                              restarted the bank from its result */
+#define NTE_STATUS_REFINING (1U << 15U) /**< a slice of a refinement ran at this sample
+                                             (from the sample that ended the insertion to
+                                             the one that adopted or dropped the result) */
 #define NTE_STATUS_CONVERGED (1U << 10U) /**< the last refinement agreed with the data
                                               (confidence >= converged_confidence) and moved
                                               no parameter by more than converged_change
@@ -500,6 +514,10 @@ typedef struct nte_robust_config_t {
     nte_real_t lm_lambda0;           /**< [0.01] initial LM damping, > 0 */
     nte_real_t converged_confidence; /**< [0.75] CONVERGED needs confidence >= this, > 0 */
     nte_real_t converged_change;     /**< [0.05] and a relative change <= this, > 0 */
+    int32_t slice_entries;           /**< [96] buffer entries the refinement simulates per
+                                          nte_step, 0..4096; 0: the whole refinement in the
+                                          step that ends the insertion (THE ROBUST
+                                          ESTIMATOR above) */
 } nte_robust_config_t;
 
 /** The contact state published in nte_output_t.contact. */
@@ -713,6 +731,22 @@ typedef struct nte_robust_t {
     nte_real_t g_try[NTE_MODEL_PARAM_COUNT];
     nte_real_t v[NTE_MODEL_PARAM_COUNT];     /**< current log-parameters of the fit */
     nte_real_t v_try[NTE_MODEL_PARAM_COUNT]; /**< trial point */
+    /* the refinement in progress, sliced across samples (THE ROBUST ESTIMATOR above) */
+    bool refining;                         /**< a refinement is running */
+    bool trial_ok;                         /**< the trial point's solve succeeded */
+    uint8_t start;                         /**< the fit's start: 0 start_a, 1 prev_theta */
+    int32_t iteration;                     /**< -1 the start's first simulation, else the
+                                                   LM iteration whose trial is simulated */
+    uint32_t entry;                        /**< next buffer entry of that simulation */
+    uint32_t fit_count;                    /**< entries of the insertion being fitted */
+    nte_real_t start_a[NTE_PARAM_COUNT];   /**< the bank's values as the insertion ended */
+    nte_real_t z;                          /**< the simulation's z ... */
+    nte_real_t sz[NTE_MODEL_PARAM_COUNT];  /**< ... its sensitivities dz/dv ... */
+    nte_real_t sim_cost;                   /**< ... and its squared error so far, N^2 */
+    nte_real_t cost;                       /**< the current point's cost, N^2 */
+    nte_real_t lam;                        /**< the LM damping */
+    nte_real_t v_a[NTE_MODEL_PARAM_COUNT]; /**< start 0's fitted log-parameters ... */
+    nte_real_t cost_a;                     /**< ... and cost, N^2 */
 } nte_robust_t;
 #endif
 

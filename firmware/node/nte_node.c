@@ -444,6 +444,7 @@ static void nte_node_publish_health(nte_node_t* self, uint32_t t, const nte_outp
     (void)memset(&h, 0, sizeof h);
     h.refined = (o->status & NTE_STATUS_REFINED) != 0u;
     h.converged = (o->status & NTE_STATUS_CONVERGED) != 0u;
+    h.refining = (o->status & NTE_STATUS_REFINING) != 0u;
     /* in [0, 1] by construction (nte.h); NaN would fail the encoder: 0 */
     const float c = (float)o->confidence;
     h.confidence = (c > 0.0f) ? ((c < 1.0f) ? c : 1.0f) : 0.0f;
@@ -452,8 +453,8 @@ static void nte_node_publish_health(nte_node_t* self, uint32_t t, const nte_outp
     }
     const bool changed =
         !self->health_sent || (h.refined != self->health.refined) ||
-        (h.converged != self->health.converged) || (h.confidence < self->health.confidence) ||
-        (h.confidence > self->health.confidence) ||
+        (h.converged != self->health.converged) || (h.refining != self->health.refining) ||
+        (h.confidence < self->health.confidence) || (h.confidence > self->health.confidence) ||
         (memcmp(h.filter_flags, self->health.filter_flags, sizeof h.filter_flags) != 0);
     const int32_t since = nte_node_tdiff(t, self->health_t);
     if (!changed && (since >= 0) &&

@@ -105,7 +105,7 @@ nte_err_t nte_step(nte_t* self, const nte_sample_t* sample, nte_output_t* out)
     } else {
         const bool first = !self->initialised;
         const int64_t dt_us = first ? 1 : (sample->t_us - self->t_prev_us);
-        const nte_real_t dt = (nte_real_t)dt_us / NTE_C(1.0e6);
+        const nte_real_t dt = nte_real_from_i64(dt_us) / NTE_C(1.0e6);
         if (cfg->contact.enabled) {
             /* stage and raw force -> tissue depth and tare-free force */
             nte_contact_step(self, l_in, v, y, &fed.depth_mm, &fed.force_n);

@@ -69,6 +69,7 @@ static void set_common(nte_config_t* cfg, const int32_t model, const nte_schedul
     cfg->robust.fit_substeps = 2;
     cfg->robust.fit_iterations = 8;
     cfg->robust.min_entries = 24;
+    cfg->robust.slice_entries = 96;
     cfg->robust.restart_p0_u = NTE_K_ROB_RESTART_P0_U;
     cfg->robust.lm_lambda0 = NTE_K_ROB_LM_LAMBDA0;
     cfg->robust.converged_confidence = NTE_K_ROB_CONVERGED_CONFIDENCE;
@@ -151,7 +152,9 @@ static nte_err_t check_robust(const nte_robust_config_t* rc)
         (rc->fit_iterations < NTE_RANGE_ROB_FIT_ITERATIONS_MIN) ||
         (rc->fit_iterations > NTE_RANGE_ROB_FIT_ITERATIONS_MAX) ||
         (rc->min_entries < NTE_RANGE_ROB_MIN_ENTRIES_MIN) ||
-        (rc->min_entries > NTE_RANGE_ROB_MIN_ENTRIES_MAX) || (rc->min_entries > rc->buffer_len)) {
+        (rc->min_entries > NTE_RANGE_ROB_MIN_ENTRIES_MAX) || (rc->min_entries > rc->buffer_len) ||
+        (rc->slice_entries < NTE_RANGE_ROB_SLICE_ENTRIES_MIN) ||
+        (rc->slice_entries > NTE_RANGE_ROB_SLICE_ENTRIES_MAX)) {
         return nte_err_bad_robust;
     }
     const nte_real_t positive[] = {NTE_ROBUST_POSITIVE_FIELDS(rc)};

@@ -60,8 +60,13 @@ nte_ekf_update_t nte_ekf_joseph_update(const size_t n, nte_real_t* x, nte_mat3_t
         k[i] = (hold && (i > 0U)) ? NTE_C(0.0) : (pht[i] / s);
     }
     res.s = s;
-    res.nis = (innovation * innovation) / s;
-    res.accepted = (res.nis <= gate2) || open_gate;
+    const nte_real_t y2 = innovation * innovation;
+    res.nis = y2 / s;
+    /* the gate decides on y^2 <= gate^2 S, without the division (ekf.joseph_update): what a
+     * fixed-point port can compare (the NIS spans 1e-10..1e4); S <= 0 or NaN as y^2 / S did */
+    const bool inside = (s > NTE_C(0.0)) ? (y2 <= (gate2 * s))
+                                         : ((s < NTE_C(0.0)) && (y2 >= NTE_C(0.0)));
+    res.accepted = inside || open_gate;
     if (!(apply && res.accepted)) {
         return res;
     }

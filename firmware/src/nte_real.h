@@ -44,6 +44,12 @@ static inline nte_real_t nte_sqrt(const nte_real_t x)
 
 static inline bool nte_isfinite(const nte_real_t x) { return isfinite(x) != 0; }
 
+/**
+ * (nte_real_t) x for a time in integer microseconds, correctly rounded (to nearest, ties to
+ * even), as numpy's astype (nte_real.c: why not the cast).
+ */
+nte_real_t nte_real_from_i64(int64_t x);
+
 /** 2^n for n in the normal exponent range, assembled from the exponent bits. */
 static inline nte_real_t nte_pow2(const int32_t n)
 {

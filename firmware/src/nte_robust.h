@@ -24,8 +24,8 @@ bool nte_robust_ldlt_solve(size_t n, nte_robust_mat_t M, const nte_real_t* b, nt
 void nte_robust_start(nte_t* self);
 
 /** RobustEstimator.step after the bank's step of the same sample: the buffer, the trigger and
- *  the refinement.  `valid`: the bank accepted the sample.  Returns the status bits to add
- *  (NTE_STATUS_REFINED, NTE_STATUS_CONVERGED). */
+ *  a slice of the refinement.  `valid`: the bank accepted the sample.  Returns the status
+ *  bits to add (NTE_STATUS_REFINING, NTE_STATUS_REFINED, NTE_STATUS_CONVERGED). */
 uint32_t nte_robust_step(nte_t* self, const nte_sample_t* sample, bool valid);
 
 #endif

@@ -254,10 +254,43 @@ static void test_jacobians_finite_differences(void** state)
     }
 }
 
+/* nte_real_from_i64 = the cast, bit for bit: around every power of two from 2^24 to 2^62
+ * (where ties first occur), the ties themselves, both signs and the int64 extremes. */
+static void test_real_from_i64_is_the_cast(void** state)
+{
+    (void)state;
+    size_t checked = 0U;
+    for (int p = 20; p < 63; p++) {
+        const int64_t base = (int64_t)1 << p;
+        const int64_t unit = (p > 24) ? ((int64_t)1 << (p - 24)) : 1; /* the float's step */
+        for (int64_t k = -3; k <= 3; k++) {
+            for (int64_t d = -2; d <= 2; d++) {
+                /* values near base, near base + k units, and exact half-units (ties) */
+                const int64_t x = base + (k * unit) + ((d * unit) / 2) + ((d == 2) ? 1 : 0);
+                const int64_t xs[2] = {x, -x};
+                for (size_t j = 0U; j < 2U; j++) {
+                    const nte_real_t a = nte_real_from_i64(xs[j]);
+                    const nte_real_t b = (nte_real_t)xs[j];
+                    assert_memory_equal(&a, &b, sizeof a);
+                    checked++;
+                }
+            }
+        }
+    }
+    const int64_t ends[4] = {INT64_MAX, INT64_MIN, (int64_t)INT32_MAX + 1, (int64_t)INT32_MIN - 1};
+    for (size_t j = 0U; j < 4U; j++) {
+        const nte_real_t a = nte_real_from_i64(ends[j]);
+        const nte_real_t b = (nte_real_t)ends[j];
+        assert_memory_equal(&a, &b, sizeof a);
+    }
+    assert_true(checked > 2000U);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_exp_tanh_vectors),
+        cmocka_unit_test(test_real_from_i64_is_the_cast),
         cmocka_unit_test(test_model_vectors),
         cmocka_unit_test(test_jacobians_finite_differences),
     };

@@ -145,11 +145,13 @@ static const signal_t contact_signals[] = {
 
 MSG(health)
 SIG(health, crc) SIG(health, counter) SIG(health, refined) SIG(health, converged)
+SIG(health, refining)
 SIG(health, confidence) SIG(health, filter0_flags) SIG(health, filter1_flags)
 SIG(health, filter2_flags)
 static const signal_t health_signals[] = {
     ENTRY(health, crc, "Crc"), ENTRY(health, counter, "Counter"),
     ENTRY(health, refined, "Refined"), ENTRY(health, converged, "Converged"),
+    ENTRY(health, refining, "Refining"),
     ENTRY(health, confidence, "Confidence"), ENTRY(health, filter0_flags, "Filter0Flags"),
     ENTRY(health, filter1_flags, "Filter1Flags"), ENTRY(health, filter2_flags, "Filter2Flags")};
 /* clang-format on */

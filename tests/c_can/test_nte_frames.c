@@ -601,20 +601,22 @@ static void test_health(void** state)
             (i % 2u) == 0u,
             (i % 3u) == 1u,
             confidences[i],
-            {(uint8_t)(1u << (i % 6u)), (uint8_t)NTE_FRAMES_FILTER_FLAGS, (uint8_t)(i * 7u % 64u)}};
+            {(uint8_t)(1u << (i % 6u)), (uint8_t)NTE_FRAMES_FILTER_FLAGS, (uint8_t)(i * 7u % 64u)},
+            (i % 4u) == 2u};
         assert_int_equal(nte_frames_encode_health(&in, &l.tx, l.frame), nte_frames_ok);
         assert_int_equal(nte_frames_decode_health(&l.rx, l.frame, 8, &out, NULL, NULL),
                          nte_frames_ok);
         assert_int_equal(out.refined, in.refined);
         assert_int_equal(out.converged, in.converged);
+        assert_int_equal(out.refining, in.refining);
         assert_near(out.confidence, in.confidence, 5e-5 + 1e-7); /* half a 1e-4 step */
         assert_memory_equal(out.filter_flags, in.filter_flags, sizeof in.filter_flags);
     }
     {
-        nte_frames_health_t above = {false, false, 1.0001f, {0u, 0u, 0u}};
-        nte_frames_health_t below = {false, false, -0.0001f, {0u, 0u, 0u}};
-        nte_frames_health_t nan_conf = {false, false, NAN, {0u, 0u, 0u}};
-        nte_frames_health_t bad_bits = {false, false, 0.5f, {0u, 0u, 1u << 6}};
+        nte_frames_health_t above = {false, false, 1.0001f, {0u, 0u, 0u}, false};
+        nte_frames_health_t below = {false, false, -0.0001f, {0u, 0u, 0u}, false};
+        nte_frames_health_t nan_conf = {false, false, NAN, {0u, 0u, 0u}, false};
+        nte_frames_health_t bad_bits = {false, false, 0.5f, {0u, 0u, 1u << 6}, false};
         assert_int_equal(nte_frames_encode_health(&above, &l.tx, l.frame), nte_frames_err_range);
         assert_int_equal(nte_frames_encode_health(&below, &l.tx, l.frame), nte_frames_err_range);
         assert_int_equal(nte_frames_encode_health(&nan_conf, &l.tx, l.frame),

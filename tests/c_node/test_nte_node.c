@@ -1334,7 +1334,7 @@ static void test_model3_params_contact(void** state)
             assert_false(health_sent[step]);
             health_sent[step] = true;
             n_health++;
-            assert_false(h.refined || h.converged); /* the bank */
+            assert_false(h.refined || h.converged || h.refining); /* the bank */
             assert_true(h.confidence <= 0.0f);
             for (uint32_t i = 0u; i < NTE_FRAMES_FILTERS; i++) {
                 assert_int_equal(h.filter_flags[i], health_flags(ro[step].filter_status[i]));

@@ -119,10 +119,13 @@ def test_selftest_bit_identical_to_host(board_run, host_lines) -> None:
 
 
 def test_selftest_exercises_the_refinement(host_lines) -> None:
-    """The robust run refines once, at the sample that leaves the tissue (status bit 9)."""
-    refined = [ln for ln in host_lines
-               if ln.startswith("S 2 ") and int(ln.split()[7], 16) & (1 << 9)]
+    """The robust run refines once (status bit 9, REFINED), in 18 slices (bit 15, REFINING)
+    from the sample that leaves the tissue on (nte.h THE ROBUST ESTIMATOR, the defaults)."""
+    robust = [int(ln.split()[7], 16) for ln in host_lines if ln.startswith("S 2 ")]
+    refined = [k for k, st in enumerate(robust) if st & (1 << 9)]
+    slicing = [k for k, st in enumerate(robust) if st & (1 << 15)]
     assert len(refined) == 1
+    assert slicing == list(range(refined[0] - 17, refined[0] + 1))
 
 
 def _figures():
@@ -517,14 +520,15 @@ def _cycles():
 # with -fno-inline-functions; QEMU 7.2): the model is deterministic, so a step that gets more than 5 % slower fails here
 # (update the figure, and the README's table, when a change is meant to cost cycles).
 MEASURED_WORST_HI = {
-    "Model I bank, all": 18_345,
-    "Model II bank, all": 16_267,
-    "Model II bank, rotate": 12_966,
-    "Model II robust, normal sample": 18_693,
-    "Model II robust, refinement": 6_971_122,
+    "Model I bank, all": 18_393,
+    "Model II bank, all": 16_314,
+    "Model II bank, rotate": 12_988,
+    "Model II robust, normal sample": 18_759,
+    # the worst of the refinement's 18 slices (one simulation of the buffer each)
+    "Model II robust, refinement": 409_332,
     # Model III (direction memory with its identified turn-over length, two relaxation
-    # branches, the step bound): 1.49 x Model II's bank, all
-    "Model III bank, all": 24_150,
+    # branches, the step bound): 1.48 x Model II's bank, all
+    "Model III bank, all": 24_194,
 }
 #: issue 21's budget: Model III's bank costs at most this many times Model II's (worst steps)
 MODEL3_OVER_MODEL2_MAX = 1.5
@@ -587,9 +591,21 @@ STEP_CYCLES_MAX = 20_000
 MODEL2_BANK_CYCLES_MAX = 5_000
 
 
-@pytest.mark.xfail(strict=True, reason="measured: the refinement runs inside one nte_step, "
-                   "5.95-6.97 M cycles, and Model III's bank 24 150; the refinement is not "
-                   "sliced across samples yet (issue 24)")
+#: one sample period at 200 Hz on a 168 MHz part, cycles
+SAMPLE_PERIOD_CYCLES = 840_000
+
+
+def test_no_step_blocks_a_sample_period(cycle_model) -> None:
+    """Every configuration's worst step (upper bound) within one sample period at 200 Hz: the
+    refinement is sliced across samples (it took 6.97 M cycles, 8.3 periods, in one step)."""
+    worst = {label: s["worst_hi"] for label, s in cycle_model.items()}
+    assert max(worst.values()) <= SAMPLE_PERIOD_CYCLES, worst
+    assert cycle_model["Model II robust, refinement"]["steps"] > 1
+
+
+@pytest.mark.xfail(strict=True, reason="measured: the refinement's slices take up to 0.41 M "
+                   "cycles (one simulation of the buffer each), and Model III's bank 24 194; "
+                   "the bank itself needs the arithmetic budget below first (issue 24)")
 def test_no_step_above_its_real_time_budget(cycle_model) -> None:
     """Every configuration's worst step (upper bound) within STEP_CYCLES_MAX: a 200 Hz loop on a
     168 MHz part misses no deadline for the estimator."""
@@ -597,7 +613,7 @@ def test_no_step_above_its_real_time_budget(cycle_model) -> None:
     assert max(worst.values()) <= STEP_CYCLES_MAX, worst
 
 
-@pytest.mark.xfail(strict=True, reason="measured: Model II bank, all filters, 16 267 cycles "
+@pytest.mark.xfail(strict=True, reason="measured: Model II bank, all filters, 16 314 cycles "
                    "(worst step, upper bound): branches and loads/stores, not arithmetic, "
                    "dominate (issue 24)")
 def test_model2_bank_within_its_arithmetic_budget(cycle_model) -> None:

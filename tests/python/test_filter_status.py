@@ -160,3 +160,6 @@ def test_node_health_frames_equal_the_mirror(tmp_path):
     # before the refinement nothing is refined or converged, and the confidence is 0
     first = healths.index(refined[0])
     assert not any(h.refined or h.converged or h.confidence_raw for h in healths[:first])
+    # the fit ran in slices (Refining) from the end of the insertion to its adoption
+    assert refined[0].refining == 1 and healths[first + 1].refining == 0
+    assert any(h.refining and not h.refined for h in healths[:first])

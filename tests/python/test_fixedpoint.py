@@ -86,7 +86,8 @@ def test_small_set_covers_every_variable(small_set):
     for want in ("z", "u.sigma0", "u.beta", "theta.sigma1", "g", "1/g", "h (force)",
                  "rk3 dz/dz0", "rk3 dz/du.beta", "H[z]", "H[u.f1]", "P1 predicted [z,z]",
                  "P2 updated [f1,sigma1]", "P3 updated [sigma2,sigma2]", "K1[sigma0]", "K3[z]",
-                 "innovation2", "S3 = H P H' + R", "NIS1", "input force_n"):
+                 "innovation2", "S3 = H P H' + R", "gate2 y^2", "gate3 gate^2 S", "NIS1",
+                 "input force_n"):
         assert want in names, want
     assert all(r.count > 0 for r in small_set.values())
 
@@ -108,7 +109,7 @@ def test_small_set_ranges_are_physical(small_set):
 
 
 def test_small_set_table(small_set):
-    lines, misfits = fp.format_table(small_set, 12)
+    lines, misfits, published = fp.format_table(small_set, 12)
     rows = {ln.split(" | ")[0][2:]: ln for ln in lines[2:]}
     assert set(rows) == set(small_set)
     # the log-parameters are O(1) by construction (|u| <= u_max = 3.9): at most Q2.29
@@ -116,11 +117,28 @@ def test_small_set_table(small_set):
         I, F = (int(x) for x in rows[name].split(" | ")[4][1:].split("."))
         assert I <= 2 and I + F == 31, rows[name]
         assert name not in misfits
-    # misfits are exactly the rows marked no
+    # misfits are exactly the rows marked no; the NIS is published only, never a misfit
     assert misfits == [n for n, ln in rows.items() if ln.endswith("**no** |")]
+    assert published == [n for n, ln in rows.items() if ln.endswith("no (published only) |")]
+    assert not any(n.startswith("NIS") for n in misfits)
+    # the gate's comparison fits where y^2 alone would not (its values near 0 need no bits)
+    for i in (1, 2, 3):
+        assert rows[f"gate{i} y^2"].endswith("yes (as the gate's comparison) |")
+        assert not fp.q_format(small_set[f"gate{i} y^2"], 12)[2]
     # asking for more significant bits can only add misfits
     more = fp.format_table(small_set, 24)[1]
     assert set(misfits) <= set(more) and len(more) > len(misfits)
+
+
+def test_gate_comparison_is_judged_on_its_threshold():
+    """y^2 <= gate2 S in one format: it fits when the threshold keeps its significant bits,
+    however small y^2 gets; a threshold too small for the larger side's format does not."""
+    y2 = _range([1e-14, 1e-9, 0.06] * 40)
+    thr = _range([5e-4, 9.0] * 60)
+    I, F, fits = fp.gate_format(y2, thr, 12)
+    assert (I, F) == (4, 27) and fits
+    tiny = _range([1e-7, 9.0] * 60)   # 1e-7 is 13 steps of Q4.27: 4 bits, not 12
+    assert not fp.gate_format(y2, tiny, 12)[2]
 
 
 def test_cli_rejects_bad_flags():

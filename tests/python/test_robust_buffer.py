@@ -48,11 +48,15 @@ def test_refines_once_per_insertion_and_restarts_the_bank():
     p = PRESET.params
     start = p.with_values(sigma0=p.sigma0 * 1.6, sigma1=p.sigma1 / 1.6, sigma2=p.sigma2 * 1.6,
                           f1=p.f1 * 1.6, beta=p.beta / 1.6).as_list()
+    # the whole refinement in the step that ends the insertion (slice_entries 0): 22 slices of
+    # the default size would outlast the 0.1 s at the surface between the two insertions
     est = rb.RobustEstimator(F64, default_config(), [start],
-                             rb.RobustConfig(fit_iterations=10))
+                             rb.RobustConfig(fit_iterations=10, slice_entries=0))
+    assert est.slices() == 1
     outs = _run(est, t, l, v, f)
     refined = [k for k, o in enumerate(outs) if o.status[0] & rb.STATUS_REFINED]
     assert len(refined) == 2
+    assert [k for k, o in enumerate(outs) if o.status[0] & rb.STATUS_REFINING] == refined
     for k in refined:
         assert l[k] == 0.0 and l[k - 1] > 0.0     # at the sample the needle leaves the tissue
     # after a restart the bank's scaled parameters are centred on the refinement
@@ -102,3 +106,61 @@ def test_reset_restores_the_configured_nominal():
     assert est.bank.th.sigma0[0] != pytest.approx(start[0])
     est.reset()
     assert est.bank.th.sigma0[0] == pytest.approx(start[0], rel=1e-15)
+
+
+def _leaving(l):
+    return [k for k in range(1, len(l)) if l[k] == 0.0 and l[k - 1] > 0.0]
+
+
+def test_refinement_is_sliced_and_adopts_the_same_fit():
+    """Default slicing (slice_entries 96, the C library's steps): the refinement runs on the
+    samples from the one that ends the insertion for slices() samples, REFINED on the last,
+    and the bank restarts from exactly the fit that the whole refinement in one step gives."""
+    t, l, v, f = _scenario()
+    start = [x * 1.3 for x in PRESET.params.as_list()]
+    sliced = rb.RobustEstimator(F64, default_config(), [start], rb.RobustConfig())
+    whole = rb.RobustEstimator(F64, default_config(), [start], rb.RobustConfig(slice_entries=0))
+    n = sliced.slices()
+    assert n == -(-2 * 9 * 95 // 96) == 18
+    a, b = _run(sliced, t, l, v, f), _run(whole, t, l, v, f)
+    k0 = _leaving(l)[0]
+    busy = [k for k, o in enumerate(a) if o.status[0] & rb.STATUS_REFINING]
+    assert busy == list(range(k0, k0 + n))
+    assert [k for k, o in enumerate(a) if o.status[0] & rb.STATUS_REFINED] == [k0 + n - 1]
+    assert [k for k, o in enumerate(b) if o.status[0] & rb.STATUS_REFINED] == [k0]
+    for x, y in zip(sliced.prev_theta, whole.prev_theta):
+        assert x[0] == y[0]                   # the same bits
+    assert sliced.confidence[0] == whole.confidence[0] > 0.0
+    # until the adoption the bank went on with its own estimate, not the fit's
+    assert not np.array_equal(a[k0 + n - 2].params, b[k0 + n - 2].params)
+
+
+def test_insertion_during_a_refinement_is_not_recorded():
+    """A second insertion that begins before the first one's fit is adopted (22 slices, 0.1 s
+    = 20 samples at the surface) is not recorded or refined; the first is adopted during it."""
+    t, l, v, f = _scenario(cycles=2)
+    est = rb.RobustEstimator(F64, default_config(), [PRESET.params.as_list()],
+                             rb.RobustConfig(fit_iterations=10))
+    assert est.slices() == 22
+    outs = _run(est, t, l, v, f)
+    refined = [k for k, o in enumerate(outs) if o.status[0] & rb.STATUS_REFINED]
+    k0, k1 = _leaving(l)
+    assert refined == [k0 + 21] and l[k0 + 21] > 0.0     # adopted inside the second insertion
+    assert not est.refining[0] and est.count[0] == 0
+
+
+@pytest.mark.parametrize("hold", ["frozen", "predict_only"])
+def test_result_dropped_when_held_at_adoption(hold):
+    """Held parameters or predict-only switched on while the fit runs: at its last slice the
+    result is dropped (no REFINED, the bank not restarted, no confidence)."""
+    t, l, v, f = _scenario()
+    est = rb.RobustEstimator(F64, default_config(), [PRESET.params.as_list()], rb.RobustConfig())
+    k0 = _leaving(l)[0]
+    outs = []
+    for k in range(len(t)):
+        if k == k0 + 3:
+            getattr(est, f"set_{hold}")(True)
+        outs.append(est.step(t[k:k + 1], l[k:k + 1], v[k:k + 1], f[k:k + 1]))
+    assert sum(bool(o.status[0] & rb.STATUS_REFINING) for o in outs) == est.slices()
+    assert not any(o.status[0] & rb.STATUS_REFINED for o in outs)
+    assert not est.has_refined[0] and est.confidence[0] == 0.0 and not est.refining[0]

@@ -2419,6 +2419,7 @@ int nte_can_health_pack(
     dst_p[1] |= pack_left_shift_u8(src_p->counter, 0u, 0x0fu);
     dst_p[1] |= pack_left_shift_u8(src_p->refined, 4u, 0x10u);
     dst_p[1] |= pack_left_shift_u8(src_p->converged, 5u, 0x20u);
+    dst_p[1] |= pack_left_shift_u8(src_p->refining, 6u, 0x40u);
     dst_p[2] |= pack_left_shift_u16(src_p->confidence, 0u, 0xffu);
     dst_p[3] |= pack_right_shift_u16(src_p->confidence, 8u, 0x3fu);
     dst_p[4] |= pack_left_shift_u8(src_p->filter0_flags, 0u, 0xffu);
@@ -2441,6 +2442,7 @@ int nte_can_health_unpack(
     dst_p->counter = unpack_right_shift_u8(src_p[1], 0u, 0x0fu);
     dst_p->refined = unpack_right_shift_u8(src_p[1], 4u, 0x10u);
     dst_p->converged = unpack_right_shift_u8(src_p[1], 5u, 0x20u);
+    dst_p->refining = unpack_right_shift_u8(src_p[1], 6u, 0x40u);
     dst_p->confidence = unpack_right_shift_u16(src_p[2], 0u, 0xffu);
     dst_p->confidence |= unpack_left_shift_u16(src_p[3], 8u, 0x3fu);
     dst_p->filter0_flags = unpack_right_shift_u8(src_p[4], 0u, 0xffu);
@@ -2537,6 +2539,26 @@ bool nte_can_health_converged_is_in_range(uint8_t value)
 }
 
 bool nte_can_health_converged_is_in_phys_range(float value)
+{
+    return ((value >= 0.0f) && (value <= 1.0f));
+}
+
+uint8_t nte_can_health_refining_encode(float value)
+{
+    return (uint8_t)(cantools_unsigned_from_double(roundf(value)));
+}
+
+float nte_can_health_refining_decode(uint8_t value)
+{
+    return ((float)value);
+}
+
+bool nte_can_health_refining_is_in_range(uint8_t value)
+{
+    return (value <= 1u);
+}
+
+bool nte_can_health_refining_is_in_phys_range(float value)
 {
     return ((value >= 0.0f) && (value <= 1.0f));
 }

@@ -239,6 +239,7 @@ extern "C" {
 #define NTE_CAN_HEALTH_COUNTER_NAME "Counter"
 #define NTE_CAN_HEALTH_REFINED_NAME "Refined"
 #define NTE_CAN_HEALTH_CONVERGED_NAME "Converged"
+#define NTE_CAN_HEALTH_REFINING_NAME "Refining"
 #define NTE_CAN_HEALTH_CONFIDENCE_NAME "Confidence"
 #define NTE_CAN_HEALTH_FILTER0_FLAGS_NAME "Filter0Flags"
 #define NTE_CAN_HEALTH_FILTER1_FLAGS_NAME "Filter1Flags"
@@ -932,6 +933,15 @@ struct nte_can_health_t {
      * Offset: 0
      */
     uint8_t converged;
+
+    /**
+     * 1 = a slice of the robust estimator's refinement ran at this step (NTE_STATUS_REFINING: from the step that ended the insertion to the one that adopted or dropped the fit, 18 steps at the defaults); 0 for the bank.
+     *
+     * Range: 0..1 (0..1 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    uint8_t refining;
 
     /**
      * The robust estimator's confidence in its last refinement, sqrt(r_n2) / max(rms residual, sqrt(r_n2)) in (0, 1], 1e-4 resolution; 0 before the first refinement and for the bank.
@@ -4302,6 +4312,46 @@ bool nte_can_health_converged_is_in_range(uint8_t value);
  * @return true if in range, false otherwise.
  */
 bool nte_can_health_converged_is_in_phys_range(float value);
+
+/**
+ * Encode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to encode.
+ *
+ * @return Encoded signal.
+ */
+uint8_t nte_can_health_refining_encode(float value);
+
+/**
+ * Decode given signal by applying scaling and offset.
+ *
+ * @param[in] value Signal to decode.
+ *
+ * @return Decoded signal.
+ */
+float nte_can_health_refining_decode(uint8_t value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_health_refining_is_in_range(uint8_t value);
+
+/**
+ * Check that given physical value is in allowed range before encoding.
+ *
+ * Use this BEFORE calling _encode() to avoid silent integer overflow:
+ *   encode(-1.0) on a [0,100] signal wraps to 255 and passes is_in_range().
+ *   is_in_phys_range(-1.0) correctly returns false.
+ *
+ * @param[in] value Physical signal value to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool nte_can_health_refining_is_in_phys_range(float value);
 
 /**
  * Encode given signal by applying scaling and offset.
