@@ -158,7 +158,8 @@ def _send_canplayer(log: Path, duration_s: float, progress: bool) -> None:
 
 class _Collect(can.Listener):
     def __init__(self, db: NteDatabase, writers: Sequence[can.Listener]) -> None:
-        self.ids = {db.frame_id(n) for n in ("Estimate", "Params", "Heartbeat", "Contact")}
+        self.ids = {db.frame_id(n) for n in ("Estimate", "Params", "Heartbeat", "Contact",
+                                             "Health")}
         self.writers = list(writers)
         self.messages: list[can.Message] = []
 
@@ -315,7 +316,7 @@ def cmd_replay(a: argparse.Namespace) -> int:
                                           outs, out)
         outs.commit()
     print(f"nte-bench: sent {len(frames)} frames in {record['wall_s']:.1f} s; recorded "
-          f"{len(collector.messages)} frames from the node (Estimate, Params, Heartbeat)")
+          f"{len(collector.messages)} frames from the node (Estimate, Params, Heartbeat, Contact, Health)")
     if a.no_check:
         print(f"recorded in {a.out}; compare with the reference: nte-bench check {a.out}")
         return 0

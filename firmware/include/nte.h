@@ -79,13 +79,14 @@
  *
  * MEMORY MODEL
  *   The caller owns every instance (static, stack or pool).  sizeof(nte_t) on x86-64 (gcc):
- *   904 bytes (float) / 1680 (double) with NTE_ROBUST_BUFFER_LEN = 0 (the bank and the
+ *   912 bytes (float) / 1704 (double) with NTE_ROBUST_BUFFER_LEN = 0 (the bank and the
  *   contact front end: its state 52 / 88 bytes, its configuration 36 / 64); with the default
- *   96: 3032 (float, +2128) / 5904 (double, +4224), of which the buffer of
- *   96 x 4 reals is 1536 / 3072 and the LM workspace (J^T J and J^T r at the current and the
- *   trial point, both parameter vectors) 384 / 768.  The refinement's deepest stack frame
- *   (nte_step -> refinement -> lm -> simulate -> rk3) adds about 1.2 KiB (float) / 1.9 KiB
- *   (double) of stack below nte_step's own frame (x86-64 gcc -O2 -fstack-usage).
+ *   96: 3184 (float, +2272) / 6176 (double, +4472), of which the buffer of
+ *   96 x 4 reals is 1536 / 3072, the LM workspace (J^T J and J^T r at the current and the
+ *   trial point, both parameter vectors) 384 / 768 and the sliced refinement's state 144 /
+ *   248.  The refinement's deepest stack path (nte_step -> nte_robust_step -> a slice -> rk3)
+ *   adds about 0.8 KiB (float) / 1.2 KiB (double) below nte_step's own frame (x86-64 gcc -O2
+ *   -fstack-usage; 1.2 / 1.9 KiB while the refinement ran in one call).
  *   The library never allocates, has no global or static mutable state and no recursion; all
  *   working memory is the instance plus a fixed, small stack frame (measure it with
  *   -fstack-usage).  Several instances may coexist.
