@@ -390,6 +390,16 @@ static void nte_node_heartbeat(nte_node_t* self, uint64_t now)
     self->step_time_max_us = 0u;
 }
 
+/* The rule of the frames sent on a change (Contact, Health; nte_node.h MODEL III, HEALTH):
+ * a change, else once period_us of sensor time has passed since the last one, or time went
+ * back. */
+static bool nte_node_due(const bool changed, const uint32_t t, const uint32_t last_t,
+                         const uint32_t period_us)
+{
+    const int32_t since = nte_node_tdiff(t, last_t);
+    return changed || (since < 0) || (since >= (int32_t)(period_us / NTE_NODE_TICK_US));
+}
+
 /* Model III: the Contact frame after a step at sensor time t (rule in nte_node.h, MODEL III). */
 static void nte_node_publish_contact(nte_node_t* self, uint32_t t, const nte_output_t* o)
 {
@@ -408,9 +418,7 @@ static void nte_node_publish_contact(nte_node_t* self, uint32_t t, const nte_out
                          (c.surface_valid != self->contact.surface_valid) ||
                          (c.surface_mm < self->contact.surface_mm) ||
                          (c.surface_mm > self->contact.surface_mm); /* finite: 0 when invalid */
-    const int32_t since = nte_node_tdiff(t, self->contact_t);
-    if (!changed && (since >= 0) &&
-        (since < (int32_t)(NTE_NODE_CONTACT_PERIOD_US / NTE_NODE_TICK_US))) {
+    if (!nte_node_due(changed, t, self->contact_t, NTE_NODE_CONTACT_PERIOD_US)) {
         return;
     }
     self->contact_sent = true;
@@ -456,9 +464,7 @@ static void nte_node_publish_health(nte_node_t* self, uint32_t t, const nte_outp
         (h.converged != self->health.converged) || (h.refining != self->health.refining) ||
         (h.confidence < self->health.confidence) || (h.confidence > self->health.confidence) ||
         (memcmp(h.filter_flags, self->health.filter_flags, sizeof h.filter_flags) != 0);
-    const int32_t since = nte_node_tdiff(t, self->health_t);
-    if (!changed && (since >= 0) &&
-        (since < (int32_t)(NTE_NODE_HEALTH_PERIOD_US / NTE_NODE_TICK_US))) {
+    if (!nte_node_due(changed, t, self->health_t, NTE_NODE_HEALTH_PERIOD_US)) {
         return;
     }
     self->health_sent = true;

@@ -113,25 +113,15 @@ def test_node_health_frames_equal_the_mirror(tmp_path):
     refinement that agrees with it)."""
     import json
     import subprocess
-    import sys
 
     import can
 
     from host_bench.node_mirror import NodeMirror
     from host_bench.node_outputs import health_outputs
-    from host_bench.replay import scenario_frames
     from reference_py.bus.candump import write_candump
-    from test_node_port import DB, ROOT, assert_node_equals_mirror, node_binary
+    from test_node_port import DB, assert_node_equals_mirror, node_binary, two_insertions
 
-    csv = tmp_path / "paper2.csv"
-    subprocess.run([sys.executable, "-m", "reference_py", "simulate", "--preset", "paper-10mms",
-                    "--depth", "20", "--dwell", "0.5", "--seed", "3", "--cycles", "2",
-                    "--out", str(csv)], check=True, cwd=ROOT, stdout=subprocess.DEVNULL)
-    frames = scenario_frames(str(csv), DB, 1000.0)
-    depth_id = DB.frame_id("Depth")
-    t_end = frames[-1][0]
-    t_out = next(t for t, m in frames if m.arbitration_id == depth_id and 1.0 < t < t_end - 1.0
-                 and DB.decode_unchecked("Depth", bytes(m.data))["Depth"] == 0.0)
+    frames, t_out = two_insertions(tmp_path, seed=3)
     robust = DB.sender().message("Command", {"Reset": 0, "ModelSel": 0, "EstimatorSel": 2,
                                              "AdaptCmd": 0})
     log, rec, stats = tmp_path / "in.log", tmp_path / "out.log", tmp_path / "stats.json"

@@ -160,6 +160,21 @@ def test_replay_real_clock_jump_recovers(tmp_path: Path, paper_frames: list,
     assert ev["stale"] <= 10
 
 
+def two_insertions(tmp_path: Path, seed: int) -> tuple[list, float]:
+    """The frames of two paper insertions (20 mm, 0.5 s dwell, `nte-ref simulate --cycles 2`)
+    and a time out of the tissue between them (a depth-0 stretch after the first), s."""
+    csv = tmp_path / "paper2.csv"
+    subprocess.run([sys.executable, "-m", "reference_py", "simulate", "--preset", "paper-10mms",
+                    "--depth", "20", "--dwell", "0.5", "--seed", str(seed), "--cycles", "2",
+                    "--out", str(csv)], check=True, cwd=ROOT, stdout=subprocess.DEVNULL)
+    frames = scenario_frames(str(csv), DB, 1000.0)
+    depth_id = DB.frame_id("Depth")
+    t_end = frames[-1][0]
+    t_out = next(t for t, m in frames if m.arbitration_id == depth_id and 1.0 < t < t_end - 1.0
+                 and DB.decode_unchecked("Depth", bytes(m.data))["Depth"] == 0.0)
+    return frames, t_out
+
+
 def test_replay_commands_rules_and_robust_estimator(tmp_path: Path) -> None:
     """Two paper insertions; commands on the bus: robust during the first insertion (refused:
     in tissue), robust between the insertions (applied: the second runs the robust estimator,
@@ -167,16 +182,7 @@ def test_replay_commands_rules_and_robust_estimator(tmp_path: Path) -> None:
     limited), the first command replayed (stale counter: no effect; the sender's next command
     follows the replayed counter and is ignored too), freeze in the second insertion (applied:
     the parameters held, Adapting 0 from then on, as the mirror's)."""
-    csv = tmp_path / "paper2.csv"
-    subprocess.run([sys.executable, "-m", "reference_py", "simulate", "--preset", "paper-10mms",
-                    "--depth", "20", "--dwell", "0.5", "--seed", "1", "--cycles", "2",
-                    "--out", str(csv)], check=True, cwd=ROOT, stdout=subprocess.DEVNULL)
-    frames = scenario_frames(str(csv), DB, 1000.0)
-    depth_id = DB.frame_id("Depth")
-    t_end = frames[-1][0]
-    # out of tissue between the insertions: a depth-0 stretch after the first one
-    t_out = next(t for t, m in frames if m.arbitration_id == depth_id and 1.0 < t < t_end - 1.0
-                 and DB.decode_unchecked("Depth", bytes(m.data))["Depth"] == 0.0)
+    frames, t_out = two_insertions(tmp_path, seed=1)
     tx = DB.sender()
 
     def cmd(**kw):
