@@ -138,13 +138,13 @@ static void record(nte_robust_t* rb, const uint32_t buffer_len, const nte_sample
  * RobustEstimator.slices), so both adopt the same bits at the same sample.
  */
 
-/* The fit's model at log-parameters v around the current start (the fit's nominal). */
-static void fit_theta(const nte_t* self, const nte_real_t* v, nte_theta_t* th)
+/* The fit's model at log-parameters v around a start's nominal (0: start_a, 1: prev_theta). */
+static void fit_theta(const nte_t* self, const uint8_t start, const nte_real_t* v, nte_theta_t* th)
 {
     const nte_robust_t* rb = &self->robust;
     const uint8_t* ids = NULL;
     const size_t n = nte_bank_identified(self, &ids);
-    const nte_real_t* nominal = (rb->start == 0U) ? rb->start_a : rb->prev_theta;
+    const nte_real_t* nominal = (start == 0U) ? rb->start_a : rb->prev_theta;
     const nte_real_t ex = nte_model_f1_excess(nominal[nte_param_f1], nominal[nte_param_f2],
                                               self->kappa);
     nte_real_t u[NTE_PARAM_COUNT];
@@ -161,14 +161,21 @@ static void fit_theta(const nte_t* self, const nte_real_t* v, nte_theta_t* th)
  * iteration's trial (at v_try into A_try, g_try). */
 static bool sim_is_trial(const nte_robust_t* rb) { return rb->iteration >= 0; }
 
+/* The sums the simulation in progress accumulates into: J^T J and J^T r. */
+static nte_robust_mat_t* sim_jtj(nte_robust_t* rb)
+{
+    return sim_is_trial(rb) ? &rb->A_try : &rb->A;
+}
+static nte_real_t* sim_jtr(nte_robust_t* rb) { return sim_is_trial(rb) ? rb->g_try : rb->g; }
+
 /* A simulation starts: z from 0, the sums at 0 (RobustEstimator._simulate's set-up). */
 static void sim_begin(nte_t* self)
 {
     nte_robust_t* rb = &self->robust;
     const uint8_t* ids = NULL;
     const size_t n = nte_bank_identified(self, &ids);
-    nte_real_t* g = sim_is_trial(rb) ? rb->g_try : rb->g;
-    nte_robust_mat_t* A = sim_is_trial(rb) ? &rb->A_try : &rb->A;
+    nte_real_t* g = sim_jtr(rb);
+    nte_robust_mat_t* A = sim_jtj(rb);
     rb->z = NTE_C(0.0);
     rb->sim_cost = NTE_C(0.0);
     rb->entry = 1U;
@@ -195,10 +202,10 @@ static void sim_run(nte_t* self, const uint32_t count)
     const size_t n = nte_bank_identified(self, &ids);
     const nte_real_t zero = NTE_C(0.0);
     const nte_real_t* v = sim_is_trial(rb) ? rb->v_try : rb->v;
-    nte_real_t* g = sim_is_trial(rb) ? rb->g_try : rb->g;
-    nte_robust_mat_t* A = sim_is_trial(rb) ? &rb->A_try : &rb->A;
+    nte_real_t* g = sim_jtr(rb);
+    nte_robust_mat_t* A = sim_jtj(rb);
     nte_theta_t th;
-    fit_theta(self, v, &th);
+    fit_theta(self, rb->start, v, &th);
     nte_real_t jrow[NTE_MODEL_PARAM_COUNT];
     const uint32_t end = rb->entry + count;
     for (uint32_t i = rb->entry; i < end; i++) {
@@ -248,7 +255,7 @@ static nte_real_t sim_end(nte_t* self)
     nte_robust_t* rb = &self->robust;
     const uint8_t* ids = NULL;
     const size_t n = nte_bank_identified(self, &ids);
-    nte_robust_mat_t* A = sim_is_trial(rb) ? &rb->A_try : &rb->A;
+    nte_robust_mat_t* A = sim_jtj(rb);
     for (size_t a = 0U; a < n; a++) {
         for (size_t b = 0U; b < a; b++) {
             (*A)[a][b] = (*A)[b][a];
@@ -312,10 +319,7 @@ static bool refine_end(nte_t* self)
     const bool second = rb->cost < rb->cost_a;
     const nte_real_t best_cost = second ? rb->cost : rb->cost_a;
     nte_theta_t th;
-    if (!second) {
-        rb->start = 0U;
-    }
-    fit_theta(self, second ? rb->v : rb->v_a, &th);
+    fit_theta(self, second ? 1U : 0U, second ? rb->v : rb->v_a, &th);
     const nte_real_t n_used = (nte_real_t)((rb->fit_count > 1U) ? rb->fit_count : 1U);
     const nte_real_t rms = nte_sqrt(best_cost / n_used);
     const nte_real_t sq_r = nte_sqrt(self->cfg.r_n2);
