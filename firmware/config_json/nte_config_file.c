@@ -8,6 +8,7 @@
 
 #include "nte.h"
 #include "nte_constants.h"
+#include "nte_file_in.h"
 
 #include <cjson/cJSON.h>
 
@@ -372,41 +373,12 @@ int nte_config_file_read(const char* path, nte_file_config_t* out, char* msg, si
 {
     reader_t r = {path, msg, cap};
     (void)memset(out, 0, sizeof *out);
-    FILE* fh = fopen(path, "rb");
-    if (fh == NULL) {
+    size_t len = 0U;
+    char* buf = nte_file_read_all(path, &len);
+    if (buf == NULL) {
         (void)snprintf(msg, cap, "%s: cannot read: %s", path, strerror(errno));
         return -1;
     }
-    size_t len = 0U;
-    size_t size = 4096U;
-    char* buf = malloc(size);
-    int err = 0;
-    while (buf != NULL) {
-        len += fread(buf + len, 1U, size - len - 1U, fh);
-        if (ferror(fh) != 0) {
-            err = errno;
-            break;
-        }
-        if (feof(fh) != 0) {
-            break;
-        }
-        char* bigger = realloc(buf, 2U * size);
-        if (bigger == NULL) {
-            free(buf);
-            buf = NULL;
-            err = ENOMEM;
-            break;
-        }
-        buf = bigger;
-        size *= 2U;
-    }
-    (void)fclose(fh);
-    if ((buf == NULL) || (err != 0)) {
-        free(buf);
-        (void)snprintf(msg, cap, "%s: cannot read: %s", path, strerror(err));
-        return -1;
-    }
-    buf[len] = '\0';
     const char* end = NULL;
     /* the whole file one JSON value (json.loads: trailing whitespace only) */
     cJSON* doc = (strlen(buf) == len) ? cJSON_ParseWithOpts(buf, &end, 1) : NULL;

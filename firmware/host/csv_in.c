@@ -5,6 +5,7 @@
 #include "csv_in.h"
 
 #include "name_value.h"
+#include "nte_file_in.h"
 
 #include "nte_units.h"
 
@@ -263,47 +264,6 @@ static int push(nte_trial_t* tr, size_t* cap, const double t, const double l, co
     return 0;
 }
 
-/* The whole file, or NULL with errno set. */
-static char* slurp(const char* path, size_t* len)
-{
-    FILE* fh = fopen(path, "rb");
-    if (fh == NULL) {
-        return NULL;
-    }
-    size_t cap = 65536U;
-    size_t n = 0U;
-    char* buf = malloc(cap);
-    while (buf != NULL) {
-        if (n == cap) {
-            char* b = realloc(buf, cap * 2U);
-            if (b == NULL) {
-                free(buf);
-                buf = NULL;
-                errno = ENOMEM;
-                break;
-            }
-            buf = b;
-            cap *= 2U;
-        }
-        const size_t got = fread(&buf[n], 1U, cap - n, fh);
-        n += got;
-        if (got == 0U) {
-            if (ferror(fh) != 0) { /* a directory: EISDIR, as Python's open() says */
-                const int e = errno;
-                free(buf);
-                buf = NULL;
-                errno = e;
-            }
-            break;
-        }
-    }
-    const int e = errno;
-    (void)fclose(fh);
-    errno = e;
-    *len = n;
-    return buf;
-}
-
 void nte_columns_standard(nte_columns_t* c)
 {
     (void)snprintf(c->t, sizeof c->t, "t_s");
@@ -524,7 +484,7 @@ int nte_trial_read_columns(const char* path, const nte_columns_t* cols, nte_tria
     memset(tr, 0, sizeof *tr);
     size_t len = 0U;
     errno = 0;
-    char* text = slurp(path, &len);
+    char* text = nte_file_read_all(path, &len);
     if (text == NULL) {
         fail(err, es, "%s: cannot read: %s", path, strerror((errno != 0) ? errno : EIO));
         return -1;
