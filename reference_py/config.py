@@ -263,8 +263,8 @@ GATE_REOPEN_AFTER = {1: 10, 2: 10, 3: 1}
 #: e^(u + du) ~ e^u (1 + du) holds, and the bank lands with several parameters at their clip
 #: and the prediction off for the rest of the insertion (phantom lab seed 203: 58x the noise
 #: with a cutting term).  Bounding the step keeps every update where its linearisation holds;
-#: it scales the parameter part of the update whole (the direction the data ask for is kept,
-#: z takes its full share).  Chosen on phantom seeds 201-215 (six presets) and measured-like
+#: it scales the update whole, z included (the direction the data ask for is kept;
+#: ekf.bound_step says why z is shortened too).  Chosen on phantom seeds 201-215 (six presets) and measured-like
 #: seeds 100-159 from 0.1, 0.3 and 1 (README "Model III's step bound").
 U_STEP_MAX = {1: 0.0, 2: 0.0, 3: 0.3}
 

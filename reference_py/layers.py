@@ -137,7 +137,11 @@ def tear_prior(R: Real, P: Matrix, hrow: list[Array], tear: Array, P0: Matrix
     development seeds: z alone with the parameters' covariance kept (a catastrophic
     seed, 38 -> 151x), the whole covariance restarted with a full update (median 11x
     against 10x), the reopened gate's step bounded to the gate's size (worse
-    everywhere)."""
+    everywhere).  Tried later and dropped: z's variance restarted at 1e-3 instead of p0_z,
+    so that z takes the whole drop in the tear's sample (held-out measured-like records:
+    insertion 7.7 -> 7.0, and 4.2 -> 2.5 without the tears' own samples, but the
+    retraction's 90th percentile 4.9 -> 8.0, and 6.4 -> 27 at 200 Hz: z left far from its
+    steady state pays at the reversal)."""
     zero = R.c(0.0)
     n = len(hrow)
     P = [[np.where(tear, P0[a][b], P[a][b]) for b in range(n)] for a in range(n)]

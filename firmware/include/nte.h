@@ -598,8 +598,8 @@ typedef struct nte_config_t {
     nte_real_t u_max;                /**< [3.9] |u| clip, log units (3.9 = factor 50), > 0, <= 10 */
     nte_real_t u_step_max;           /**< [0; Model III 0.3] the largest change of any u one
                                           update may make, log units, >= 0, <= 10: a larger
-                                          update's parameter part is scaled down whole (z
-                                          keeps its update); 0: no bound.  Keeps every update
+                                          update is scaled down whole, z's change
+                                          with it; 0: no bound.  Keeps every update
                                           where e^u's linearisation holds (reference_py/
                                           config.py U_STEP_MAX).  Cost: one pass over the
                                           filter's parameters per update */

@@ -95,7 +95,8 @@ nte_ekf_update_t nte_ekf_joseph_update(const size_t n, nte_real_t* x, nte_mat3_t
             P[j][i] = v;
         }
     }
-    /* the step bound (ekf.bound_step): the largest change of x[1..n), from 0, strict */
+    /* the step bound (ekf.bound_step): the largest change of x[1..n), from 0, strict; over it
+     * the whole update, z's change included, is shortened */
     nte_real_t xn[NTE_EKF_N_MAX];
     nte_real_t big = NTE_C(0.0);
     for (size_t i = 0U; i < n; i++) {
@@ -106,7 +107,7 @@ nte_ekf_update_t nte_ekf_joseph_update(const size_t n, nte_real_t* x, nte_mat3_t
     const bool over = (step > NTE_C(0.0)) && (big > step);
     const nte_real_t scale = over ? (step / big) : NTE_C(1.0);
     for (size_t i = 0U; i < n; i++) {
-        x[i] = (over && (i > 0U)) ? (x[i] + ((xn[i] - x[i]) * scale)) : xn[i];
+        x[i] = over ? (x[i] + ((xn[i] - x[i]) * scale)) : xn[i];
     }
     return res;
 }

@@ -26,8 +26,8 @@ typedef struct nte_ekf_update_t {
 /** Scalar measurement update in Joseph form behind an innovation gate (ekf.joseph_update).
  *  x and P are updated in place only when `apply` and accepted; s, nis and accepted are always
  *  computed (the reference evaluates them for idle filters too).  step > 0 bounds the update
- *  of x[1..n) (ekf.bound_step): where the largest |change| of x[1..n) exceeds it, that part of
- *  the update is scaled by step / largest (x[0] keeps its update); step <= 0: no bound.
+ *  (ekf.bound_step): where the largest |change| of x[1..n) exceeds it, the whole update, x[0]
+ *  included, is scaled by step / largest; step <= 0: no bound.
  *  hold: the gain's rows 1..n) are 0, so x[1..n) stays bit for bit and P follows that gain
  *  (the parameters held, nte.h HELD PARAMETERS). */
 nte_ekf_update_t nte_ekf_joseph_update(size_t n, nte_real_t* x, nte_mat3_t P, const nte_real_t* h,

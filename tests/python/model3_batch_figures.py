@@ -1,6 +1,6 @@
 """Model III's one-step innovation per phase over many records at once, for choosing its tuning:
 
-    .venv/bin/python tests/python/model3_batch_figures.py [--set select|held] [NAME=JSON ...]
+    .venv/bin/python tests/python/model3_batch_figures.py [--set select|held|forms] [NAME=JSON ...]
 
 Each NAME=JSON is a variant: EstimatorConfig fields over Model III's default configuration with
 the contact front end on (e.g. ``'bound 1.0={"u_step_max": 1.0}'``); without any, the step bound
@@ -16,8 +16,11 @@ the insertion without the samples the rupture detector flagged as tears; printed
 Sets (seeds nothing else in the repository chose anything on):
   select  phantom seeds 201-215 of the six presets and `lab`, measured-like seeds 100-159
           (the step bound was chosen here);
-  held    the README's held-out records: phantom seeds 301-310, measured-like seeds 31-50.
-About 20 s per variant and set on one core.
+  held    the README's held-out records: phantom seeds 301-310, measured-like seeds 31-50;
+  forms   the measured-like generator's forms of config_loop_figures.ATLAS_FORMS (rates, noise,
+          a tear over 1 mm, a stage that backs off, stick-slip, ...) on its held-out seeds
+          41-50, one line per form.
+About 20 s per variant and set on one core (forms: about 2 min).
 """
 from __future__ import annotations
 
@@ -51,11 +54,12 @@ DEFAULT_VARIANTS = {f"u_step_max {v:g}": {"u_step_max": v} for v in (0.0, 0.1, 0
 COLUMNS = ("insertion", "dwell", "retraction", "reversal peak", "insertion without tears")
 
 
-def record(d: Path, kind: str, seed: int) -> tuple[Path, np.ndarray, float]:
-    """The record's file, each sample's phase (plotting.PHASES or "") and the sensor noise."""
+def record(d: Path, kind: str, seed: int, **form: object) -> tuple[Path, np.ndarray, float]:
+    """The record's file, each sample's phase (plotting.PHASES or "") and the sensor noise;
+    ``form``: the measured-like generator's options (make_trial's keywords)."""
     if kind == "measured-like":
         from discrepancy_measured_like import make_trial
-        tr, force_true, sigma, _ = make_trial(seed)
+        tr, force_true, sigma, _ = make_trial(seed, **form)  # type: ignore[arg-type]
         f = d / f"ml{seed}.csv"
         clf.write_record(f, tr.t_s, tr.depth_mm, tr.force_n)
         phase = phase_of(tr.t_s, spans_from_motion(read_input(str(f))))
@@ -109,6 +113,21 @@ def summary(a: np.ndarray) -> str:
     return "  ".join(f"{np.median(a[:, k]):5.2f} ({tail(a[:, k]):5.1f})" for k in range(a.shape[1]))
 
 
+def by_form(variants: dict[str, dict[str, object]]) -> int:
+    """``--set forms``: per variant, one line per form of the measured-like generator."""
+    print(f"Model III, files as recorded, the measured-like generator's forms, seeds "
+          f"{clf.FORM_SEEDS[0]}-{clf.FORM_SEEDS[-1]}: one-step innovation RMS / noise, median "
+          f"(the largest)")
+    print(f"{'':22s}" + "  ".join(f"{c[:13]:>13s}" for c in COLUMNS))
+    for label, fields in variants.items():
+        print(label)
+        for form, kw in clf.ATLAS_FORMS.items():
+            with tempfile.TemporaryDirectory() as tmp:
+                recs = [record(Path(tmp), "measured-like", s, **kw) for s in clf.FORM_SEEDS]
+                print(f"  {form[:20]:20s}{summary(run_batch(recs, fields))}", flush=True)
+    return 0
+
+
 def main(argv: list[str]) -> int:
     set_name = "select"
     if argv[:1] == ["--set"] and len(argv) > 1:
@@ -120,17 +139,19 @@ def main(argv: list[str]) -> int:
             fields = json.loads(text) if sep else None
         except json.JSONDecodeError:
             fields = None
-        if set_name not in SETS or not isinstance(fields, dict):
-            print("usage: model3_batch_figures.py [--set select|held] [NAME=JSON ...] "
+        if set_name not in (*SETS, "forms") or not isinstance(fields, dict):
+            print("usage: model3_batch_figures.py [--set select|held|forms] [NAME=JSON ...] "
                   f"(sets: {', '.join(SETS)}; JSON: an object of EstimatorConfig fields); "
                   f"not one: {a!r}", file=sys.stderr)
             return 2
         variants[name] = fields
-    if set_name not in SETS:
-        print(f"usage: model3_batch_figures.py [--set select|held] [NAME=JSON ...]; unknown "
-              f"set {set_name!r}", file=sys.stderr)
+    if set_name not in (*SETS, "forms"):
+        print(f"usage: model3_batch_figures.py [--set select|held|forms] [NAME=JSON ...]; "
+              f"unknown set {set_name!r}", file=sys.stderr)
         return 2
     variants = variants or DEFAULT_VARIANTS
+    if set_name == "forms":
+        return by_form(variants)
     names = SETS[set_name]
     kinds = list(dict.fromkeys(kind for kind, _ in names))
     with tempfile.TemporaryDirectory() as tmp:

@@ -21,7 +21,7 @@ def _random_case(rng, n):
     return x, P, F, Q, H, R, z
 
 
-def _ours(x, P, F, Q, H, R, z, gate2=1e30):
+def _ours(x, P, F, Q, H, R, z, gate2=1e30, step=None):
     n = len(x)
     col = lambda v: F64.arr([v])  # noqa: E731
     Pm = [[col(P[i, j]) for j in range(n)] for i in range(n)]
@@ -30,7 +30,7 @@ def _ours(x, P, F, Q, H, R, z, gate2=1e30):
     xp = F @ x
     innov = col(z - float((H @ xp)[0]))
     upd = joseph_update(F64, [col(v) for v in xp], Pp, [col(h) for h in H[0]], innov, col(R),
-                        col(gate2))
+                        col(gate2), step=None if step is None else col(step))
     return (np.array([v[0] for v in upd.x]),
             np.array([[upd.P[i][j][0] for j in range(n)] for i in range(n)]), upd)
 
@@ -60,3 +60,24 @@ def test_gate_rejects_outlier_and_keeps_prior():
     _, _, upd = _ours(x, P, F, Q, H, R, z + 1e3, gate2=36.0)
     assert not upd.accepted[0]
     np.testing.assert_array_equal(np.array([v[0] for v in upd.x]), F @ x)
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_step_bound_shortens_the_whole_update(seed):
+    """Model III's step bound (ekf.bound_step): where the update moves a parameter x[1:] by more
+    than the bound, the whole update, the state x[0] included, is filterpy's update shortened by
+    bound / largest parameter change; below the bound it is filterpy's update itself."""
+    rng = np.random.default_rng(500 + seed)
+    x, P, F, Q, H, R, z = _random_case(rng, 3)
+    xp = F @ x
+    free, _, _ = _ours(x, P, F, Q, H, R, z)
+    largest = float(np.max(np.abs(free[1:] - xp[1:])))
+    tight = 0.25 * largest
+    bounded, _, _ = _ours(x, P, F, Q, H, R, z, step=tight)
+    np.testing.assert_allclose(bounded, xp + (free - xp) * (tight / largest), rtol=1e-12,
+                               atol=1e-14)
+    assert abs(abs(bounded[1:] - xp[1:]).max() - tight) <= 1e-12 * max(1.0, tight)
+    # z moved by a quarter of its unbounded change, in the same direction
+    assert (bounded[0] - xp[0]) * (free[0] - xp[0]) > 0.0
+    loose, _, _ = _ours(x, P, F, Q, H, R, z, step=2.0 * largest)
+    np.testing.assert_array_equal(loose, free)
