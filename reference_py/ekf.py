@@ -57,9 +57,9 @@ def joseph_update(R: Real, x: list[Array], P: Matrix, h: list[Array], innovation
     S = h P h^T + r,  K = P h^T / S,  x += K y,  P = (I - K h) P (I - K h)^T + K r K^T.
     When y^2 > gate2 S the measurement is rejected and x, P are returned unchanged, unless
     ``open_gate`` (per batch element) forces it through.  ``step``: the update is bounded
-    by bound_step on its parameter part x[1:] (None: no bound).  ``hold``: the gain's rows 1.. are 0, so x[1:]
-    stays bit for bit and P follows that gain (the Joseph form is right for any gain; the
-    parameters held, FilterBank.set_frozen).
+    by bound_step on its parameter part x[1:] (None: no bound).  ``hold``: the gain's rows
+    1.. are 0, so x[1:] stays bit for bit and P follows that gain (the Joseph form is right
+    for any gain; the parameters held, FilterBank.set_frozen).
     """
     n = len(x)
     pht = [_dot(P[i], h) for i in range(n)]

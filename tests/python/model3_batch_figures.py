@@ -141,7 +141,7 @@ def main(argv: list[str]) -> int:
             fields = None
         if set_name not in (*SETS, "forms") or not isinstance(fields, dict):
             print("usage: model3_batch_figures.py [--set select|held|forms] [NAME=JSON ...] "
-                  f"(sets: {', '.join(SETS)}; JSON: an object of EstimatorConfig fields); "
+                  f"(sets: {', '.join((*SETS, 'forms'))}; JSON: an object of EstimatorConfig fields); "
                   f"not one: {a!r}", file=sys.stderr)
             return 2
         variants[name] = fields
