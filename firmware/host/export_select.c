@@ -1,6 +1,7 @@
 /*
  * --export-config's choice of parameter set: the snapshot that replays the record best from
- * depth alone, fitted to it.  Twin: reference_py/tools/export_select.py.
+ * depth alone, fitted to it (and fitted again from the record's first relaxation strengths
+ * when that misses).  Twin: reference_py/tools/export_select.py.
  */
 #include "export_select.h"
 #include "export_replay.h"
@@ -126,6 +127,45 @@ static int fit_layers(const nte_config_t* replay_cfg, const nte_trial_t* tr,
     return 0;
 }
 
+/* The fit of one row (export_refine.h) from snapshot `snap`: it moves the identified values,
+ * the seven's (Model I's beta is its fixed beta0), then every strength; `fitted` says which. */
+static int fit_row(const nte_config_t* replay_cfg, const nte_trial_t* tr,
+                   const nte_export_snapshot_t* snap, int model, const double* row, size_t row_len,
+                   double surface_mm, double tare_n, nte_t* scratch,
+                   bool fitted[NTE_EXPORT_ROW_MAX], nte_export_fit_t* fit)
+{
+    for (size_t j = 0U; j < NTE_EXPORT_ROW_MAX; j++) {
+        fitted[j] = (j >= 7U) && (j < row_len);
+    }
+    for (size_t j = 0U; (j < snap->np) && (j < NTE_IDENTIFIED_MAX); j++) {
+        const size_t id = (size_t)snap->pe[j].id;
+        if ((id < 7U) && !((model == 1) && (id == (size_t)nte_param_beta))) {
+            fitted[id] = true;
+        }
+    }
+    return nte_export_refine(replay_cfg, tr, row, row_len, fitted, surface_mm, tare_n, scratch,
+                             fit);
+}
+
+/* fit_row, then the layer sets (fit_layers) when the record's first insertion tore: `fit` and
+ * `out`'s sets are what this start gives. */
+static int fit_with_sets(const nte_config_t* replay_cfg, const nte_trial_t* tr,
+                         const nte_export_snapshot_t* snap, int model, const double* row,
+                         size_t row_len, const nte_export_layers_t* layers, double surface_mm,
+                         double tare_n, nte_t* scratch, bool fitted[NTE_EXPORT_ROW_MAX],
+                         nte_export_fit_t* fit, nte_export_choice_t* out)
+{
+    if (fit_row(replay_cfg, tr, snap, model, row, row_len, surface_mm, tare_n, scratch, fitted,
+                fit) != 0) {
+        return -1;
+    }
+    if ((layers != NULL) && (layers->count > 0U)) {
+        return fit_layers(replay_cfg, tr, layers, fitted, row_len, surface_mm, tare_n, scratch, fit,
+                          out);
+    }
+    return 0;
+}
+
 int nte_export_choose(const nte_config_t* run_cfg, const nte_trial_t* tr,
                       const nte_export_snapshot_t snaps[NTE_EXPORT_CANDIDATES],
                       const nte_export_layers_t* layers, const double fixed[7], int model,
@@ -147,6 +187,7 @@ int nte_export_choose(const nte_config_t* run_cfg, const nte_trial_t* tr,
     out->peak_n = (double)NAN;
     out->fit_rmse_n = (double)NAN;
     out->fit_passes = 0U;
+    out->restart_from_rmse_n = (double)NAN;
     out->n_sets = 0U;
     keep_snapshot(&snaps[out->candidate], fixed, model, out);
     if (replay_cfg.contact.enabled && !isfinite(surface_mm)) {
@@ -193,28 +234,36 @@ int nte_export_choose(const nte_config_t* run_cfg, const nte_trial_t* tr,
     if (rep.counted == 0U) {
         return 0;
     }
-    /* the fit moves the identified values: the seven's (Model I's beta is its fixed beta0),
-     * then every strength */
-    bool fitted[NTE_EXPORT_ROW_MAX] = {false, false, false, false, false,
-                                       false, false, false, false};
-    for (size_t j = 0U; (j < snaps[best].np) && (j < NTE_IDENTIFIED_MAX); j++) {
-        const size_t id = (size_t)snaps[best].pe[j].id;
-        if ((id < 7U) && !((model == 1) && (id == (size_t)nte_param_beta))) {
-            fitted[id] = true;
-        }
-    }
-    for (size_t j = 7U; j < row_len; j++) {
-        fitted[j] = true;
-    }
+    bool fitted[NTE_EXPORT_ROW_MAX];
     nte_export_fit_t fit;
-    if (nte_export_refine(&replay_cfg, tr, row[best], row_len, fitted, surface_mm, tare_n, scratch,
-                          &fit) != 0) {
+    if (fit_with_sets(&replay_cfg, tr, &snaps[best], model, row[best], row_len, layers, surface_mm,
+                      tare_n, scratch, fitted, &fit, out) != 0) {
         return -1;
     }
-    if ((layers != NULL) && (layers->count > 0U) &&
-        (fit_layers(&replay_cfg, tr, layers, fitted, row_len, surface_mm, tare_n, scratch, &fit,
-                    out) != 0)) {
-        return -1;
+    if ((row_len > 7U) && (fit.rmse_n > (NTE_EXPORT_RESTART_FRACTION * rep.peak_n))) {
+        /* the strengths may have collapsed in a minimum of their own: the same snapshot again
+         * with the first snapshot's strengths, the closer result kept (export_select.py
+         * choose_export) */
+        double restart[NTE_EXPORT_ROW_MAX];
+        (void)memcpy(restart, row[best], row_len * sizeof restart[0]);
+        for (size_t j = 7U; j < row_len; j++) {
+            restart[j] = row[0][j];
+        }
+        nte_export_choice_t again_out = *out;
+        again_out.n_sets = 0U;
+        nte_export_fit_t again;
+        if (fit_with_sets(&replay_cfg, tr, &snaps[best], model, restart, row_len, layers,
+                          surface_mm, tare_n, scratch, fitted, &again, &again_out) != 0) {
+            return -1;
+        }
+        const unsigned passes = fit.passes + again.passes;
+        const double first_rmse_n = fit.rmse_n;
+        if (again.rmse_n < fit.rmse_n) {
+            fit = again;
+            *out = again_out;
+        }
+        fit.passes = passes;
+        out->restart_from_rmse_n = first_rmse_n;
     }
     for (size_t j = 0U; j < row_len; j++) {
         const double sd = fit.has_sd[j] ? fit.sd[j] : ((j < 7U) ? out->sd[j] : out->g_sd[j - 7U]);

@@ -21,6 +21,9 @@
 #define NTE_EXPORT_CANDIDATES 24U
 /** Above this RMSE / peak the export warns that the parameters do not replay their record. */
 #define NTE_EXPORT_WARN_FRACTION 0.15
+/** Above this fitted RMSE / peak the fit runs again with the strengths at the first snapshot's
+ * (export_select.py RESTART_FRACTION). */
+#define NTE_EXPORT_RESTART_FRACTION 0.10
 
 /** The estimates at one sample. */
 typedef struct nte_export_snapshot_t {
@@ -43,11 +46,14 @@ typedef struct nte_export_choice_t {
     const char* g_name[2];
     double g[2];
     double g_sd[2];
-    double fit_rmse_n;    /**< RMSE of the fitted values' replay, N (NaN: not fitted) */
-    unsigned fit_passes;  /**< the fit's replays */
-    double presliding_mm; /**< Model III's turn-over length replayed and exported, mm: the
+    double fit_rmse_n;          /**< RMSE of the fitted values' replay, N (NaN: not fitted) */
+    unsigned fit_passes;        /**< the fit's replays */
+    double restart_from_rmse_n; /**< the first fit's RMSE, N, when it missed by more than
+                                     NTE_EXPORT_RESTART_FRACTION and the fit ran again from the
+                                     first snapshot's strengths (NaN: it did not) */
+    double presliding_mm;       /**< Model III's turn-over length replayed and exported, mm: the
                                last snapshot's identified delta, else the run's */
-    size_t n_sets;        /**< layer sets fitted (0: none found, or they did not help) */
+    size_t n_sets;              /**< layer sets fitted (0: none found, or they did not help) */
     double set_start_mm[NTE_LAYER_SETS_MAX]; /**< each one's start, mm below the surface */
     double set_values[NTE_LAYER_SETS_MAX][NTE_LAYER_SET_VALUES]; /**< nte_layer_set_t order */
     double set_sd[NTE_LAYER_SETS_MAX][NTE_LAYER_SET_VALUES];     /**< the fit's (NaN: none) */

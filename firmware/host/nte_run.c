@@ -829,11 +829,16 @@ static void print_replay(const nte_export_snapshot_t* snap, const nte_export_cho
     /* export_select.exported_rmse: the fitted values', else the snapshot's */
     const double rmse = isfinite(ch->fit_rmse_n) ? ch->fit_rmse_n : ch->rmse_n;
     const double frac = (ch->peak_n > 0.0) ? (rmse / ch->peak_n) : (double)INFINITY;
-    printf("exported the estimates at t = %.3f s (best of %u) fitted to the record (%u passes): "
-           "replayed from depth alone, RMSE %.4g N = %.1f %% of the peak %.4g N (the snapshot "
+    printf("exported the estimates at t = %.3f s (best of %u) fitted to the record (%u passes",
+           snap->t_s, (unsigned)NTE_EXPORT_CANDIDATES, ch->fit_passes);
+    if (isfinite(ch->restart_from_rmse_n)) {
+        printf("; run again from the record's first relaxation strengths after a first fit at "
+               "%.4g N",
+               ch->restart_from_rmse_n);
+    }
+    printf("): replayed from depth alone, RMSE %.4g N = %.1f %% of the peak %.4g N (the snapshot "
            "unfitted: %.4g N, the final estimates: %.4g N)\n",
-           snap->t_s, (unsigned)NTE_EXPORT_CANDIDATES, ch->fit_passes, rmse, 100.0 * frac,
-           ch->peak_n, ch->rmse_n, ch->final_rmse_n);
+           rmse, 100.0 * frac, ch->peak_n, ch->rmse_n, ch->final_rmse_n);
     if ((ch->peak_n > 0.0) && (frac > NTE_EXPORT_WARN_FRACTION)) {
         fprintf(stderr,
                 "warning: the exported parameters replay their own record from depth alone at "

@@ -306,7 +306,7 @@ def test_estimate_exports_what_it_identified(sim_csv, tmp_path, capsys):
     """--export-config: the identified parameters start from the estimate file's row at the
     snapshot that replayed best (the "replay" block's t_s; export_select.py) and are fitted to
     the record (export_refine.py: a replay no worse than the snapshot's; every value within a
-    factor 7^20 of its start); the fixed ones at the preset; Model III's constants and
+    factor 7^20 of its start; run again from the first strengths after a poor fit); the fixed ones at the preset; Model III's constants and
     strengths."""
     import json
     from reference_py.params import PARAM_NAMES, PRESETS
@@ -321,7 +321,11 @@ def test_estimate_exports_what_it_identified(sim_csv, tmp_path, capsys):
               if float(r.split(",", 1)[0]) == cfg["replay"]["t_s"]]
     assert len(chosen) == 1
     rep = cfg["replay"]
-    assert rep["fit_rmse_n"] <= rep["rmse_n"] and 1 <= rep["fit_passes"] <= 20
+    # a fit that missed by more than 10 % of the peak ran again from the first strengths (this
+    # record's first fit did), 20 passes at most each
+    again = "run again from the record's first relaxation strengths" in capsys.readouterr().out
+    assert again or rep["fit_rmse_n"] <= 0.10 * rep["peak_n"]
+    assert rep["fit_rmse_n"] <= rep["rmse_n"] and 1 <= rep["fit_passes"] <= (40 if again else 20)
     moved = 0
     for name in ("sigma0", "sigma1", "sigma2", "f1", "beta", "g_fast", "g_slow"):
         got = cfg["params"].get(name, cfg["model3"]["strengths"].get(name))

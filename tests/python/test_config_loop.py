@@ -345,7 +345,10 @@ def test_export_keeps_the_snapshot_that_replays_best_and_fits_it(loop, model):
     assert r.returncode == 0, r.stderr
     cfg = json.loads(exported.read_text())
     rep = cfg["replay"]
-    assert rep["candidates"] == 24 and 1 <= rep["fit_passes"] <= 20
+    # the fit runs again only for Model III's strengths, and only after a first fit that missed
+    again = "run again from the record's first relaxation strengths" in r.stdout
+    assert not again if model == "2" else (again or rep["fit_rmse_n"] <= 0.10 * rep["peak_n"])
+    assert rep["candidates"] == 24 and 1 <= rep["fit_passes"] <= (40 if again else 20)
     assert 0.0 < rep["fit_rmse_n"] <= 0.75 * rep["rmse_n"] <= 0.75 * rep["final_rmse_n"]
     pred = d / f"selp{model}.csv"
     assert ref(str(loop["p2"]), "--config", str(exported), "--predict-only", "--out",
@@ -444,6 +447,39 @@ def test_export_same_bytes_from_both_twins(loop, args):
     for exe in (ref, crun):
         assert exe(str(loop["p1"]), "--config", str(cx), "--out",
                    str(d / "re.csv")).returncode == 0
+
+
+def test_a_poor_fit_runs_again_from_the_first_strengths_in_both_twins(tmp_path):
+    """A fit that still misses its record by more than RESTART_FRACTION of the peak runs again
+    from the same snapshot with the relaxation strengths the record began with (the fit moves
+    them in log form, and one pushed towards 0 stays there); the closer result is exported.
+    On the measured-like generator's seed 44 at 50 Hz (measured: a first fit at 15 % of the
+    peak) both twins do it, say so on stdout with the first fit's RMSE, and write the same
+    bytes; the exported fit is no worse than the first."""
+    _c()
+    sys.path.insert(0, str(Path(__file__).parent))
+    import config_loop_figures as figures
+    from discrepancy_measured_like import make_trial
+    from reference_py.tools.export_select import RESTART_FRACTION
+    tr, _, _, _ = make_trial(44, rate_hz=50.0)
+    rec = tmp_path / "ml44.csv"
+    figures.write_record(rec, tr.t_s, tr.depth_mm, tr.force_n)
+    args = ("--model", "3", "--contact", "on")
+    r = ref(str(rec), *args, "--out", str(tmp_path / "r.csv"), "--export-config",
+            str(tmp_path / "r.json"))
+    assert r.returncode == 0, r.stderr
+    c = crun(str(rec), *args, "--out", str(tmp_path / "c.csv"), "--export-config",
+             str(tmp_path / "c.json"))
+    assert c.returncode == 0, c.stderr
+    assert (tmp_path / "r.json").read_text().replace('"source": "nte-ref estimate"',
+                                                     '"source": "nte-run"') == \
+        (tmp_path / "c.json").read_text()
+    said = [ln for ln in r.stdout.splitlines() if ln.startswith("exported the estimates")]
+    assert len(said) == 1 and said[0] in c.stdout.splitlines()
+    rep = json.loads((tmp_path / "c.json").read_text())["replay"]
+    first = float(said[0].split("after a first fit at ")[1].split(" N")[0])
+    assert first > RESTART_FRACTION * rep["peak_n"]
+    assert rep["fit_rmse_n"] <= first * (1 + 1e-3)     # the printed figure has 4 digits
 
 
 # -- nte-node --config: the same reader (firmware/config_json), Models I and II ---------------
