@@ -28,7 +28,7 @@ from .contact import ContactFrontEnd
 from .ekf import Matrix, joseph_update, positive_definite, predict_covariance
 from .fmath import Array, Real
 from .identified import dynamic, filter_subsets, identified_names, relax_count
-from .layers import LayerSets, RuptureDetector, tear_prior
+from .layers import LayerSets, RuptureDetector, tear_prior, tear_rescale
 from .model import (BatchScaled, DepthTerms, Theta, clamp_depth, depth_terms, exact_sign,
                     output, output_du, output_dz, smooth_sign, steady_state_z)
 from .params import ALL_NAMES, IDX, PARAM_NAMES, RELAX_NAMES, RELAX_NOMINAL
@@ -316,7 +316,7 @@ class FilterBank:
         innovation0 = R.full(B, 0.0)
         nis0 = R.full(B, 0.0)
         rotate = cfg.schedule == "rotate"
-        tear = None
+        tear = z_prior0 = innovation_raw0 = None
         if rotate:
             # one prediction, with every identified parameter's sensitivity, serves all three
             shared_pred = rk3_step(R, self.th, z_prev, l_prev, l, dt, cfg.substeps,
@@ -338,6 +338,7 @@ class FilterBank:
                                                                   y, active)
             fstat[i] |= st
             if i == 0 and self.layers is not None:
+                z_prior0, innovation_raw0 = x[0], innovation    # for tear_rescale, below
                 # the innovation in units of the sensor noise: the front end's, or sqrt(r_n2)
                 sigma = (self.contact.noise_sigma() if self.contact is not None
                          else np.sqrt(R.full(B, 0.0) + c.r))
@@ -360,10 +361,12 @@ class FilterBank:
                 innovation0 = np.where(active, np.where(in_range, innovation, R.c(0.0)),
                                        innovation0)
                 # an overflowed NIS (tiny R) is published saturated at COST_HUGE
-                huge = R.c(1.0e30)
-                nis = np.where(nis <= huge, nis, huge)
+                nis = np.where(nis <= R.c(1.0e30), nis, R.c(1.0e30))
                 nis0 = np.where(active, np.where(in_range, nis, R.c(0.0)), nis0)
 
+        if tear is not None and np.any(tear):   # the model scaled to the force after the drop
+            z_post, self.mrel, self.th = tear_rescale(R, tear, y, innovation_raw0, z_prior0,
+                                                      z_post, self.scaled, self.mrel, self.th)
         z_post = np.where(surface & run, R.c(0.0), z_post)
         # posterior output with the final shared model
         d = depth_terms(R, self.th, l)
@@ -685,12 +688,10 @@ class _Constants:
         self.gate2 = R.c(cfg.gate_sigma) * R.c(cfg.gate_sigma)
         self.u_max = R.c(cfg.u_max)
         self.u_step_max = R.c(cfg.u_step_max)
-        self.var_floor_z = R.c(cfg.var_floor_z)
-        self.var_floor_u = R.c(cfg.var_floor_u)
+        self.var_floor_z, self.var_floor_u = R.c(cfg.var_floor_z), R.c(cfg.var_floor_u)
         self.v_still = R.c(cfg.v_still_mm_s)
         self.dt_max = R.c(cfg.dt_max_s)
-        self.depth_min = R.c(cfg.depth_min_mm)
-        self.depth_max = R.c(cfg.depth_max_mm)
+        self.depth_min, self.depth_max = R.c(cfg.depth_min_mm), R.c(cfg.depth_max_mm)
         self.speed_max = R.c(cfg.speed_max_mm_s)
         self.force_max = R.c(cfg.force_max_n)
         self.noise_sd = np.sqrt(self.r)

@@ -32,7 +32,8 @@ tests/python/test_layers.py measures the index (its figures in the README).
 The bank runs the detector (RuptureDetector.watch) on filter 1's prior innovation of every
 accepted sample, before any filter's update, and treats the sample of a rupture as a tear
 (tear_prior): every filter's covariance restarts at P0 — the torn layer's estimates are the next
-layer's start — and that sample updates z alone.  --export-config writes a layer set (MODEL.md
+layer's start — and that sample updates z alone; then the model's force is scaled down to the
+force measured after the drop (tear_rescale).  --export-config writes a layer set (MODEL.md
 §3b part 3, LayerSets) at each tear the detector found in a record's first insertion, for
 predict-only mode.
 
@@ -61,6 +62,8 @@ DRIFT_SIGMA = 1.0
 THRESHOLD_SIGMA = 20.0
 #: no rupture within this depth below the surface or the previous rupture, mm
 HOLDOFF_MM = 1.5
+#: the smallest share of the prior force a tear's rescale keeps (tear_rescale)
+TEAR_RATIO_MIN = 0.05
 
 
 class RuptureDetector:
@@ -149,6 +152,46 @@ def tear_prior(R: Real, P: Matrix, hrow: list[Array], tear: Array, P0: Matrix
     return P, hrow
 
 
+def tear_rescale(R: Real, tear: Array, y: Array, innovation: Array, z_prior: Array,
+                 z_post: Array, scaled: ScaledParams, mrel: list[Array], th: Theta
+                 ) -> tuple[Array, list[Array], Theta]:
+    """After a tear's sample: the model's force scaled down to the force measured after the
+    drop, where ``tear``, by r = y / h (h = y - innovation: filter 1's prior force), at least
+    TEAR_RATIO_MIN and only for a drop (h > 0, r < 1).  Scales the nominal beta and sigma2 in
+    ``scaled`` in place; returns z = r z_prior (the posterior ``z_post`` elsewhere), the
+    relaxation memories and theta with its beta and sigma2 times r (the next refresh of the
+    two, nominal exp(u), agrees with them to rounding).  C twin: nte_bank.c
+    tear_rescale.
+
+    Why this is exact.  z, beta and sigma2 scaled by r scale the whole model:
+        dz/dt = l (beta - sigma0 z / g)  ->  r dz/dt     (z stays r times the old trajectory)
+        f = sigma0 z l + s l (sigma1 e (beta - sigma0 z / g) + sigma2)  ->  r f
+    and the memories, which follow the elastic force, with it; sigma0, sigma1, f1 and z's time
+    scale are untouched.  So the tear's sample ends on the measured force without moving any
+    parameter along the gain.
+
+    Why.  Tenting a membrane, the filters explain the rising force by the friction's scale
+    (sigma1 10x its value, beta): where z's leverage on the force is small, the tear's z-only
+    update (tear_prior) cannot take the drop, and the parameters, bounded to u_step_max per
+    update, took 25-35 samples at -100 to -400 noise sd to come down (measured-like seed 124:
+    5.2 N tented, 0.76 N after).  Chosen on model3_batch_figures.py --set select (ratio floor
+    0.01-0.1 alike, 0.2 worse), read on --set held and --set forms (README "Model III's
+    tears")."""
+    one = R.c(1.0)
+    h = y - innovation
+    r = y / h
+    ok = tear & (h > R.c(0.0)) & (r < one)
+    floor = R.c(TEAR_RATIO_MIN)
+    r = np.where(r > floor, r, floor)
+    fresh = {}
+    for nm in ("beta", "sigma2"):
+        j = IDX[nm]
+        scaled.nominal[j] = np.where(ok, scaled.nominal[j] * r, scaled.nominal[j])
+        fresh[nm] = np.where(ok, getattr(th, nm) * r, getattr(th, nm))
+    th = Theta(*(fresh.get(f, getattr(th, f)) for f in Theta.__dataclass_fields__))
+    return np.where(ok, z_prior * r, z_post), [np.where(ok, m * r, m) for m in mrel], th
+
+
 class LayerSets:
     """Model III's layer sets for a batch (nte.h THE LAYER SETS, MODEL.md §3b part 3): per set
     its start depth below the surface and, per LAYER_SET_NAMES entry, the value of every run,
@@ -234,5 +277,5 @@ class LayerSets:
                        for f in Theta.__dataclass_fields__))
 
 
-__all__ = ["LAYER_MAX", "DRIFT_SIGMA", "THRESHOLD_SIGMA", "HOLDOFF_MM", "RuptureDetector",
-           "tear_prior", "LayerSets"]
+__all__ = ["LAYER_MAX", "DRIFT_SIGMA", "THRESHOLD_SIGMA", "HOLDOFF_MM", "TEAR_RATIO_MIN",
+           "RuptureDetector", "tear_prior", "tear_rescale", "LayerSets"]

@@ -163,13 +163,10 @@ static void set_nominal(nte_t* self)
     self->nominal[nte_param_delta] = cfg->presliding_mm;
 }
 
-void nte_bank_restart_from(nte_t* self, const nte_real_t theta[NTE_PARAM_COUNT],
-                           const nte_real_t p0_u)
+/* The filters started on the nominal values: every u 0, covariances P0 with var(u) = p0_u,
+ * no gate run (the start and a restart share it). */
+static void start_filters(nte_t* self, const nte_real_t p0_u)
 {
-    for (size_t j = 0U; j < NTE_PARAM_COUNT; j++) {
-        self->nominal[j] = theta[j];
-    }
-    self->ex_nominal = nte_model_f1_excess(theta[nte_param_f1], theta[nte_param_f2], self->kappa);
     for (size_t j = 0U; j < NTE_PARAM_COUNT; j++) {
         self->u[j] = NTE_C(0.0);
     }
@@ -180,45 +177,36 @@ void nte_bank_restart_from(nte_t* self, const nte_real_t theta[NTE_PARAM_COUNT],
     }
 }
 
+void nte_bank_restart_from(nte_t* self, const nte_real_t theta[NTE_PARAM_COUNT],
+                           const nte_real_t p0_u)
+{
+    for (size_t j = 0U; j < NTE_PARAM_COUNT; j++) {
+        self->nominal[j] = theta[j];
+    }
+    self->ex_nominal = nte_model_f1_excess(theta[nte_param_f1], theta[nte_param_f2], self->kappa);
+    start_filters(self, p0_u);
+}
+
 void nte_bank_start(nte_t* self)
 {
     set_nominal(self);
-    for (size_t j = 0U; j < NTE_PARAM_COUNT; j++) {
-        self->u[j] = NTE_C(0.0);
-    }
-    nte_model_theta(&self->th, self->nominal, self->ex_nominal, self->kappa, self->u);
+    start_filters(self, self->cfg.p0_u);
     self->z = NTE_C(0.0);
     self->sdir = NTE_C(0.0);
     self->sdir_du = NTE_C(0.0);
     self->turned = false;
     self->mrel[0] = NTE_C(0.0);
     self->mrel[1] = NTE_C(0.0);
-    for (size_t i = 0U; i < NTE_FILTER_COUNT; i++) {
-        p0(self, subset_count(self, i) + 1U, self->P[i]);
-        self->gated_run[i] = 0U;
-    }
     self->initialised = false;
     self->t_prev_us = 0;
     self->l_prev = NTE_C(0.0);
     self->y_max = NTE_C(0.0);
     self->set_layer = 0U;
     self->k_mod3 = 0U;
-    self->last.force_hat_n = NTE_C(0.0);
-    self->last.z = NTE_C(0.0);
-    self->last.innovation_n = NTE_C(0.0);
-    self->last.nis = NTE_C(0.0);
-    self->last.status = 0U;
-    for (size_t i = 0U; i < NTE_FILTER_COUNT; i++) {
-        self->last.filter_status[i] = 0U;
-    }
-    self->last.confidence = NTE_C(0.0);
-    for (size_t c = 0U; c < NTE_REJECT_CAUSES; c++) {
-        self->counters.rejected[c] = 0U;
-    }
-    self->counters.gated = 0U;
-    self->counters.filter_resets = 0U;
-    self->counters.gaps = 0U;
-    self->counters.diverged = 0U;
+    /* every output and counter 0 (all bits zero is +0.0 in IEEE 754, which C99's Annex F
+     * floats are; the contact front end and the layers publish their fields after this) */
+    (void)memset(&self->last, 0, sizeof self->last);
+    (void)memset(&self->counters, 0, sizeof self->counters);
 }
 
 /* Clip |u|, floor variances, reset the filter when its prior, P or x went bad (bank._guard):
@@ -289,7 +277,9 @@ typedef struct step_ctx_t {
     bool surface;
     bool gap;
     bool rotate;
-    bool tear; /* Model III: a layer tore at this sample (nte_layers_watch) */
+    bool tear;                  /* Model III: a layer tore at this sample (nte_layers_watch) */
+    nte_real_t tear_z;          /* ... filter 1's prior z at it (tear_rescale) */
+    nte_real_t tear_innovation; /* ... and its innovation, N */
 } step_ctx_t;
 
 /* ---- Model III (reference_py/MODEL.md §3b, JACOBIANS.md §7) ---- */
@@ -483,12 +473,37 @@ static void tear_prior(const nte_t* self, filter_work_t* w)
     }
 }
 
+/* layers.tear_rescale: after a tear's sample the model's force is scaled down to the force
+ * measured after the drop, by r = y / h (h: filter 1's prior force), at least
+ * NTE_K_LAYER_TEAR_RATIO_MIN and only for a drop.  z, beta and sigma2 times r scale the whole
+ * model exactly (dz/dt = l (beta - sigma0 z / g) and the force are linear in the three), and
+ * the relaxation memories follow the elastic force: the tear ends on the measured force
+ * without moving a parameter along the gain (the derivation and the measurements:
+ * reference_py/layers.py).  Returns the posterior z. */
+static nte_real_t tear_rescale(nte_t* self, const step_ctx_t* c, const nte_real_t z_post)
+{
+    const nte_real_t h = c->y - c->tear_innovation;
+    nte_real_t r = (h > NTE_C(0.0)) ? (c->y / h) : NTE_C(1.0);
+    if (!(r < NTE_C(1.0))) {
+        return z_post;
+    }
+    r = (r > NTE_K_LAYER_TEAR_RATIO_MIN) ? r : NTE_K_LAYER_TEAR_RATIO_MIN;
+    self->nominal[nte_param_beta] *= r;
+    self->nominal[nte_param_sigma2] *= r;
+    self->th.v[nte_param_beta] *= r;
+    self->th.v[nte_param_sigma2] *= r;
+    self->mrel[0] *= r;
+    self->mrel[1] *= r;
+    return c->tear_z * r;
+}
+
 /* bank._update_and_guard: the gated Joseph update (active filters only), the guard, and the
  * commit of the filter's covariance and parameters to the shared model. */
 static uint32_t update_and_guard(nte_t* self, const size_t i, const nte_depth_terms_t* d,
                                  const bool tear, filter_work_t* w, filter_out_t* fo)
 {
-    const size_t n = w->n;
+    /* w->n never exceeds NTE_EKF_N_MAX; the bound says so to the compiler's array checks */
+    const size_t n = (w->n < NTE_EKF_N_MAX) ? w->n : NTE_EKF_N_MAX;
     const size_t na = n - 1U;
     uint32_t status = 0U;
     nte_real_t xn[NTE_EKF_N_MAX];
@@ -579,6 +594,8 @@ static uint32_t run_filter(nte_t* self, step_ctx_t* c, const size_t i,
         const bool watched = !self->cfg.predict_only && w.in_range;
         c->tear = nte_layers_watch(self, c->l, c->v, watched ? w.innovation : NTE_C(0.0));
         status |= c->tear ? NTE_STATUS_RUPTURE : 0U;
+        c->tear_z = w.x[0];
+        c->tear_innovation = w.innovation;
     }
     if (c->tear) {
         tear_prior(self, &w);
@@ -698,6 +715,9 @@ void nte_bank_advance(nte_t* self, const bool first, const nte_real_t dt, const 
                     nis0 = fo.nis;
                 }
             }
+        }
+        if (c.tear) {
+            z_post = tear_rescale(self, &c, z_post);
         }
         self->z = c.surface ? NTE_C(0.0) : z_post;
     }

@@ -111,7 +111,7 @@ def lib_header() -> str:
     for f, hi in {**config.CONTACT_POSITIVE_BOUNDS, **config.CONTACT_NONNEGATIVE_BOUNDS}.items():
         rows.append(pair("NTE_K_RANGE_CON_" + f.upper() + "_MAX", hi, hi))
     # Model III's rupture detector (reference_py/layers.py)
-    for name in ("DRIFT_SIGMA", "THRESHOLD_SIGMA", "HOLDOFF_MM"):
+    for name in ("DRIFT_SIGMA", "THRESHOLD_SIGMA", "HOLDOFF_MM", "TEAR_RATIO_MIN"):
         v = float(getattr(layers, name))
         rows.append(pair("NTE_K_LAYER_" + name, v, v))
     # the data's bound on the published force (reference_py/bank.py)

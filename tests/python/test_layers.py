@@ -23,6 +23,7 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
 from reference_py.fmath import F32, F64  # noqa: E402
+from reference_py import layers  # noqa: E402
 from reference_py.layers import (HOLDOFF_MM, LAYER_MAX, THRESHOLD_SIGMA,  # noqa: E402
                                  RuptureDetector)
 
@@ -138,11 +139,12 @@ PARAM_COLUMNS = ("sigma0", "sigma1", "sigma2", "f1", "beta", "g_fast", "g_slow",
 
 
 @pytest.mark.parametrize("precision", ["float64", "float32"])
-def test_c_equals_reference_and_a_tear_moves_z_alone(tmp_path, precision):
+def test_c_equals_reference_and_a_tear_rescales_the_model(tmp_path, precision):
     """C is the reference bit for bit through the tears; without the layers the file is the
-    same up to the first rupture, whose sample leaves every parameter where it was (the tear
-    updates z alone, its gate open) and after which the estimates differ (the covariances
-    restarted)."""
+    same up to the first rupture.  At a tear's sample no parameter moves along the gain (the
+    tear updates z alone, its gate open); a drop rescales beta and sigma2 by one ratio below 1
+    (layers.tear_rescale), so that the published force is the measured one after the drop,
+    and the estimates differ after it (the covariances restarted)."""
     rec, _ = _phantom(tmp_path, "lab", 204)          # three ruptures
     if not C64.exists():
         pytest.skip("build/host missing: make build")
@@ -169,6 +171,17 @@ def test_c_equals_reference_and_a_tear_moves_z_alone(tmp_path, precision):
     for name in without.dtype.names:
         a, b = e[name][:k], without[name][:k]
         assert np.array_equal(a, b, equal_nan=True), name
-    for name in params:
-        assert e[name][k] == e[name][k - 1], f"{name} moved at the tear"
+    rel = 1e-12 if precision == "float64" else 2e-6
+    for k in tears:
+        for name in params:
+            if name not in ("beta", "sigma2"):
+                assert e[name][k] == e[name][k - 1], f"{name} moved at the tear {k}"
+        ratio = e["beta"][k] / e["beta"][k - 1]
+        assert layers.TEAR_RATIO_MIN <= ratio <= 1.0
+        assert e["sigma2"][k] / e["sigma2"][k - 1] == pytest.approx(ratio, rel=rel * 10)
+    # the lab tissue's tears drop the force: each is rescaled, onto the measured force
+    k = tears[0]
+    assert e["beta"][k] < 0.9 * e["beta"][k - 1]
+    measured = np.genfromtxt(rec, delimiter=",", names=True)["force_n"][k] - e["tare_n"][k]
+    assert e["force_hat_n"][k] == pytest.approx(measured, rel=100 * rel, abs=1e-6)
     assert not np.array_equal(e["force_hat_n"][k + 1:], without["force_hat_n"][k + 1:])
