@@ -27,7 +27,8 @@
  *   sum g_i and recovers after an unloading.  The strengths g_fast, g_slow are identified (as
  *   odds, g_i = G_i / (1 + sum G) < 1) by filter 1 with sigma0; the memories are treated as
  *   known inputs (JACOBIANS.md §7).  (3) The layer index (THE LAYER INDEX): a tear's sample
- *   restarts the filters' covariances and moves z alone.  Parameters are identified in log
+ *   restarts the filters' covariances, moves z alone, and a drop scales z, beta and sigma2
+ *   (the whole model) to the force measured after it.  Parameters are identified in log
  *   form relative to nominal values, theta = nominal exp(u), so every state stays O(1) in
  *   float32.  The derivations of the Jacobians are in reference_py/JACOBIANS.md; the model
  *   reading (sign of the velocity, z reset at the surface) in the project's model notes.
@@ -59,7 +60,8 @@
  *                       Model III's direction     _relax_output, _relax_fractions,
  *                       state, relaxation, tear   _relax_nominal; layers.py
  *                                                 RuptureDetector.watch, tear_prior,
- *                                                 LayerSets; identified.py the subsets)
+ *                                                 tear_rescale, LayerSets; identified.py
+ *                                                 the subsets)
  *   src/nte_layers.c/.h the layer index           layers.py RuptureDetector
  *   src/nte_robust.c/.h the robust estimator      robust.py RobustEstimator, ldlt_solve
  *   src/nte_contact.c/.h the surface and tare     contact.py ContactFrontEnd
@@ -200,7 +202,10 @@
  *   tests/python/test_layers.py (README).  The detector runs inside the bank's step, on
  *   filter 1's prior innovation before any update, and a rupture's sample is a tear: every
  *   filter's covariance restarts at its initial value (the torn layer's estimates start the
- *   next layer) and the sample updates z alone, so the drop drives no parameter to its clip.
+ *   next layer) and the sample updates z alone, so the drop drives no parameter to its clip;
+ *   then, for a drop, z, beta and sigma2 are scaled by r = force / prior force (at least
+ *   NTE_K_LAYER_TEAR_RATIO_MIN, 0.05), which scales the whole model exactly: the published
+ *   force is the measured one after the drop (reference_py/MODEL.md §3b part 3).
  *   Cost per sample: 1 sqrt, 1 division, 3 flops; memory: nte_layers_t in the instance.
  *
  * THE PREDICT-ONLY MODE (sensorless prediction; cfg.predict_only, nte_set_predict_only)
