@@ -364,7 +364,7 @@ class FilterBank:
                 nis = np.where(nis <= R.c(1.0e30), nis, R.c(1.0e30))
                 nis0 = np.where(active, np.where(in_range, nis, R.c(0.0)), nis0)
 
-        if tear is not None and np.any(tear):   # the model scaled to the force after the drop
+        if tear is not None and np.any(tear) and not self.frozen:   # layers.tear_rescale
             z_post, self.mrel, self.th = tear_rescale(R, tear, y, innovation_raw0, z_prior0,
                                                       z_post, self.scaled, self.mrel, self.th)
         z_post = np.where(surface & run, R.c(0.0), z_post)

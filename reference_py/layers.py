@@ -157,7 +157,8 @@ def tear_rescale(R: Real, tear: Array, y: Array, innovation: Array, z_prior: Arr
                  ) -> tuple[Array, list[Array], Theta]:
     """After a tear's sample: the model's force scaled down to the force measured after the
     drop, where ``tear``, by r = y / h (h = y - innovation: filter 1's prior force), at least
-    TEAR_RATIO_MIN and only for a drop (h > 0, r < 1).  Scales the nominal beta and sigma2 in
+    TEAR_RATIO_MIN and only for a drop (h > 0, r < 1; the bank skips it while the parameters are
+    held, FilterBank.set_frozen).  Scales the nominal beta and sigma2 in
     ``scaled`` in place; returns z = r z_prior (the posterior ``z_post`` elsewhere), the
     relaxation memories and theta with its beta and sigma2 times r (the next refresh of the
     two, nominal exp(u), agrees with them to rounding).  C twin: nte_bank.c

@@ -716,7 +716,8 @@ void nte_bank_advance(nte_t* self, const bool first, const nte_real_t dt, const 
                 }
             }
         }
-        if (c.tear) {
+        if (c.tear && !self->frozen) {
+            /* the model scaled to the force after the drop (held parameters stay held) */
             z_post = tear_rescale(self, &c, z_post);
         }
         self->z = c.surface ? NTE_C(0.0) : z_post;

@@ -185,3 +185,41 @@ def test_c_equals_reference_and_a_tear_rescales_the_model(tmp_path, precision):
     measured = np.genfromtxt(rec, delimiter=",", names=True)["force_n"][k] - e["tare_n"][k]
     assert e["force_hat_n"][k] == pytest.approx(measured, rel=100 * rel, abs=1e-6)
     assert not np.array_equal(e["force_hat_n"][k + 1:], without["force_hat_n"][k + 1:])
+
+
+def test_held_parameters_are_not_rescaled_at_a_tear(tmp_path):
+    """With the parameters held (set_frozen) a tear still restarts nothing the user froze:
+    beta and sigma2 keep their values (and their nominal) through the tear, which the same
+    record without the freeze rescales."""
+    from dataclasses import replace
+
+    from reference_py.bank import STATUS_RUPTURE, FilterBank
+    from reference_py.config import ContactConfig, default_config
+    from reference_py.params import IDX, PRESETS
+    from reference_py.tools.csvio import read_trial, time_us
+
+    rec, _ = _phantom(tmp_path, "lab", 204)          # three ruptures
+    tr = read_trial(str(rec))
+    t_us = time_us(tr.t_s)
+    cfg = replace(default_config(3), contact=ContactConfig(enabled=True))
+
+    def run(freeze_at: int | None) -> tuple[list[int], list[tuple[float, float, float]]]:
+        bank = FilterBank(F64, cfg, [PRESETS["paper-10mms"].params.as_list()])
+        tears, values = [], []
+        for k in range(len(t_us)):
+            if freeze_at is not None and k == freeze_at:
+                bank.set_frozen(True)
+            o = bank.step(t_us[k:k + 1], F64.arr(tr.depth_mm[k:k + 1]),
+                          F64.arr(tr.velocity_mm_s[k:k + 1]), F64.arr(tr.force_n[k:k + 1]))
+            if int(o.status[0]) & STATUS_RUPTURE:
+                tears.append(k)
+            values.append((float(bank.th.beta[0]), float(bank.th.sigma2[0]),
+                           float(bank.scaled.nominal[IDX["beta"]][0])))
+        return tears, values
+
+    tears, adapting = run(None)
+    k = tears[0]
+    assert adapting[k][0] < 0.9 * adapting[k - 1][0], "the free run rescales at its tear"
+    held_tears, held = run(k - 5)
+    assert any(k - 5 <= j <= k + 5 for j in held_tears), "the held run tears there too"
+    assert all(v == held[k - 6] for v in held[k - 5:]), "a held beta or sigma2 moved"
