@@ -157,12 +157,11 @@ def tear_rescale(R: Real, tear: Array, y: Array, innovation: Array, z_prior: Arr
                  ) -> tuple[Array, list[Array], Theta]:
     """After a tear's sample: the model's force scaled down to the force measured after the
     drop, where ``tear``, by r = y / h (h = y - innovation: filter 1's prior force), at least
-    TEAR_RATIO_MIN and only for a drop (h > 0, r < 1; the bank skips it while the parameters are
-    held, FilterBank.set_frozen).  Scales the nominal beta and sigma2 in
-    ``scaled`` in place; returns z = r z_prior (the posterior ``z_post`` elsewhere), the
-    relaxation memories and theta with its beta and sigma2 times r (the next refresh of the
-    two, nominal exp(u), agrees with them to rounding).  C twin: nte_bank.c
-    tear_rescale.
+    TEAR_RATIO_MIN and only for a drop (h > 0, r < 1; the bank skips it while the parameters
+    are held, FilterBank.set_frozen).  Scales the nominal beta and sigma2 in ``scaled`` in
+    place; returns z = r z_prior (the posterior ``z_post`` elsewhere), the relaxation memories
+    and theta with its beta and sigma2 times r (the next refresh of the two, nominal exp(u),
+    agrees with them to rounding).  C twin: nte_bank.c tear_rescale.
 
     Why this is exact.  z, beta and sigma2 scaled by r scale the whole model:
         dz/dt = l (beta - sigma0 z / g)  ->  r dz/dt     (z stays r times the old trajectory)
@@ -176,8 +175,8 @@ def tear_rescale(R: Real, tear: Array, y: Array, innovation: Array, z_prior: Arr
     update (tear_prior) cannot take the drop, and the parameters, bounded to u_step_max per
     update, took 25-35 samples at -100 to -400 noise sd to come down (measured-like seed 124:
     5.2 N tented, 0.76 N after).  Chosen on model3_batch_figures.py --set select (ratio floor
-    0.01-0.1 alike, 0.2 worse), read on --set held and --set forms (README "Model III's
-    tears")."""
+    0.01-0.1 alike, 0.2 worse), read on --set held and --set forms (README "A tear rescales
+    the model to the force after the drop")."""
     one = R.c(1.0)
     h = y - innovation
     r = y / h
