@@ -502,8 +502,9 @@ static nte_real_t tear_rescale(nte_t* self, const step_ctx_t* c, const nte_real_
 static uint32_t update_and_guard(nte_t* self, const size_t i, const nte_depth_terms_t* d,
                                  const bool tear, filter_work_t* w, filter_out_t* fo)
 {
-    /* w->n never exceeds NTE_EKF_N_MAX; the bound says so to the compiler's array checks */
-    const size_t n = (w->n < NTE_EKF_N_MAX) ? w->n : NTE_EKF_N_MAX;
+    /* 2 <= w->n <= NTE_EKF_N_MAX always (z and a subset); the bounds say so to the
+     * compiler's and the static analyser's array checks */
+    const size_t n = (w->n < 2U) ? 2U : ((w->n < NTE_EKF_N_MAX) ? w->n : NTE_EKF_N_MAX);
     const size_t na = n - 1U;
     uint32_t status = 0U;
     nte_real_t xn[NTE_EKF_N_MAX];
