@@ -520,15 +520,15 @@ def _cycles():
 # with -fno-inline-functions; QEMU 7.2): the model is deterministic, so a step that gets more than 5 % slower fails here
 # (update the figure, and the README's table, when a change is meant to cost cycles).
 MEASURED_WORST_HI = {
-    "Model I bank, all": 18_603,
-    "Model II bank, all": 16_510,
-    "Model II bank, rotate": 13_139,
-    "Model II robust, normal sample": 18_955,
+    "Model I bank, all": 18_550,
+    "Model II bank, all": 16_467,
+    "Model II bank, rotate": 13_094,
+    "Model II robust, normal sample": 18_912,
     # the worst of the refinement's 18 slices (one simulation of the buffer each)
-    "Model II robust, refinement": 409_532,
+    "Model II robust, refinement": 409_489,
     # Model III (direction memory with its identified turn-over length, two relaxation
     # branches, the step bound): 1.48 x Model II's bank, all
-    "Model III bank, all": 24_439,
+    "Model III bank, all": 24_362,
 }
 #: issue 21's budget: Model III's bank costs at most this many times Model II's (worst steps)
 MODEL3_OVER_MODEL2_MAX = 1.5
@@ -604,7 +604,7 @@ def test_no_step_blocks_a_sample_period(cycle_model) -> None:
 
 
 @pytest.mark.xfail(strict=True, reason="measured: the refinement's slices take up to 0.41 M "
-                   "cycles (one simulation of the buffer each), and Model III's bank 24 439; "
+                   "cycles (one simulation of the buffer each), and Model III's bank 24 362; "
                    "the bank itself needs the arithmetic budget below first (issue 24)")
 def test_no_step_above_its_real_time_budget(cycle_model) -> None:
     """Every configuration's worst step (upper bound) within STEP_CYCLES_MAX: a 200 Hz loop on a
@@ -613,7 +613,7 @@ def test_no_step_above_its_real_time_budget(cycle_model) -> None:
     assert max(worst.values()) <= STEP_CYCLES_MAX, worst
 
 
-@pytest.mark.xfail(strict=True, reason="measured: Model II bank, all filters, 16 510 cycles "
+@pytest.mark.xfail(strict=True, reason="measured: Model II bank, all filters, 16 467 cycles "
                    "(worst step, upper bound): branches and loads/stores, not arithmetic, "
                    "dominate (issue 24)")
 def test_model2_bank_within_its_arithmetic_budget(cycle_model) -> None:
