@@ -45,6 +45,7 @@ here they sit with the index so that bank.py keeps to the filters.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -188,8 +189,8 @@ def tear_rescale(R: Real, tear: Array, y: Array, innovation: Array, z_prior: Arr
         j = IDX[nm]
         scaled.nominal[j] = np.where(ok, scaled.nominal[j] * r, scaled.nominal[j])
         fresh[nm] = np.where(ok, getattr(th, nm) * r, getattr(th, nm))
-    th = Theta(*(fresh.get(f, getattr(th, f)) for f in Theta.__dataclass_fields__))
-    return np.where(ok, z_prior * r, z_post), [np.where(ok, m * r, m) for m in mrel], th
+    return (np.where(ok, z_prior * r, z_post), [np.where(ok, m * r, m) for m in mrel],
+            replace(th, **fresh))
 
 
 class LayerSets:
