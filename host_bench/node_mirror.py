@@ -93,6 +93,29 @@ def quantise(value: float, scale: float, lo: float, hi: float) -> tuple[int, boo
     return roundf(F32(v / F32(scale))), clamped
 
 
+def std_log10(sd: np.float32) -> np.float32:
+    """nte_frames.c's log10 of a standard deviation, float operation by float operation:
+    std = 2^e m, m in [sqrt(1/2), sqrt(2)), ln m = 2 atanh((m - 1)/(m + 1)) to the t^9 term;
+    below 1e-33 the Params frame's range end."""
+    sd = F32(sd)
+    if sd < F32(1e-33):
+        return F32(-32.767)
+    bits = int(np.array([sd], dtype=np.float32).view(np.uint32)[0])
+    e = ((bits >> 23) & 0xFF) - 127
+    m = np.array([(bits & 0x007FFFFF) | 0x3F800000], dtype=np.uint32).view(np.float32)[0]
+    if m > F32(1.41421356):
+        m, e = F32(m * F32(0.5)), e + 1
+    one = F32(1.0)
+    t = F32(F32(m - one) / F32(m + one))
+    t2 = F32(t * t)
+    series = F32(one / F32(9.0))
+    for k in (7.0, 5.0, 3.0):
+        series = F32(F32(one / F32(k)) + F32(t2 * series))
+    series = F32(one + F32(t2 * series))
+    ln_m = F32(F32(F32(2.0) * t) * series)
+    return F32(F32(F32(F32(e) * F32(0.693147181)) + ln_m) * F32(0.434294482))
+
+
 def param_count(model: int) -> int:
     """Params multiplexer indices cycled by a model: 0..6, Model III 0..9."""
     return 10 if model == 3 else 7
@@ -212,7 +235,7 @@ class NodeMirror:
             if sd == 0:
                 std_raw = -32768
             else:
-                lg = F32(np.log10(F32(sd)))
+                lg = std_log10(sd)
                 lg = min(max(lg, F32(-32.767)), F32(32.767))
                 std_raw = roundf(F32(lg / F32(0.001)))
             self.params.append(ParamOut(j, vals[j], std_raw))

@@ -24,11 +24,12 @@
  * Timestamps: depth and force carry the sender's clock in 100 us ticks, 16 bits, wrapping every
  * 6.5536 s; nte_frames_clock_unwrap turns them into a 32-bit count (wraps after 4.97 days).
  *
- * Integration: nte_frames.c, nte_e2e.c and generated/nte_can.c; C99, needs <math.h> (log10f,
- * powf for the parameter standard deviations only; link -lm). No dynamic memory, no globals,
+ * Integration: nte_frames.c, nte_e2e.c and generated/nte_can.c; C99, needs <math.h> (powf,
+ * for a received parameter standard deviation only; link -lm). No dynamic memory, no globals,
  * not thread-safe (the E2E states passed in belong to the caller).
  * Costs: each encode/decode is a few dozen integer operations plus the E2E CRC (~640 simple
- * operations for 8 bytes); parameter frames add one log10f (encode) or powf (decode).
+ * operations for 8 bytes); parameter frames add a
+ * 20-operation log10 (encode) or one powf (decode).
  */
 #ifndef NTE_FRAMES_H
 #define NTE_FRAMES_H

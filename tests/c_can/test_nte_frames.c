@@ -472,6 +472,35 @@ static void test_params(void** state)
                      nte_frames_err_selector);
 }
 
+/* The frame's own log10 (no libm) against the C library's, over the whole range in steps of
+ * 0.0059 decade and at the edges: the sent value is log10(std) rounded to 0.001, so the
+ * received std's log10 is within half a step of the true one (+ 1e-5 for both roundings). */
+static void test_params_std_log10_over_the_range(void** state)
+{
+    static const float edges[] = {1.0e-45f, 1.17549435e-38f, 9.9e-34f,   1.0e-33f, 1.71e-33f,
+                                  1.0f,     1.41421356f,     1.4142137f, 5.8e32f,  3.4e38f};
+    link_t l;
+    size_t j;
+    double s;
+    nte_frames_param_t out;
+    (void)state;
+    link_init(&l, nte_frames_kind_params);
+    for (j = 0; j < sizeof edges / sizeof edges[0] + 11000u; ++j) {
+        nte_frames_param_t in = {0u, 1.0f, 0.0f};
+        double expected;
+        in.std = (j < sizeof edges / sizeof edges[0])
+                     ? edges[j]
+                     : (float)(1e-33 * pow(1.0137, (double)(j - sizeof edges / sizeof edges[0])));
+        assert_int_equal(nte_frames_encode_param(&in, &l.tx, l.frame), nte_frames_ok);
+        assert_int_equal(nte_frames_decode_param(&l.rx, l.frame, 8, &out, NULL, NULL),
+                         nte_frames_ok);
+        expected = log10((double)in.std);
+        expected = expected < -32.767 ? -32.767 : (expected > 32.767 ? 32.767 : expected);
+        s = log10((double)out.std);
+        assert_near(s, expected, 0.0005 + 1e-5);
+    }
+}
+
 static void test_heartbeat(void** state)
 {
     link_t l;
@@ -668,6 +697,7 @@ int main(void)
         cmocka_unit_test(test_setting),
         cmocka_unit_test(test_estimate_clamp_and_flags),
         cmocka_unit_test(test_params),
+        cmocka_unit_test(test_params_std_log10_over_the_range),
         cmocka_unit_test(test_heartbeat),
         cmocka_unit_test(test_contact),
         cmocka_unit_test(test_health),
