@@ -28,7 +28,8 @@ from .contact import ContactFrontEnd
 from .ekf import Matrix, joseph_update, positive_definite, predict_covariance
 from .fmath import Array, Real
 from .identified import dynamic, filter_subsets, identified_names, relax_count
-from .layers import LayerSets, RuptureDetector, tear_prior, tear_rescale
+from .layers import (STATUS_DROP, STATUS_RUPTURE, LayerSets, RuptureDetector, tear_prior,
+                     tear_rescale)
 from .model import (BatchScaled, DepthTerms, Theta, clamp_depth, depth_terms, exact_sign,
                     output, output_du, output_dz, smooth_sign, steady_state_z)
 from .params import ALL_NAMES, IDX, PARAM_NAMES, RELAX_NAMES, RELAX_NOMINAL
@@ -49,8 +50,6 @@ STATUS_DIVERGED = 1 << 11       # a predicted force or z left its range (_in_ran
 #                                 reset, z at its steady state; never published out of range
 STATUS_NAMES = ("init", "rejected", "gated", "filter_reset", "gap", "out_of_tissue", "clipped",
                 "floored", "sign_uncertain")
-STATUS_RUPTURE = 1 << 12        # Model III: a layer's rupture was found at this sample
-#                                 (layers.py; the layer index advanced)
 STATUS_PREDICT_ONLY = 1 << 13   # processed in predict-only mode (cfg.predict_only or
 #                                 set_predict_only): the model alone, force not read
 STATUS_FROZEN = 1 << 14         # the parameters were held (set_frozen): z updated, no u moved
@@ -342,9 +341,10 @@ class FilterBank:
                 # the innovation in units of the sensor noise: the front end's, or sqrt(r_n2)
                 sigma = (self.contact.noise_sigma() if self.contact is not None
                          else np.sqrt(R.full(B, 0.0) + c.r))
-                tear = self.layers.watch(first, run, l, v, innovation, in_range, sigma,
-                                         cfg.predict_only)
-                status |= np.where(tear, np.uint32(STATUS_RUPTURE), np.uint32(0))
+                found = self.layers.watch(first, run, l, v, innovation, in_range, sigma,
+                                          cfg.predict_only)   # STATUS_RUPTURE, _DROP or 0
+                tear = found != 0
+                status |= found
             u_delta = self.u[IDX["delta"]]
             z_i, nis, st = self._update_and_guard(i, names, x, P_pred, hrow, innovation, r_eff,
                                                   active, run, in_range, z_ss, tear)

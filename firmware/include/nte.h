@@ -198,8 +198,11 @@
  *   sample).  It watches only while the needle moves in (velocity > v_still_mm_s) deeper than
  *   NTE_K_LAYER_HOLDOFF_MM (1.5 mm) below the surface and the previous rupture (the contact
  *   onset and the bank's re-adaptation after a drop make negative innovations too); out of the
- *   tissue the index returns to 0.  Measured on held-out phantom records by
- *   tests/python/test_layers.py (README).  The detector runs inside the bank's step, on
+ *   tissue the index returns to 0.  Inside that hold-off, a drop past the alarm in a single
+ *   sample (-nu - drift > threshold) is a second tear of the same layer: the bank treats it
+ *   as a tear below, the index stays, NTE_STATUS_DROP marks it (mostly a tear's second and
+ *   third samples: the force falls over 2-3 samples at 100 Hz).  Measured on held-out
+ *   phantom records by tests/python/test_layers.py (README).  The detector runs inside the bank's step, on
  *   filter 1's prior innovation before any update, and a rupture's sample is a tear: every
  *   filter's covariance restarts at its initial value (the torn layer's estimates start the
  *   next layer) and the sample updates z alone, so the drop drives no parameter to its clip;
@@ -457,6 +460,10 @@ typedef enum nte_err_t {
 #define NTE_STATUS_RUPTURE (1U << 12U) /**< Model III: a layer's rupture was found at this
                                            sample (nte_output_t.layer advanced; THE LAYER
                                            INDEX below) */
+#define NTE_STATUS_DROP (1U << 16U) /**< Model III: a drop past the rupture alarm in one
+                                        sample, inside the hold-off: a tear of the same layer
+                                        (treated as one, nte_output_t.layer kept; THE LAYER
+                                        INDEX below) */
 #define NTE_STATUS_PREDICT_ONLY (1U << 13U) /**< the sample was processed in predict-only
                                                 mode (cfg.predict_only or
                                                 nte_set_predict_only): the published force

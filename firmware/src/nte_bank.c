@@ -593,8 +593,10 @@ static uint32_t run_filter(nte_t* self, step_ctx_t* c, const size_t i,
          * filters run on running samples only (at the first one the detector is at its start,
          * where the reference's call leaves it) */
         const bool watched = !self->cfg.predict_only && w.in_range;
-        c->tear = nte_layers_watch(self, c->l, c->v, watched ? w.innovation : NTE_C(0.0));
-        status |= c->tear ? NTE_STATUS_RUPTURE : 0U;
+        const uint32_t torn = nte_layers_watch(self, c->l, c->v,
+                                               watched ? w.innovation : NTE_C(0.0));
+        c->tear = torn != 0U;
+        status |= torn;
         c->tear_z = w.x[0];
         c->tear_innovation = w.innovation;
     }

@@ -17,10 +17,12 @@ void nte_layers_start(nte_t* self);
  * it, nte_bank.c, on running samples: the reference's `run` is true); depth below the
  * surface (mm, what the bank was fed, clamped at 0), velocity (mm/s) and filter 1's prior
  * innovation of this sample (N; 0 where it is not watched), in units of the noise the
- * contact front end learned (sqrt(r_n2) with it off).  Advances self->layers.layer at a rupture; returns whether one was found.
+ * contact front end learned (sqrt(r_n2) with it off).  Advances self->layers.layer at a rupture.
+ * Returns NTE_STATUS_RUPTURE at a rupture, NTE_STATUS_DROP at a one-sample drop inside the
+ * hold-off (a tear of the same layer), else 0: the bank treats either as a tear.
  * Cost: 1 sqrt, 1 division, 3 flops.
  */
-bool nte_layers_watch(nte_t* self, nte_real_t depth_mm, nte_real_t velocity_mm_s,
-                      nte_real_t innovation_n);
+uint32_t nte_layers_watch(nte_t* self, nte_real_t depth_mm, nte_real_t velocity_mm_s,
+                          nte_real_t innovation_n);
 
 #endif /* NTE_LAYERS_H */

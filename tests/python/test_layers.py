@@ -37,40 +37,47 @@ HELD_OUT = [("lab", s) for s in range(201, 211)] + [
 
 
 def _one(det: RuptureDetector, R, depth: float, v: float, sigmas: float, valid: bool = True,
-         run: bool = True) -> tuple[int, bool]:
-    """One sample with an innovation of `sigmas` noise standard deviations (noise 1 mN)."""
+         run: bool = True) -> tuple[int, bool, bool]:
+    """One sample with an innovation of `sigmas` noise standard deviations (noise 1 mN): the
+    layer index, a rupture, a drop inside the hold-off."""
     arr = lambda x: R.arr([x])  # noqa: E731
-    layer, rupture = det.step(np.array([valid]), np.array([run]), arr(depth), arr(v),
-                              arr(sigmas * 1e-3), arr(1e-3))
-    return int(layer[0]), bool(rupture[0])
+    layer, rupture, drop = det.step(np.array([valid]), np.array([run]), arr(depth), arr(v),
+                                    arr(sigmas * 1e-3), arr(1e-3))
+    return int(layer[0]), bool(rupture[0]), bool(drop[0])
 
 
 @pytest.mark.parametrize("R", [F32, F64], ids=["float32", "float64"])
 def test_the_detector_rules(R):
     det = RuptureDetector(R, 1, 1e-3)
     # a drop of threshold + drift + 1 sigma in one sample, inserting below the hold-off: fires
-    assert _one(det, R, 3.0, 2.0, -(THRESHOLD_SIGMA + 2.0)) == (1, True)
-    # within the hold-off below that rupture: silent however large
-    assert _one(det, R, 3.0 + HOLDOFF_MM - 0.1, 2.0, -1000.0) == (1, False)
+    assert _one(det, R, 3.0, 2.0, -(THRESHOLD_SIGMA + 2.0)) == (1, True, False)
+    # within the hold-off below that rupture: no new layer however large; a drop past the
+    # alarm in one sample is a tear of the same layer, one short of it nothing, nor does
+    # either accumulate or move the hold-off's origin
+    assert _one(det, R, 3.5, 2.0, -(THRESHOLD_SIGMA + 0.5)) == (1, False, False)
+    assert _one(det, R, 3.6, 2.0, -(THRESHOLD_SIGMA + 0.5)) == (1, False, False)
+    assert _one(det, R, 3.0 + HOLDOFF_MM - 0.1, 2.0, -1000.0) == (1, False, True)
+    assert _one(det, R, 3.0 + HOLDOFF_MM + 0.1, 2.0, -(THRESHOLD_SIGMA + 2.0)) == (2, True, False)
     # a slow drop accumulates: 5 sigma per sample for ceil(20 / 4) + 1 samples
-    fired = [_one(det, R, 6.0 + 0.01 * k, 2.0, -5.0)[1] for k in range(6)]
+    fired = [_one(det, R, 7.0 + 0.01 * k, 2.0, -5.0)[1] for k in range(6)]
     assert fired == [False] * 5 + [True]
-    # moving out, or standing: silent
-    assert _one(det, R, 9.0, -2.0, -1000.0) == (2, False)
-    assert _one(det, R, 9.0, 0.0, -1000.0) == (2, False)
+    # moving out, or standing: silent, in the hold-off too
+    assert _one(det, R, 10.0, -2.0, -1000.0) == (3, False, False)
+    assert _one(det, R, 10.0, 0.0, -1000.0) == (3, False, False)
+    assert _one(det, R, 7.1, 0.0, -1000.0) == (3, False, False)
     # a rejected sample changes nothing; the first sample after init is not judged
-    assert _one(det, R, 12.0, 2.0, -1000.0, valid=False) == (2, False)
-    assert _one(det, R, 12.0, 2.0, -1000.0, run=False) == (2, False)
+    assert _one(det, R, 12.0, 2.0, -1000.0, valid=False) == (3, False, False)
+    assert _one(det, R, 12.0, 2.0, -1000.0, run=False) == (3, False, False)
     # positive innovations only drain the CUSUM
-    assert _one(det, R, 12.0, 2.0, 1000.0) == (2, False)
+    assert _one(det, R, 12.0, 2.0, 1000.0) == (3, False, False)
     # saturates at LAYER_MAX - 1
     for k in range(LAYER_MAX + 2):
         _one(det, R, 20.0 + 2.0 * k, 2.0, -1000.0)
     assert _one(det, R, 40.0, 2.0, 0.0)[0] == LAYER_MAX - 1
     # out of the tissue: back to layer 0, the surface is the next hold-off's origin
-    assert _one(det, R, 0.0, -2.0, 0.0) == (0, False)
-    assert _one(det, R, HOLDOFF_MM - 0.1, 2.0, -1000.0) == (0, False)
-    assert _one(det, R, HOLDOFF_MM + 0.1, 2.0, -1000.0) == (1, True)
+    assert _one(det, R, 0.0, -2.0, 0.0) == (0, False, False)
+    assert _one(det, R, HOLDOFF_MM - 0.1, 2.0, -1000.0) == (0, False, True)
+    assert _one(det, R, HOLDOFF_MM + 0.1, 2.0, -1000.0) == (1, True, False)
 
 
 def _phantom(d: Path, preset: str, seed: int) -> tuple[Path, dict]:
@@ -141,8 +148,9 @@ PARAM_COLUMNS = ("sigma0", "sigma1", "sigma2", "f1", "beta", "g_fast", "g_slow",
 
 @pytest.mark.parametrize("precision", ["float64", "float32"])
 def test_c_equals_reference_and_a_tear_rescales_the_model(tmp_path, precision):
-    """C is the reference bit for bit through the tears; without the layers the file is the
-    same up to the first rupture.  At a tear's sample no parameter moves along the gain (the
+    """C is the reference bit for bit through the tears (ruptures, and drops inside the
+    hold-off: a tear's second sample); without the layers the file is the same up to the
+    first rupture.  At a tear's sample no parameter moves along the gain (the
     tear updates z alone, its gate open); a drop rescales beta and sigma2 by one ratio below 1
     (layers.tear_rescale), so that the published force is the measured one after the drop,
     and the estimates differ after it (the covariances restarted)."""
@@ -158,8 +166,11 @@ def test_c_equals_reference_and_a_tear_rescales_the_model(tmp_path, precision):
     assert r_out.read_bytes() == c_out.read_bytes()
     e = np.genfromtxt(c_out, delimiter=",", names=True)
     status = e["status"].astype(int)
-    tears = np.flatnonzero(status & (1 << 12))
-    assert e["layer"].max() == 3 and len(tears) == 3
+    ruptures = np.flatnonzero(status & (1 << 12))
+    drops = np.flatnonzero(status & (1 << 16))      # a tear's second sample, in the hold-off
+    assert e["layer"].max() == 3 and len(ruptures) == 3 and len(drops) >= 2
+    assert np.all(e["layer"][drops] == e["layer"][drops - 1]), "a drop is not a new layer"
+    tears = np.union1d(ruptures, drops)
     assert not np.any(status[tears] & (1 << 2)), "a tear's sample is never gated"
     n_out = tmp_path / "n.csv"
     _run(C64 if precision == "float64" else C32, str(rec), "--model", "3", "--no-layers",
@@ -180,11 +191,13 @@ def test_c_equals_reference_and_a_tear_rescales_the_model(tmp_path, precision):
         ratio = e["beta"][k] / e["beta"][k - 1]
         assert layers.TEAR_RATIO_MIN <= ratio <= 1.0
         assert e["sigma2"][k] / e["sigma2"][k - 1] == pytest.approx(ratio, rel=rel * 10)
-    # the lab tissue's tears drop the force: each is rescaled, onto the measured force
-    k = tears[0]
-    assert e["beta"][k] < 0.9 * e["beta"][k - 1]
-    measured = np.genfromtxt(rec, delimiter=",", names=True)["force_n"][k] - e["tare_n"][k]
-    assert e["force_hat_n"][k] == pytest.approx(measured, rel=100 * rel, abs=1e-6)
+    # the lab tissue's tears drop the force: the rupture's sample and the drop after it are
+    # each rescaled, onto the measured force
+    force = np.genfromtxt(rec, delimiter=",", names=True)["force_n"]
+    for k in (ruptures[0], drops[0]):
+        assert e["beta"][k] < 0.9 * e["beta"][k - 1]
+        measured = force[k] - e["tare_n"][k]
+        assert e["force_hat_n"][k] == pytest.approx(measured, rel=100 * rel, abs=1e-6)
     assert not np.array_equal(e["force_hat_n"][k + 1:], without["force_hat_n"][k + 1:])
 
 
