@@ -45,7 +45,7 @@ STATUS_OUT_OF_TISSUE = 1 << 5   # depth <= 0: z held at 0
 STATUS_CLIPPED = 1 << 6         # a scaled parameter hit |u| = u_max
 STATUS_FLOORED = 1 << 7         # a variance was raised to its floor
 STATUS_SIGN_UNCERTAIN = 1 << 8  # R inflated: the smooth sign may disagree with the motion
-# bits 9 and 10 are the robust estimator's (robust.py)
+# bits 9, 10 and 15 are the robust estimator's (robust.py), 12 and 16 the layers' (layers.py)
 STATUS_DIVERGED = 1 << 11       # a predicted force or z left its range (_in_range): filter
 #                                 reset, z at its steady state; never published out of range
 STATUS_NAMES = ("init", "rejected", "gated", "filter_reset", "gap", "out_of_tissue", "clipped",

@@ -39,9 +39,9 @@ depth, no false alarm, for drift 1 and thresholds 20-40) and checked on records 
 tests/python/test_layers.py measures the index (its figures in the README).
 
 The bank runs the detector (RuptureDetector.watch) on filter 1's prior innovation of every
-accepted sample, before any filter's update, and treats the sample of a rupture or a drop as a tear
-(tear_prior): every filter's covariance restarts at P0 — the torn layer's estimates are the next
-layer's start — and that sample updates z alone; then the model's force is scaled down to the
+accepted sample, before any filter's update, and treats the sample of a rupture or a drop as a
+tear (tear_prior): every filter's covariance restarts at P0 — the torn layer's estimates are the
+next layer's start — and that sample updates z alone; then the model's force is scaled down to the
 force measured after the drop (tear_rescale).  --export-config writes a layer set (MODEL.md
 §3b part 3, LayerSets) at each tear the detector found in a record's first insertion, for
 predict-only mode.
@@ -99,7 +99,7 @@ class RuptureDetector:
         self.layer = np.zeros(B, dtype=np.uint32)
 
     def step(self, valid: Array, run: Array, depth: Array, velocity: Array, innovation: Array,
-             sigma: Array) -> tuple[Array, Array]:
+             sigma: Array) -> tuple[Array, Array, Array]:
         """One sample: ``valid`` accepted, ``run`` accepted and not the first; depth below the
         surface (mm, what the bank was fed), velocity (mm/s), filter 1's innovation (N) and the
         noise's standard deviation (N).  Returns the layer index, where a rupture was found

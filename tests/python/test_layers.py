@@ -130,8 +130,8 @@ def test_ruptures_found_on_held_out_phantom_records(held_out):
     """At least 85 % of the ruptures found within 0.3 s, at most one false alarm per five
     records (measured: 30 of 31, 1 in 20, on skin-incision 111, which has no membrane; 31 of 31
     before a drop inside the hold-off was a tear of the same layer (artery-filled 112's fourth
-    tore 1.48 mm below the third's alarm), 30 of 31 before the tear's rescale, 0 false alarms while the step bound left z's change whole, 2
-    before the step bound)."""
+    tore 1.48 mm below the third's alarm), 30 of 31 before the tear's rescale, 0 false alarms
+    while the step bound left z's change whole, 2 before the step bound)."""
     assert held_out["total"] >= 20
     assert held_out["found"] >= 0.85 * held_out["total"]
     assert held_out["false"] <= len(HELD_OUT) / 5
