@@ -78,6 +78,7 @@ TEAR_RATIO_MIN = 0.05
 STATUS_RUPTURE = 1 << 12   # a layer's rupture was found at this sample: the index advanced
 STATUS_DROP = 1 << 16      # a drop past the alarm in one sample inside the hold-off: a tear
 #                            of the same layer (the bank treats it as a tear, the index stays)
+STATUS_TEAR = STATUS_RUPTURE | STATUS_DROP   # the samples the bank treated as a tear
 
 
 class RuptureDetector:
@@ -298,5 +299,5 @@ class LayerSets:
 
 
 __all__ = ["LAYER_MAX", "DRIFT_SIGMA", "THRESHOLD_SIGMA", "HOLDOFF_MM", "TEAR_RATIO_MIN",
-           "STATUS_RUPTURE", "STATUS_DROP",
+           "STATUS_RUPTURE", "STATUS_DROP", "STATUS_TEAR",
            "RuptureDetector", "tear_prior", "tear_rescale", "LayerSets"]

@@ -28,8 +28,8 @@
  * for a received parameter standard deviation only; link -lm). No dynamic memory, no globals,
  * not thread-safe (the E2E states passed in belong to the caller).
  * Costs: each encode/decode is a few dozen integer operations plus the E2E CRC (~640 simple
- * operations for 8 bytes); parameter frames add a
- * 20-operation log10 (encode) or one powf (decode).
+ * operations for 8 bytes); parameter frames add a 20-operation log10 (encode) or one powf
+ * (decode).
  */
 #ifndef NTE_FRAMES_H
 #define NTE_FRAMES_H

@@ -202,13 +202,14 @@
  *   sample (-nu - drift > threshold) is a second tear of the same layer: the bank treats it
  *   as a tear below, the index stays, NTE_STATUS_DROP marks it (mostly a tear's second and
  *   third samples: the force falls over 2-3 samples at 100 Hz).  Measured on held-out
- *   phantom records by tests/python/test_layers.py (README).  The detector runs inside the bank's step, on
- *   filter 1's prior innovation before any update, and a rupture's sample is a tear: every
- *   filter's covariance restarts at its initial value (the torn layer's estimates start the
- *   next layer) and the sample updates z alone, so the drop drives no parameter to its clip;
- *   then, for a drop, z, beta and sigma2 are scaled by r = force / prior force (at least
- *   NTE_K_LAYER_TEAR_RATIO_MIN, 0.05), which scales the whole model exactly: the published
- *   force is the measured one after the drop (reference_py/MODEL.md §3b part 3).
+ *   phantom records by tests/python/test_layers.py (README).  The detector runs inside the
+ *   bank's step, on filter 1's prior innovation before any update, and a rupture's (or a
+ *   drop's) sample is a tear: every filter's covariance restarts at its initial value (the
+ *   torn layer's estimates start the next layer) and the sample updates z alone, so the drop
+ *   drives no parameter to its clip; then, for a drop, z, beta and sigma2 are scaled by
+ *   r = force / prior force (at least NTE_K_LAYER_TEAR_RATIO_MIN, 0.05), which scales the
+ *   whole model exactly: the published force is the measured one after the drop
+ *   (reference_py/MODEL.md §3b part 3).
  *   Cost per sample: 1 sqrt, 1 division, 3 flops; memory: nte_layers_t in the instance.
  *
  * THE PREDICT-ONLY MODE (sensorless prediction; cfg.predict_only, nte_set_predict_only)

@@ -188,8 +188,8 @@
  * COST
  *   nte_node_poll: per received frame one E2E CRC (8 bytes) and a few dozen operations; per
  *   force sample one nte_step (see nte.h), a search of at most NTE_NODE_DEPTH_HISTORY entries,
- *   1 + params_per_step encodes (one float log10 each for Params).  At most `rx_budget` frames are
- *   received per call, so one call is bounded.
+ *   1 + params_per_step encodes (one float log10 each for Params).  At most `rx_budget` frames
+ *   are received per call, so one call is bounded.
  */
 #ifndef NTE_NODE_H
 #define NTE_NODE_H

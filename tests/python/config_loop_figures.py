@@ -41,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from reference_py.bank import STATUS_DROP, STATUS_RUPTURE
+from reference_py.layers import STATUS_TEAR
 from reference_py.tools.plotting import (PHASES, phase_of, read_input, read_truth,
                                          spans_from_motion)
 
@@ -157,7 +157,7 @@ def phase_rms_by_model(d: Path, record: Path, phase: np.ndarray, noise: float
         # them; a drop within a sample no one-step prediction sees coming): what the model
         # leaves once the tears are counted apart
         status = column(d / "ph.csv", "status").astype(np.int64)
-        kept = (phase == "insertion") & ((status & (STATUS_RUPTURE | STATUS_DROP)) == 0)
+        kept = (phase == "insertion") & ((status & STATUS_TEAR) == 0)
         out[model].append(float(np.sqrt(np.mean(innovation[kept] ** 2))) / noise)
     return out
 

@@ -34,9 +34,10 @@ from pathlib import Path
 import numpy as np
 
 import config_loop_figures as clf
-from reference_py.bank import STATUS_DROP, STATUS_RUPTURE, FilterBank
+from reference_py.bank import FilterBank
 from reference_py.config import ContactConfig, default_config
 from reference_py.fmath import real_for
+from reference_py.layers import STATUS_TEAR
 from reference_py.params import PRESETS
 from reference_py.tools.csvio import read_trial, time_us
 from reference_py.tools.plotting import (PHASES, phase_of, read_input, read_truth,
@@ -102,7 +103,7 @@ def run_batch(recs: list[tuple[Path, np.ndarray, float]], fields: dict[str, obje
         window = clf.REVERSAL_WINDOW_S
         row.append(max((float(np.max(np.abs(inn[(t >= t0) & (t < t0 + window)])))
                         for t0 in starts), default=0.0) / noise)
-        kept = (phase == "insertion") & ((st & (STATUS_RUPTURE | STATUS_DROP)) == 0)
+        kept = (phase == "insertion") & ((st & STATUS_TEAR) == 0)
         row.append(float(np.sqrt(np.mean(inn[kept] ** 2))) / noise)
         rows.append(row)
     return np.asarray(rows)
