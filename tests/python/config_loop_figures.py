@@ -14,7 +14,8 @@
 3. The atlas on a second generator held out from the export's development: the measured-like
    records of discrepancy_measured_like.py (another force law and sampling; seeds 11-21), each
    identified as generated and predicted on the same record's truth under a fresh noise draw
-   (the same condition, another trial), RMSE to the truth less its tare over the peak.
+   (the same insertion measured again), RMSE to the truth less its tare over the peak; part 6
+   predicts another insertion instead.
 4. The one-step innovation RMS over the sensor noise per phase (insertion, dwell, retraction)
    and the reversal's peak (the largest |innovation| / noise within 1 s after the retraction
    starts), files as recorded, Model II's default beside Model III's (contact front end on),
@@ -27,6 +28,12 @@
 5. The atlas of part 3 under other forms of the measured-like generator (rates, noise, a tear
    that runs on, a stage that backs off, stick-slip, no membrane; held-out seeds 41-50):
    `config_loop_figures.py --forms` prints this part alone.
+6. The atlas of part 3 on another trial of the same condition (make_trial's ``trial``: the
+   same tissue, speed and rate; the stage starting +-1.5 mm elsewhere, each tear +-0.3 mm and
+   x0.85-1.15, a new clock, tare and noise; held-out seeds 320-339): identify on the record,
+   predict trial 1 from its depth alone, once with `--surface` (its true surface, a robot
+   registered to the tissue) and once with the surface the config carries;
+   `config_loop_figures.py --trials` prints this part alone.
 
 The estimator runs are nte-run-double's (bit for bit the reference's: test_config_loop.py), for
 speed.  Tuning seeds 1-5, held-out seeds 101-110.
@@ -242,6 +249,40 @@ def atlas_by_form(d: Path) -> None:
             for m in (2, 3)))
 
 
+TRIAL_SEEDS = range(320, 340)
+
+
+def atlas_other_trial(d: Path) -> None:
+    """Part 6 (``--trials``): identify on a measured-like record, predict another trial of
+    its condition, with its true surface and with the config's; RMSE / peak, median (worst)."""
+    from discrepancy_measured_like import make_trial, surface_of
+    print(f"6. atlas on another trial of the same condition (measured-like, seeds "
+          f"{TRIAL_SEEDS[0]}-{TRIAL_SEEDS[-1]}): RMSE / peak, median (worst)")
+    rel: dict[tuple[int, bool], list[float]] = {(m, g): [] for m in (2, 3) for g in (True, False)}
+    for seed in TRIAL_SEEDS:
+        first, _, _, _ = make_trial(seed)
+        other, truth, _, _ = make_trial(seed, trial=1)
+        a, b = d / "trial_a.csv", d / "trial_b.csv"
+        write_record(a, first.t_s, first.depth_mm, first.force_n)
+        write_record(b, other.t_s, other.depth_mm, other.force_n)
+        target = truth - truth[0]
+        for model in (2, 3):
+            cfg = d / "trial.json"
+            run(str(a), "--model", str(model), "--contact", "on", "--out", str(d / "id.csv"),
+                "--export-config", str(cfg))
+            for registered in (True, False):
+                surface = ("--surface", str(surface_of(seed, 1))) if registered else ()
+                run(str(b), "--config", str(cfg), "--predict-only", *surface,
+                    "--out", str(d / "pr.csv"))
+                err = column(d / "pr.csv", "force_hat_n") - target
+                rel[(model, registered)].append(100.0 * float(np.sqrt(np.mean(err ** 2))) /
+                                                float(np.max(np.abs(target))))
+    for registered in (True, False):
+        print(f"   {'its true surface (--surface)' if registered else 'the config surface':30s}"
+              + "  ".join(f"Model {'I' * m}: {np.median(rel[(m, registered)]):.1f} % "
+                          f"({np.max(rel[(m, registered)]):.1f} %)" for m in (2, 3)))
+
+
 def main(presets: list[str]) -> None:
     if not C.exists():
         raise SystemExit(f"{C} missing: make build")
@@ -253,6 +294,9 @@ def main(presets: list[str]) -> None:
             return
         if presets[:1] == ["--forms"]:
             atlas_by_form(d)     # part 5 alone
+            return
+        if presets[:1] == ["--trials"]:
+            atlas_other_trial(d)     # part 6 alone
             return
         preset = presets[0]
         tune = [str(phantom(d, preset, s)) for s in TUNING]
@@ -292,14 +336,16 @@ def main(presets: list[str]) -> None:
                       f"{np.max(medians[model]):.0f} %)")
         measured_like_atlas(d, range(11, 22))
         innovation_by_phase(d, presets)
+        atlas_other_trial(d)
 
 
 if __name__ == "__main__":
     args = sys.argv[1:] or ["skin-on-muscle"]
     from reference_py.sim.calibration import PRESETS as TISSUES
-    unknown = [a for a in args if a not in ("--phases", "--forms") and a not in TISSUES]
+    unknown = [a for a in args if a not in ("--phases", "--forms", "--trials")
+               and a not in TISSUES]
     if unknown:
-        print(f"usage: config_loop_figures.py [--phases | --forms] [PRESET...] (presets: "
-              f"{', '.join(TISSUES)}); not one: {unknown[0]}", file=sys.stderr)
+        print(f"usage: config_loop_figures.py [--phases | --forms | --trials] [PRESET...] "
+              f"(presets: {', '.join(TISSUES)}); not one: {unknown[0]}", file=sys.stderr)
         raise SystemExit(2)
     main(args)

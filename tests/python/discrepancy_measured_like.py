@@ -8,8 +8,11 @@ friction's direction follows a Dahl state over travelled distance (pre-sliding: 
 millimetres to turn over).  The whole tissue force passes through a generalised Maxwell element
 (two branches, ~0.3 s and 2-5 s) on the stress the tissue holds on the needle (cutting and
 friction): relaxation is a property of the tissue, present while moving and visible in the dwell;
-a membrane's tenting stress is released at its rupture.  The stage meets the tissue 4-16 mm after it starts; 25 mm stroke at
-1-3 mm/s (LSPB), 5.26 s dwell, retraction; 76-100 Hz with gaps; noise 8-50 mN; tare offset.
+a membrane's tenting stress is released at its rupture.  The stage meets the tissue 4-16 mm
+after it starts; 25 mm stroke at 1-3 mm/s (LSPB), 5.26 s dwell, retraction; 76-100 Hz with
+gaps; noise 8-50 mN; tare offset.  ``trial``: another insertion of the same condition (the
+same tissue, speed and rate; where the stage starts, the clock, each tear, the tare and the
+noise drawn anew), for predicting one trial from another's identification.
 Out-of-vocabulary option: stick-slip (a sawtooth on the force while moving).  Options for the
 rupture detector: a tear that releases over a travel (``release_mm``) instead of at once, and
 the deepest rupture this far before the stop (``stop_rupture_mm``), and smaller
@@ -54,9 +57,17 @@ def make_trial(seed: int, n_layers: int | None = None, relaxation: bool = True,
                presliding: bool = True, noise: float | None = None, speed: float | None = None,
                stick_slip: bool = False, rate_hz: float | None = None,
                release_mm: float = 0.0, stop_rupture_mm: float | None = None,
-               rupture_scale: float = 1.0, unload_mm: float = 0.0
+               rupture_scale: float = 1.0, unload_mm: float = 0.0, trial: int | None = None
                ) -> tuple[Trial, np.ndarray, float, int]:
+    """The record of ``seed`` (its Trial, noise-free force with the tare, noise sd in N and
+    number of ruptures).  ``trial``: another trial of the same condition — the tissue, speed,
+    rate and noise level of ``seed``, but what differs between two insertions of one phantom
+    drawn from (seed, trial): where the stage starts (the surface +-1.5 mm), the sample clock,
+    each tear's depth (+-0.3 mm sd) and force (x0.85-1.15), the tare and the noise itself.
+    None: the record exactly as it always was."""
     rng = np.random.default_rng(seed)
+    # the per-trial draws come from their own stream, so the condition's draws stay in order
+    other = None if trial is None else np.random.default_rng([seed, trial])
     rate = rate_hz or rng.uniform(76.0, 100.0)
     speed = speed or rng.uniform(1.0, 3.0)
     surface = rng.uniform(4.4, 15.7)
@@ -64,15 +75,13 @@ def make_trial(seed: int, n_layers: int | None = None, relaxation: bool = True,
     dwell = 5.26
     acc = rng.uniform(20.0, 60.0)
     t_pre = rng.uniform(0.5, 1.5)
-    # sample times with jitter and gaps
-    ts, t = [0.0], 0.0
     total = t_pre + 2 * (stroke / speed + 1.0) + dwell + 2.0
-    while t < total:
-        t += (1.0 / rate) * rng.uniform(0.9, 1.1)
-        if rng.random() < 0.004:
-            t += rng.uniform(0.05, 0.3)
-        ts.append(t)
-    tt = np.asarray(ts)
+    tt = _clock(rng, rate, total)
+    depth_max = stroke - surface            # the condition's: its layers are drawn on it
+    if other is not None:
+        surface = float(np.clip(surface + other.uniform(-1.5, 1.5), 2.0, 18.0))
+        t_pre = other.uniform(0.5, 1.5)
+        tt = _clock(other, rate, t_pre + 2 * (stroke / speed + 1.0) + dwell + 2.0)
     x1, v1, t_end1 = _lspb(tt, t_pre, stroke, speed, acc)
     x2, v2, _ = _lspb(tt, t_end1 + dwell, -stroke, speed, acc)
     x, v = x1 + x2, v1 + v2
@@ -80,7 +89,6 @@ def make_trial(seed: int, n_layers: int | None = None, relaxation: bool = True,
         x3, v3, _ = _lspb(tt, t_end1, -unload_mm, speed, acc)
         x, v = x + x3, v + v3
     l = np.maximum(x - surface, 0.0)
-    depth_max = stroke - surface
     nl = int(rng.choice([1, 1, 2, 2, 2, 3, 3, 3, 4])) if n_layers is None else n_layers
     # rupture depths spread over the inserted depth, at least 1.5 mm apart
     while True:
@@ -92,6 +100,11 @@ def make_trial(seed: int, n_layers: int | None = None, relaxation: bool = True,
     peak_force = rng.uniform(2.3, 6.2)
     rupt_f = np.sort(rng.uniform(0.5, 1.0, nl))[::-1] * peak_force if nl else np.array([])
     rupt_f = rupt_f * rupture_scale
+    if other is not None and nl:
+        # the same membranes, torn a little deeper or shallower, a little harder or softer
+        rd = np.sort(np.clip(rd + other.normal(0.0, 0.3, nl), 1.0,
+                             max(stroke - surface - 0.5, 1.0)))
+        rupt_f = rupt_f * other.uniform(0.85, 1.15, nl)
     gam = rng.uniform(1.3, 2.5, nl)
     cut = rng.uniform(0.15, 0.4) * peak_force
     mu = rng.uniform(0.07, 0.15, nl + 1)        # N/mm per band (band 0 before the first rupture)
@@ -159,9 +172,39 @@ def make_trial(seed: int, n_layers: int | None = None, relaxation: bool = True,
     sigma = noise if noise is not None else float(rng.choice([rng.uniform(0.008, 0.013),
                                                               rng.uniform(0.013, 0.05)]))
     tare = rng.uniform(-0.3, 0.3)
+    if other is not None:
+        tare = other.uniform(-0.3, 0.3)
     truth = f_tis + tare
-    meas = truth + rng.normal(0.0, sigma, len(tt))
+    meas = truth + (rng if other is None else other).normal(0.0, sigma, len(tt))
     return Trial(f"m{seed}", tt, x, meas), truth, sigma, nl
+
+
+def surface_of(seed: int, trial: int | None = None, rate_hz: float | None = None,
+               speed: float | None = None) -> float:
+    """Where make_trial's stage meets the tissue (stage mm) for the same arguments: what a
+    robot registered to the tissue would know (nte-ref estimate --surface)."""
+    rng = np.random.default_rng(seed)
+    if not rate_hz:
+        rng.uniform(76.0, 100.0)
+    if not speed:
+        rng.uniform(1.0, 3.0)
+    surface = float(rng.uniform(4.4, 15.7))
+    if trial is not None:
+        other = np.random.default_rng([seed, trial])
+        surface = float(np.clip(surface + other.uniform(-1.5, 1.5), 2.0, 18.0))
+    return surface
+
+
+def _clock(rng: np.random.Generator, rate: float, total: float) -> np.ndarray:
+    """Sample times from 0 to past ``total`` s at ``rate`` Hz, each period jittered by +-10 %
+    and one in 250 followed by a gap of 0.05-0.3 s."""
+    ts, t = [0.0], 0.0
+    while t < total:
+        t += (1.0 / rate) * rng.uniform(0.9, 1.1)
+        if rng.random() < 0.004:
+            t += rng.uniform(0.05, 0.3)
+        ts.append(t)
+    return np.asarray(ts)
 
 
 def make_case(seed: int, trials: int = 3, **kw: object) -> MeasuredCase:

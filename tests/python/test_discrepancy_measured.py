@@ -7,11 +7,39 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from discrepancy_measured_like import make_case, make_trial
+from discrepancy_measured_like import make_case, make_trial, surface_of
 from reference_py.discrepancy.evidence import collect, rupture_count
 from reference_py.discrepancy.prep import prepare
 from reference_py.discrepancy.report import bound_violations
 from reference_py.discrepancy.workflow import run
+
+
+@pytest.mark.parametrize("seed", range(2000, 2006))
+def test_another_trial_keeps_the_condition(seed: int) -> None:
+    """make_trial's ``trial`` (config_loop_figures part 6): the same tissue and noise level, the
+    stage starting within 1.5 mm of the first trial's, the force leaving its tare where that
+    surface says, the tears within 1.2 mm (4 sd) of the first trial's depth below the surface,
+    and a noise draw of its own."""
+    first, truth0, sigma0, n0 = make_trial(seed)
+    other, truth1, sigma1, n1 = make_trial(seed, trial=1)
+    assert (sigma1, n1) == (sigma0, n0)
+    s0, s1 = surface_of(seed), surface_of(seed, 1)
+    assert 0.0 < abs(s1 - s0) <= 1.5
+
+    def tears(tr, truth, surface):
+        rise = truth - truth[0]
+        inside = tr.depth_mm > surface
+        # nothing before the surface; the force rises after it (membrane tenting or cutting)
+        assert np.all(np.abs(rise[~inside & (tr.t_s < tr.t_s[np.argmax(inside)])]) == 0.0)
+        drop = np.flatnonzero(np.diff(rise) < -0.15)
+        drop = drop[np.diff(tr.depth_mm)[drop] > 0]
+        return tr.depth_mm[drop] - surface
+    d0, d1 = tears(first, truth0, s0), tears(other, truth1, s1)
+    assert len(d0) == len(d1) == n0
+    assert np.all(np.abs(d1 - d0) <= 1.2), (d0, d1)
+    noise0 = first.force_n - truth0
+    noise1 = other.force_n[:len(noise0)] - truth1[:len(noise0)]
+    assert abs(np.corrcoef(noise0[:len(noise1)], noise1)[0, 1]) < 0.1
 
 
 @pytest.mark.parametrize("seed", range(8))
