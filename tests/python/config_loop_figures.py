@@ -254,33 +254,41 @@ TRIAL_SEEDS = range(320, 340)
 
 def atlas_other_trial(d: Path) -> None:
     """Part 6 (``--trials``): identify on a measured-like record, predict another trial of
-    its condition, with its true surface and with the config's; RMSE / peak, median (worst)."""
+    its condition with its true surface and with the config's, and (part 3's case, for
+    comparison) the same record's truth under a fresh noise draw; RMSE / peak, median (worst)."""
     from discrepancy_measured_like import make_trial, surface_of
     print(f"6. atlas on another trial of the same condition (measured-like, seeds "
           f"{TRIAL_SEEDS[0]}-{TRIAL_SEEDS[-1]}): RMSE / peak, median (worst)")
-    rel: dict[tuple[int, bool], list[float]] = {(m, g): [] for m in (2, 3) for g in (True, False)}
+    cases = ("another trial, its true surface (--surface)", "another trial, the config surface",
+             "the same record again (part 3)")
+    rel: dict[tuple[int, str], list[float]] = {(m, c): [] for m in (2, 3) for c in cases}
     for seed in TRIAL_SEEDS:
-        first, _, _, _ = make_trial(seed)
-        other, truth, _, _ = make_trial(seed, trial=1)
-        a, b = d / "trial_a.csv", d / "trial_b.csv"
+        first, truth0, sigma, _ = make_trial(seed)
+        other, truth1, _, _ = make_trial(seed, trial=1)
+        a = d / "trial_a.csv"
         write_record(a, first.t_s, first.depth_mm, first.force_n)
-        write_record(b, other.t_s, other.depth_mm, other.force_n)
-        target = truth - truth[0]
+        rng = np.random.default_rng(1000 + seed)
+        again = (first.t_s, first.depth_mm, truth0 + rng.normal(0.0, sigma, len(truth0)))
+        targets = {cases[0]: (other, truth1, ("--surface", str(surface_of(seed, 1)))),
+                   cases[1]: (other, truth1, ()), cases[2]: (again, truth0, ())}
         for model in (2, 3):
             cfg = d / "trial.json"
             run(str(a), "--model", str(model), "--contact", "on", "--out", str(d / "id.csv"),
                 "--export-config", str(cfg))
-            for registered in (True, False):
-                surface = ("--surface", str(surface_of(seed, 1))) if registered else ()
+            for case, (rec, truth, surface) in targets.items():
+                b = d / "trial_b.csv"
+                write_record(b, *((rec.t_s, rec.depth_mm, rec.force_n)
+                                  if rec is other else rec))
                 run(str(b), "--config", str(cfg), "--predict-only", *surface,
                     "--out", str(d / "pr.csv"))
+                target = truth - truth[0]
                 err = column(d / "pr.csv", "force_hat_n") - target
-                rel[(model, registered)].append(100.0 * float(np.sqrt(np.mean(err ** 2))) /
-                                                float(np.max(np.abs(target))))
-    for registered in (True, False):
-        print(f"   {'its true surface (--surface)' if registered else 'the config surface':30s}"
-              + "  ".join(f"Model {'I' * m}: {np.median(rel[(m, registered)]):.1f} % "
-                          f"({np.max(rel[(m, registered)]):.1f} %)" for m in (2, 3)))
+                rel[(model, case)].append(100.0 * float(np.sqrt(np.mean(err ** 2))) /
+                                          float(np.max(np.abs(target))))
+    for case in cases:
+        print(f"   {case:45s}" + "  ".join(
+            f"Model {'I' * m}: {np.median(rel[(m, case)]):.1f} % ({np.max(rel[(m, case)]):.1f} %)"
+            for m in (2, 3)))
 
 
 def main(presets: list[str]) -> None:
