@@ -560,9 +560,11 @@ def test_atlas_on_held_out_records_within_15_percent(tmp_path):
     """The paper's atlas with the fitted export (issue 21's first figure), on data the export
     was not developed on: identify on one record with Model III (--contact on), predict another
     trial of the same condition from its depth alone.  Phantom muscle, seeds 41 -> 42 (measured
-    3.8 % with the layer sets) and the measured-like generator's seed 22 (another force law; the
-    same record's truth under a fresh noise draw; measured 6.5 %): RMSE to the noise-free force
-    <= 15 % of its peak.
+    3.8 % with the layer sets) and the measured-like generator's seed 22 (another force law),
+    predicting its trial 1 (the stage 1.5 mm elsewhere at most, each tear moved, a new clock,
+    tare and noise) with the surface the config carries: RMSE to that trial's noise-free force
+    <= 15 % of its peak (measured 7.7 %; the same record's truth under a fresh noise draw,
+    which this test predicted before, 6.5 %).
     Run by the C twin for speed (its export equals the reference's byte for byte, above)."""
     _c()
     sys.path.insert(0, str(Path(__file__).parent))
@@ -571,15 +573,17 @@ def test_atlas_on_held_out_records_within_15_percent(tmp_path):
     e, peak = res[0]
     assert e <= 0.15 * peak, (e, peak)
     from discrepancy_measured_like import make_trial
-    tr, truth, sigma, _ = make_trial(22)
+    first, _, _, _ = make_trial(22)
+    other, truth, _, _ = make_trial(22, trial=1)
     a, b = tmp_path / "a.csv", tmp_path / "b.csv"
-    rng = np.random.default_rng(1022)
-    for path, force in ((a, tr.force_n), (b, truth + rng.normal(0.0, sigma, len(truth)))):
-        figures.write_record(path, tr.t_s, tr.depth_mm, force)
+    for path, tr in ((a, first), (b, other)):
+        figures.write_record(path, tr.t_s, tr.depth_mm, tr.force_n)
     assert crun(str(a), "--model", "3", "--contact", "on", "--out", str(tmp_path / "id.csv"),
                 "--export-config", str(tmp_path / "x.json")).returncode == 0
     assert crun(str(b), "--config", str(tmp_path / "x.json"), "--predict-only", "--out",
                 str(tmp_path / "p.csv")).returncode == 0
     target = truth - truth[0]                  # the record starts in the air: the tare
     err = np.genfromtxt(tmp_path / "p.csv", delimiter=",", names=True)["force_hat_n"] - target
-    assert float(np.sqrt(np.mean(err ** 2))) <= 0.15 * float(np.max(np.abs(target)))
+    rel = float(np.sqrt(np.mean(err ** 2))) / float(np.max(np.abs(target)))
+    print(f"measured-like seed 22, trial 1 predicted: {100 * rel:.1f} % of the peak")
+    assert rel <= 0.15
