@@ -269,16 +269,16 @@ def atlas_other_trial(d: Path) -> None:
         write_record(a, first.t_s, first.depth_mm, first.force_n)
         rng = np.random.default_rng(1000 + seed)
         again = (first.t_s, first.depth_mm, truth0 + rng.normal(0.0, sigma, len(truth0)))
-        targets = {cases[0]: (other, truth1, ("--surface", str(surface_of(seed, 1)))),
-                   cases[1]: (other, truth1, ()), cases[2]: (again, truth0, ())}
+        second = (other.t_s, other.depth_mm, other.force_n)
+        targets = {cases[0]: (second, truth1, ("--surface", str(surface_of(seed, 1)))),
+                   cases[1]: (second, truth1, ()), cases[2]: (again, truth0, ())}
         for model in (2, 3):
             cfg = d / "trial.json"
             run(str(a), "--model", str(model), "--contact", "on", "--out", str(d / "id.csv"),
                 "--export-config", str(cfg))
             for case, (rec, truth, surface) in targets.items():
                 b = d / "trial_b.csv"
-                write_record(b, *((rec.t_s, rec.depth_mm, rec.force_n)
-                                  if rec is other else rec))
+                write_record(b, *rec)
                 run(str(b), "--config", str(cfg), "--predict-only", *surface,
                     "--out", str(d / "pr.csv"))
                 target = truth - truth[0]

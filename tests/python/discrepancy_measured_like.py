@@ -65,21 +65,15 @@ def make_trial(seed: int, n_layers: int | None = None, relaxation: bool = True,
     drawn from (seed, trial): where the stage starts (the surface +-1.5 mm), the sample clock,
     each tear's depth (+-0.3 mm sd) and force (x0.85-1.15), the tare and the noise itself.
     None: the record exactly as it always was."""
-    rng = np.random.default_rng(seed)
-    # the per-trial draws come from their own stream, so the condition's draws stay in order
-    other = None if trial is None else np.random.default_rng([seed, trial])
-    rate = rate_hz or rng.uniform(76.0, 100.0)
-    speed = speed or rng.uniform(1.0, 3.0)
-    surface = rng.uniform(4.4, 15.7)
+    rng, other, rate, speed, condition_surface, surface = _stage(seed, trial, rate_hz, speed)
     stroke = 25.0
     dwell = 5.26
     acc = rng.uniform(20.0, 60.0)
     t_pre = rng.uniform(0.5, 1.5)
     total = t_pre + 2 * (stroke / speed + 1.0) + dwell + 2.0
     tt = _clock(rng, rate, total)
-    depth_max = stroke - surface            # the condition's: its layers are drawn on it
+    depth_max = stroke - condition_surface  # the condition's: its layers are drawn on it
     if other is not None:
-        surface = float(np.clip(surface + other.uniform(-1.5, 1.5), 2.0, 18.0))
         t_pre = other.uniform(0.5, 1.5)
         tt = _clock(other, rate, t_pre + 2 * (stroke / speed + 1.0) + dwell + 2.0)
     x1, v1, t_end1 = _lspb(tt, t_pre, stroke, speed, acc)
@@ -179,20 +173,27 @@ def make_trial(seed: int, n_layers: int | None = None, relaxation: bool = True,
     return Trial(f"m{seed}", tt, x, meas), truth, sigma, nl
 
 
+def _stage(seed: int, trial: int | None, rate_hz: float | None, speed: float | None
+           ) -> tuple[np.random.Generator, np.random.Generator | None, float, float, float,
+                      float]:
+    """make_trial's first draws: the condition's stream and the trial's (None for the record
+    itself; the per-trial draws come from their own stream, so the condition's stay in order),
+    the rate (Hz), the speed (mm/s), the condition's surface and this trial's (stage mm)."""
+    rng = np.random.default_rng(seed)
+    other = None if trial is None else np.random.default_rng([seed, trial])
+    rate = rate_hz or rng.uniform(76.0, 100.0)
+    speed = speed or rng.uniform(1.0, 3.0)
+    surface = rng.uniform(4.4, 15.7)
+    moved = surface if other is None else float(np.clip(surface + other.uniform(-1.5, 1.5),
+                                                        2.0, 18.0))
+    return rng, other, rate, speed, surface, moved
+
+
 def surface_of(seed: int, trial: int | None = None, rate_hz: float | None = None,
                speed: float | None = None) -> float:
     """Where make_trial's stage meets the tissue (stage mm) for the same arguments: what a
     robot registered to the tissue would know (nte-ref estimate --surface)."""
-    rng = np.random.default_rng(seed)
-    if not rate_hz:
-        rng.uniform(76.0, 100.0)
-    if not speed:
-        rng.uniform(1.0, 3.0)
-    surface = float(rng.uniform(4.4, 15.7))
-    if trial is not None:
-        other = np.random.default_rng([seed, trial])
-        surface = float(np.clip(surface + other.uniform(-1.5, 1.5), 2.0, 18.0))
-    return surface
+    return _stage(seed, trial, rate_hz, speed)[5]
 
 
 def _clock(rng: np.random.Generator, rate: float, total: float) -> np.ndarray:
