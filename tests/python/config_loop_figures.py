@@ -104,11 +104,28 @@ def write_record(path: Path, t: np.ndarray, x: np.ndarray, f: np.ndarray) -> Non
         "%.17g,%.17g,%.17g\n" % r for r in zip(t, x, f)))
 
 
+def identify(d: Path, record: Path, model: int, cfg: Path) -> Path:
+    """Model ``model`` (contact front end on) over ``record``, its export written to ``cfg``."""
+    run(str(record), "--model", str(model), "--contact", "on", "--out", str(d / "id.csv"),
+        "--export-config", str(cfg))
+    return cfg
+
+
+def predicted_percent(d: Path, record: Path, cfg: Path, target: np.ndarray,
+                      *surface: str) -> float:
+    """RMSE of ``cfg``'s prediction of ``record`` from its depth alone (``surface``: e.g.
+    "--surface", "12.3"; none: the config's) to ``target`` (N), in % of the target's peak."""
+    run(str(record), "--config", str(cfg), "--predict-only", *surface, "--out",
+        str(d / "pr.csv"))
+    err = column(d / "pr.csv", "force_hat_n") - target
+    return 100.0 * float(np.sqrt(np.mean(err ** 2))) / float(np.max(np.abs(target)))
+
+
 def measured_like_atlas(d: Path, seeds: range) -> None:
     from discrepancy_measured_like import make_trial
 
     print(f"3. atlas on the measured-like generator (held out), seeds {seeds[0]}-{seeds[-1]}: "
-          "RMSE / peak of the prediction of the same condition's other trial")
+          "RMSE / peak of the prediction of the same record under a fresh noise draw")
     rel: dict[int, list[float]] = {2: [], 3: []}
     for seed in seeds:
         tr, truth, sigma, _ = make_trial(seed)
@@ -119,13 +136,8 @@ def measured_like_atlas(d: Path, seeds: range) -> None:
         target = truth - truth[0]           # the record starts in the air: truth[0] is the tare
         line = f"   seed {seed}:"
         for model in (2, 3):
-            cfg = d / f"ml{seed}_{model}.json"
-            run(str(a), "--model", str(model), "--contact", "on", "--out", str(d / "id.csv"),
-                "--export-config", str(cfg))
-            run(str(b), "--config", str(cfg), "--predict-only", "--out", str(d / "pr.csv"))
-            err = column(d / "pr.csv", "force_hat_n") - target
-            rel[model].append(100.0 * float(np.sqrt(np.mean(err ** 2))) /
-                              float(np.max(np.abs(target))))
+            cfg = identify(d, a, model, d / f"ml{seed}_{model}.json")
+            rel[model].append(predicted_percent(d, b, cfg, target))
             line += f" Model {'I' * model} {rel[model][-1]:.1f} %"
         print(line)
     for model in (2, 3):
@@ -237,13 +249,8 @@ def atlas_by_form(d: Path) -> None:
             write_record(b, tr.t_s, tr.depth_mm, truth + rng.normal(0.0, sigma, len(truth)))
             target = truth - truth[0]
             for model in (2, 3):
-                cfg = d / "form.json"
-                run(str(a), "--model", str(model), "--contact", "on", "--out",
-                    str(d / "id.csv"), "--export-config", str(cfg))
-                run(str(b), "--config", str(cfg), "--predict-only", "--out", str(d / "pr.csv"))
-                err = column(d / "pr.csv", "force_hat_n") - target
-                rel[model].append(100.0 * float(np.sqrt(np.mean(err ** 2))) /
-                                  float(np.max(np.abs(target))))
+                cfg = identify(d, a, model, d / "form.json")
+                rel[model].append(predicted_percent(d, b, cfg, target))
         print(f"   {form:15s} " + "  ".join(
             f"Model {'I' * m}: {np.median(rel[m]):.1f} % ({np.max(rel[m]):.1f} %)"
             for m in (2, 3)))
@@ -273,18 +280,12 @@ def atlas_other_trial(d: Path) -> None:
         targets = {cases[0]: (second, truth1, ("--surface", str(surface_of(seed, 1)))),
                    cases[1]: (second, truth1, ()), cases[2]: (again, truth0, ())}
         for model in (2, 3):
-            cfg = d / "trial.json"
-            run(str(a), "--model", str(model), "--contact", "on", "--out", str(d / "id.csv"),
-                "--export-config", str(cfg))
+            cfg = identify(d, a, model, d / "trial.json")
             for case, (rec, truth, surface) in targets.items():
                 b = d / "trial_b.csv"
                 write_record(b, *rec)
-                run(str(b), "--config", str(cfg), "--predict-only", *surface,
-                    "--out", str(d / "pr.csv"))
-                target = truth - truth[0]
-                err = column(d / "pr.csv", "force_hat_n") - target
-                rel[(model, case)].append(100.0 * float(np.sqrt(np.mean(err ** 2))) /
-                                          float(np.max(np.abs(target))))
+                rel[(model, case)].append(predicted_percent(d, b, cfg, truth - truth[0],
+                                                            *surface))
     for case in cases:
         print(f"   {case:45s}" + "  ".join(
             f"Model {'I' * m}: {np.median(rel[(m, case)]):.1f} % ({np.max(rel[(m, case)]):.1f} %)"

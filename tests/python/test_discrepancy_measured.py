@@ -29,8 +29,9 @@ def test_another_trial_keeps_the_condition(seed: int) -> None:
     def tears(tr, truth, surface):
         rise = truth - truth[0]
         inside = tr.depth_mm > surface
-        # nothing before the surface; the force rises after it (membrane tenting or cutting)
+        # nothing before the surface, a force once past it (membrane tenting or cutting)
         assert np.all(np.abs(rise[~inside & (tr.t_s < tr.t_s[np.argmax(inside)])]) == 0.0)
+        assert np.max(rise[inside]) > 0.0
         drop = np.flatnonzero(np.diff(rise) < -0.15)
         drop = drop[np.diff(tr.depth_mm)[drop] > 0]
         return tr.depth_mm[drop] - surface
