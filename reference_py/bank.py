@@ -430,21 +430,18 @@ class FilterBank:
         """Filter i's prior state (z restarted at the surface or after a gap), its predicted
         covariance F P F^T + Q, and z's steady state (0 out of tissue or where not finite)."""
         R, c = self.R, self.c
-        B = self.batch
         zero = R.c(0.0)
         # out of tissue z is 0; after a gap it has relaxed to its steady state: either way
         # the prior z carries no memory of z(k-1)
         z_ss = steady_state_z(R, self.th, d)
         z_restart = np.where(surface, zero, z_ss)
         zp = np.where(restart, z_restart, pred.z)
-        F: Matrix = [[np.where(restart, zero, pred.dz_dz0)] +
-                     [np.where(restart, zero, pred.dz_du[nm] if nm in pred.dz_du else zero)
-                      for nm in names]]
-        for a in range(len(names)):
-            F.append([R.full(B, 0.0)] + [R.full(B, 1.0 if a == b else 0.0)
-                                         for b in range(len(names))])
+        # z's row of the transition (the parameters' rows are a random walk: predict_covariance)
+        f = [np.where(restart, zero, pred.dz_dz0)] + \
+            [np.where(restart, zero, pred.dz_du[nm] if nm in pred.dz_du else zero)
+             for nm in names]
         q = [c.q_z] + [c.q_u[nm] for nm in names]
-        P_pred = predict_covariance(self.P[i], F, q)
+        P_pred = predict_covariance(self.P[i], f, q)
         x = [zp] + [self.u[IDX[nm]] for nm in names]
         return x, P_pred, np.where(np.isfinite(z_ss), z_ss, zero)
 

@@ -24,18 +24,30 @@ def _dot(a: list[Array], b: list[Array]) -> Array:
     return acc
 
 
-def predict_covariance(P: Matrix, F: Matrix, q: list[Array]) -> Matrix:
-    """P <- F P F^T + diag(q)."""
+def predict_covariance(P: Matrix, f: list[Array], q: list[Array]) -> Matrix:
+    """P <- F P F^T + diag(q) for the bank's transition F = [[f], [0, I]]: z's row f (dz/dz0,
+    dz/du) and the parameters a random walk.
+
+    With that F the product needs f twice and copies the rest (no product by 0 or 1):
+      (F P)[0][j] = sum_k f[k] P[k][j],   (F P)[a][j] = P[a][j]  (a >= 1)
+      out[0][0]   = sum_k (F P)[0][k] f[k] + q[0]
+      out[0][b]   = (F P)[0][b]           (F[b] is the unit row b, b >= 1)
+      out[a][b]   = P[a][b] + (q[a] if a == b)
+    The dense product's other terms are products by 0, which add nothing to a finite sum (a
+    zero's sign aside); a non-finite P fails positive_definite either way.
+    """
     n = len(P)
-    FP = [[_dot(F[i], [P[k][j] for k in range(n)]) for j in range(n)] for i in range(n)]
+    fp = [_dot(f, [P[k][j] for k in range(n)]) for j in range(n)]
     out: Matrix = [[None] * n for _ in range(n)]  # type: ignore[list-item]
-    for i in range(n):
-        for j in range(i, n):
-            v = _dot(FP[i], F[j])
-            if i == j:
-                v = v + q[i]
-            out[i][j] = v
-            out[j][i] = v
+    out[0][0] = _dot(fp, f) + q[0]
+    for b in range(1, n):
+        out[0][b] = fp[b]
+        out[b][0] = fp[b]
+    for a in range(1, n):
+        for b in range(a, n):
+            v = P[a][b] + q[a] if a == b else P[a][b]
+            out[a][b] = v
+            out[b][a] = v
     return out
 
 

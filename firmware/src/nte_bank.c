@@ -382,23 +382,20 @@ static void predict(nte_t* self, const step_ctx_t* c, const size_t i, const nte_
     if (restart) {
         zp = c->surface ? NTE_C(0.0) : nte_model_steady_state_z(&self->th, d);
     }
-    nte_mat3_t F;
+    /* z's row of the transition (the parameters' rows are a random walk: nte_ekf_predict) */
+    nte_real_t f[NTE_EKF_N_MAX];
     nte_real_t q[NTE_EKF_N_MAX];
-    F[0][0] = restart ? NTE_C(0.0) : pred->dz_dz0;
+    f[0] = restart ? NTE_C(0.0) : pred->dz_dz0;
     q[0] = self->cfg.q_z;
     w->x[0] = zp;
     for (size_t a = 0U; a < na; a++) {
         /* the relaxation strengths act on the output only: dz/du_g = 0 */
         const bool dyn = w->names[a] < (uint8_t)nte_param_g_fast;
-        F[0][a + 1U] = (restart || !dyn) ? NTE_C(0.0) : pred->dz_du[w->names[a]];
-        F[a + 1U][0] = NTE_C(0.0);
-        for (size_t b = 0U; b < na; b++) {
-            F[a + 1U][b + 1U] = (a == b) ? NTE_C(1.0) : NTE_C(0.0);
-        }
+        f[a + 1U] = (restart || !dyn) ? NTE_C(0.0) : pred->dz_du[w->names[a]];
         q[a + 1U] = self->q_u[w->names[a]];
         w->x[a + 1U] = self->u[w->names[a]];
     }
-    nte_ekf_predict(w->n, self->P[i], F, q, w->P);
+    nte_ekf_predict(w->n, self->P[i], f, q, w->P);
 }
 
 /* bank._measure: the predicted force, its Jacobian, the innovation and the effective R. */
@@ -508,7 +505,9 @@ static uint32_t update_and_guard(nte_t* self, const size_t i, const nte_depth_te
     const size_t na = n - 1U;
     uint32_t status = 0U;
     nte_real_t xn[NTE_EKF_N_MAX];
-    nte_mat3_t Pn;
+    /* the update and the guard work on the filter's own covariance, from a copy of the prior
+     * (w->P stays the prior, which the checks below judge) */
+    nte_real_t(*const Pn)[NTE_EKF_N_MAX] = self->P[i];
     for (size_t a = 0U; a < n; a++) {
         xn[a] = w->x[a];
         for (size_t b = 0U; b < n; b++) {
@@ -546,11 +545,6 @@ static uint32_t update_and_guard(nte_t* self, const size_t i, const nte_depth_te
         z_ss = nte_isfinite(z_ss) ? z_ss : NTE_C(0.0);
     }
     status |= guard(self, n, xn, Pn, w->x, prior_ok, !w->in_range, z_ss);
-    for (size_t a = 0U; a < n; a++) {
-        for (size_t b = 0U; b < n; b++) {
-            self->P[i][a][b] = Pn[a][b];
-        }
-    }
     for (size_t a = 0U; a < na; a++) {
         self->u[w->names[a]] = xn[a + 1U];
     }
@@ -691,8 +685,8 @@ void nte_bank_advance(nte_t* self, const bool first, const nte_real_t dt, const 
             status |= NTE_STATUS_GAP;
             self->counters.gaps++;
         }
+        /* written by the rotate schedule's one prediction below, read by no other schedule */
         nte_rk3_result_t shared;
-        (void)memset(&shared, 0, sizeof shared);
         if (c.rotate) {
             /* one prediction, with every identified parameter's sensitivity, serves all three */
             const uint8_t* ids = NULL;

@@ -4,30 +4,73 @@
  */
 #include "nte_ekf.h"
 
-void nte_ekf_predict(const size_t n, nte_mat3_t P, nte_mat3_t F, const nte_real_t* q,
+/* The Joseph update's sums of n products, accumulated left to right as ekf._dot does.  The
+ * bank's filters have n = 3 or 4: written out for those, a sum runs without a loop's compare,
+ * branch and counter, which cost about as much as the multiply and add they guard, in the same
+ * order, so with the same bits; any other n takes the loop. */
+
+/* sum_m a[m] b[m] */
+static inline nte_real_t dot_rows(const size_t n, const nte_real_t* a, const nte_real_t* b)
+{
+    if (n == 4U) {
+        return (((a[0] * b[0]) + (a[1] * b[1])) + (a[2] * b[2])) + (a[3] * b[3]);
+    }
+    if (n == 3U) {
+        return ((a[0] * b[0]) + (a[1] * b[1])) + (a[2] * b[2]);
+    }
+    nte_real_t acc = a[0] * b[0];
+    for (size_t m = 1U; m < n; m++) {
+        acc = acc + (a[m] * b[m]);
+    }
+    return acc;
+}
+
+/* sum_m a[m] M[m][j]: a row times column j */
+static inline nte_real_t dot_column(const size_t n, const nte_real_t* a, nte_mat3_t M,
+                                    const size_t j)
+{
+    if (n == 4U) {
+        return (((a[0] * M[0][j]) + (a[1] * M[1][j])) + (a[2] * M[2][j])) + (a[3] * M[3][j]);
+    }
+    if (n == 3U) {
+        return ((a[0] * M[0][j]) + (a[1] * M[1][j])) + (a[2] * M[2][j]);
+    }
+    nte_real_t acc = a[0] * M[0][j];
+    for (size_t m = 1U; m < n; m++) {
+        acc = acc + (a[m] * M[m][j]);
+    }
+    return acc;
+}
+
+/* F = [[f], [0, I]]: (F P)[0][j] = sum_k f[k] P[k][j], the other rows P's own, so
+ * out[0][0] = sum_k (F P)[0][k] f[k] + q[0], out[0][b] = (F P)[0][b] and out[a][b] = P[a][b]
+ * (+ q[a] on the diagonal) for a, b >= 1; the dense product's other terms are products by 0
+ * (derivation: ekf.predict_covariance) */
+void nte_ekf_predict(const size_t n, nte_mat3_t P, const nte_real_t* f, const nte_real_t* q,
                      nte_mat3_t out)
 {
-    nte_mat3_t FP;
-    for (size_t i = 0U; i < n; i++) {
-        for (size_t j = 0U; j < n; j++) {
-            nte_real_t acc = F[i][0] * P[0][j];
-            for (size_t k = 1U; k < n; k++) {
-                acc = acc + (F[i][k] * P[k][j]);
-            }
-            FP[i][j] = acc;
+    nte_real_t fp[NTE_EKF_N_MAX] = {NTE_C(0.0)};
+    for (size_t j = 0U; j < n; j++) {
+        nte_real_t acc = f[0] * P[0][j];
+        for (size_t k = 1U; k < n; k++) {
+            acc = acc + (f[k] * P[k][j]);
         }
+        fp[j] = acc;
     }
-    for (size_t i = 0U; i < n; i++) {
-        for (size_t j = i; j < n; j++) {
-            nte_real_t v = FP[i][0] * F[j][0];
-            for (size_t k = 1U; k < n; k++) {
-                v = v + (FP[i][k] * F[j][k]);
-            }
-            if (i == j) {
-                v = v + q[i];
-            }
-            out[i][j] = v;
-            out[j][i] = v;
+    nte_real_t v = fp[0] * f[0];
+    for (size_t k = 1U; k < n; k++) {
+        v = v + (fp[k] * f[k]);
+    }
+    out[0][0] = v + q[0];
+    for (size_t b = 1U; b < n; b++) {
+        out[0][b] = fp[b];
+        out[b][0] = fp[b];
+    }
+    for (size_t a = 1U; a < n; a++) {
+        out[a][a] = P[a][a] + q[a];
+        for (size_t b = a + 1U; b < n; b++) {
+            out[a][b] = P[a][b];
+            out[b][a] = P[a][b];
         }
     }
 }
@@ -77,20 +120,12 @@ nte_ekf_update_t nte_ekf_joseph_update(const size_t n, nte_real_t* x, nte_mat3_t
     }
     for (size_t i = 0U; i < n; i++) {
         for (size_t j = 0U; j < n; j++) {
-            nte_real_t acc = a[i][0] * P[0][j];
-            for (size_t m = 1U; m < n; m++) {
-                acc = acc + (a[i][m] * P[m][j]);
-            }
-            ap[i][j] = acc;
+            ap[i][j] = dot_column(n, a[i], P, j);
         }
     }
     for (size_t i = 0U; i < n; i++) {
         for (size_t j = i; j < n; j++) {
-            nte_real_t v = ap[i][0] * a[j][0];
-            for (size_t m = 1U; m < n; m++) {
-                v = v + (ap[i][m] * a[j][m]);
-            }
-            v = v + ((k[i] * r) * k[j]);
+            const nte_real_t v = dot_rows(n, ap[i], a[j]) + ((k[i] * r) * k[j]);
             P[i][j] = v;
             P[j][i] = v;
         }

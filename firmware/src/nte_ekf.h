@@ -12,9 +12,11 @@
 
 typedef nte_real_t nte_mat3_t[NTE_EKF_N_MAX][NTE_EKF_N_MAX];
 
-/** out = F P F^T + diag(q).  P and F are read only (not const: C99 array qualifiers);
- *  out must not alias P. */
-void nte_ekf_predict(size_t n, nte_mat3_t P, nte_mat3_t F, const nte_real_t* q, nte_mat3_t out);
+/** out = F P F^T + diag(q) for the bank's transition F = [[f], [0, I]]: z's row f (dz/dz0,
+ *  dz/du) and the parameters a random walk (ekf.predict_covariance).  P is read only (not
+ *  const: C99 array qualifiers); out must not alias P. */
+void nte_ekf_predict(size_t n, nte_mat3_t P, const nte_real_t* f, const nte_real_t* q,
+                     nte_mat3_t out);
 
 /** Result of one scalar update. */
 typedef struct nte_ekf_update_t {

@@ -25,8 +25,7 @@ def _ours(x, P, F, Q, H, R, z, gate2=1e30, step=None):
     n = len(x)
     col = lambda v: F64.arr([v])  # noqa: E731
     Pm = [[col(P[i, j]) for j in range(n)] for i in range(n)]
-    Fm = [[col(F[i, j]) for j in range(n)] for i in range(n)]
-    Pp = predict_covariance(Pm, Fm, [col(Q[i, i]) for i in range(n)])
+    Pp = predict_covariance(Pm, [col(F[0, j]) for j in range(n)], [col(Q[i, i]) for i in range(n)])
     xp = F @ x
     innov = col(z - float((H @ xp)[0]))
     upd = joseph_update(F64, [col(v) for v in xp], Pp, [col(h) for h in H[0]], innov, col(R),

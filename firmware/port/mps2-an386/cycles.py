@@ -263,15 +263,17 @@ def trace_steps(elf: pathlib.Path) -> tuple[list[dict[tuple[int, int], int]], di
 SIZE: dict[int, int] = {}
 
 
-def block_cost(pcs: tuple, taken: int, insns: dict[int, Insn], harness: set[int]
-               ) -> tuple[int, int, int, dict[str, int]]:
-    """(instructions, lower, upper cycles, upper cycles per class) of one execution."""
+def block_cost(pcs: tuple, taken: int, insns: dict[int, Insn], harness: set[int],
+               owner: dict[int, str]) -> tuple[int, int, int, dict[str, int], dict[str, int]]:
+    """(instructions, lower, upper cycles, upper cycles per class, upper cycles per function)
+    of one execution."""
     n = lo = hi = 0
     by: dict[str, int] = {}
+    fn: dict[str, int] = {}
     prev_single = False
     for i, pc in enumerate(pcs):
         if pc in harness:
-            return 0, 0, 0, {}
+            return 0, 0, 0, {}, {}
         ins = insns.get(pc)
         if ins is None:
             raise KeyError(f"no timing for the instruction at {pc:#x}")
@@ -285,7 +287,8 @@ def block_cost(pcs: tuple, taken: int, insns: dict[int, Insn], harness: set[int]
         lo += a
         hi += b
         by[ins.cls] = by.get(ins.cls, 0) + b
-    return n, lo, hi, by
+        fn[owner[pc]] = fn.get(owner[pc], 0) + b
+    return n, lo, hi, by, fn
 
 
 def model(elf: pathlib.Path) -> dict:
@@ -294,22 +297,28 @@ def model(elf: pathlib.Path) -> dict:
     SIZE.update({pc: i.size for pc, i in insns.items() if i is not None})
     harness = {pc for name in HARNESS if name in funcs
                for pc in range(funcs[name][0], funcs[name][1])}
+    # the function each instruction belongs to (objdump's symbol; GCC's clones such as
+    # nte_ekf_predict.constprop.0 are their own rows)
+    owner = {pc: name for name, (a, b) in funcs.items() for pc in range(a, b)}
     steps, blocks, output = trace_steps(elf)
     cache: dict[tuple[int, int], tuple] = {}
     per_step = []
     for st in steps:
         n = lo = hi = 0
         by: dict[str, int] = {}
+        fn: dict[str, int] = {}
         for key, count in st.items():
             if key not in cache:
-                cache[key] = block_cost(blocks[key[0]], key[1], insns, harness)
-            bn, blo, bhi, bby = cache[key]
+                cache[key] = block_cost(blocks[key[0]], key[1], insns, harness, owner)
+            bn, blo, bhi, bby, bfn = cache[key]
             n += count * bn
             lo += count * blo
             hi += count * bhi
             for c, v in bby.items():
                 by[c] = by.get(c, 0) + count * v
-        per_step.append({"insns": n, "lo": lo, "hi": hi, "by": by})
+            for c, v in bfn.items():
+                fn[c] = fn.get(c, 0) + count * v
+        per_step.append({"insns": n, "lo": lo, "hi": hi, "by": by, "fn": fn})
     runs = [ln for ln in output.splitlines() if ln.startswith("R ")]
     per_run = len(per_step) // max(1, len(runs))
     if per_run * len(runs) != len(per_step):
@@ -340,7 +349,7 @@ def summary(sl: list[dict]) -> dict:
     return {"steps": len(sl), "median_insns": mid["insns"], "median_lo": mid["lo"],
             "median_hi": mid["hi"], "worst_insns": worst["insns"], "worst_lo": worst["lo"],
             "worst_hi": worst["hi"], "total_lo": sum(s["lo"] for s in sl), "total_hi": tot_hi,
-            "worst_by_class": worst["by"]}
+            "worst_by_class": worst["by"], "worst_by_function": worst["fn"]}
 
 
 def num(x: int) -> str:
@@ -351,6 +360,8 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--build", default=str(ROOT / "build" / "m4"))
     ap.add_argument("--json", help="also write the figures to this file")
+    ap.add_argument("--functions", type=int, default=0, metavar="N",
+                    help="also print the N functions that take most of each worst step")
     a = ap.parse_args()
     elf = pathlib.Path(a.build) / "bin" / "nte-selftest.elf"
     if not elf.exists():
@@ -377,6 +388,11 @@ def main() -> int:
         shares = ", ".join(f"{c} {100 * v / tot:.0f} %"
                            for c, v in sorted(s["worst_by_class"].items(), key=lambda x: -x[1]))
         print(f"upper-bound cycles of the worst step by class, {label}: {shares}")
+    for label, s in res.items() if a.functions > 0 else ():
+        tot = sum(s["worst_by_function"].values())
+        top = sorted(s["worst_by_function"].items(), key=lambda x: -x[1])[:a.functions]
+        print(f"worst step by function (upper-bound cycles), {label}: " +
+              ", ".join(f"{f} {num(v)} ({100 * v / tot:.0f} %)" for f, v in top))
     if a.json:
         pathlib.Path(a.json).write_text(json.dumps(res, indent=1) + "\n")
     return 0
