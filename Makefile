@@ -70,7 +70,7 @@ clang: deps
 
 board-figures: venv board
 	$(PY) firmware/port/mps2-an386/figures.py
-	$(PY) firmware/port/mps2-an386/cycles.py
+	$(PY) firmware/port/mps2-an386/cycles.py --functions 6
 
 # the whole chain: the C node on a real vcan0 (host_bench/with-vcan boots a kernel when the host has no CAN),
 # fed by the host bench with a paper insertion, compared bit for bit with the reference
