@@ -7,7 +7,11 @@ a lower-upper cycle range.  Prints cycles per step and the CPU load at 200 Hz on
 part for each configuration of the self-test (Model I bank; Model II bank, every filter every
 sample and rotating; the robust estimator's normal samples and its refinement; Model III bank).
 
-    python3 firmware/port/mps2-an386/cycles.py [--build build/m4] [--json FILE]
+    python3 firmware/port/mps2-an386/cycles.py [--build build/m4] [--json FILE] [--functions N]
+
+--functions N also prints, for each configuration's worst step, the N functions that take most
+of its cycles: each executed instruction is charged to the function whose symbol holds it
+(what the step path inlines is charged to the function it was inlined into).
 
 Deterministic: the same image gives the same figures on every run.  Needs the cross build
 (`make board`) and qemu-system-arm.  About 15 s.
