@@ -367,6 +367,8 @@ def main() -> int:
     ap.add_argument("--functions", type=int, default=0, metavar="N",
                     help="also print the N functions that take most of each worst step")
     a = ap.parse_args()
+    if a.functions < 0:
+        ap.error(f"argument --functions: {a.functions} is negative (a count of functions, 0: none)")
     elf = pathlib.Path(a.build) / "bin" / "nte-selftest.elf"
     if not elf.exists():
         print(f"cycles: {elf} not found (build it: make board)", file=sys.stderr)
