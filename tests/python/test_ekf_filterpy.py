@@ -35,7 +35,7 @@ def _ours(x, P, F, Q, H, R, z, gate2=1e30, step=None):
 
 
 @pytest.mark.parametrize("seed", range(40))
-@pytest.mark.parametrize("n", (1, 2, 3))
+@pytest.mark.parametrize("n", (1, 2, 3, 4))
 def test_matches_filterpy(seed, n):
     rng = np.random.default_rng(seed * 10 + n)
     x, P, F, Q, H, R, z = _random_case(rng, n)
