@@ -49,6 +49,7 @@ static inline nte_real_t dot_column(const size_t n, const nte_real_t* a, nte_mat
 void nte_ekf_predict(const size_t n, nte_mat3_t P, const nte_real_t* f, const nte_real_t* q,
                      nte_mat3_t out)
 {
+    /* cleared only because GCC cannot see that n >= 1 (fp[0] is read below the loop) */
     nte_real_t fp[NTE_EKF_N_MAX] = {NTE_C(0.0)};
     for (size_t j = 0U; j < n; j++) {
         nte_real_t acc = f[0] * P[0][j];

@@ -394,11 +394,12 @@ def main() -> int:
         shares = ", ".join(f"{c} {100 * v / tot:.0f} %"
                            for c, v in sorted(s["worst_by_class"].items(), key=lambda x: -x[1]))
         print(f"upper-bound cycles of the worst step by class, {label}: {shares}")
-    for label, s in res.items() if a.functions > 0 else ():
-        tot = sum(s["worst_by_function"].values())
-        top = sorted(s["worst_by_function"].items(), key=lambda x: -x[1])[:a.functions]
-        print(f"worst step by function (upper-bound cycles), {label}: " +
-              ", ".join(f"{f} {num(v)} ({100 * v / tot:.0f} %)" for f, v in top))
+    if a.functions > 0:
+        for label, s in res.items():
+            tot = sum(s["worst_by_function"].values())
+            top = sorted(s["worst_by_function"].items(), key=lambda x: -x[1])[:a.functions]
+            print(f"worst step by function (upper-bound cycles), {label}: " +
+                  ", ".join(f"{f} {num(v)} ({100 * v / tot:.0f} %)" for f, v in top))
     if a.json:
         pathlib.Path(a.json).write_text(json.dumps(res, indent=1) + "\n")
     return 0
