@@ -291,6 +291,8 @@ def design_blocks(trials: list[TrialGrid], effects: tuple[str, ...], nl: dict[st
         for j in range(len(tr.ruptures)):
             labels += [f"layer{j + 1}_load1[{i}]", f"layer{j + 1}_load2[{i}]",
                        f"layer{j + 1}_cut[{i}]", f"layer{j + 1}_fric[{i}]"]
+        if tr.ruptures:
+            labels.append(f"layer0_fric[{i}]")
     if "velocity_friction" in effects:
         labels.append("b_visc")
     if "direction_asymmetry" in effects:
@@ -377,6 +379,8 @@ def _layer_columns(m: Array, col: dict[str, int], i: int, rs: list[float], v: Ar
     nothing (the drop).  After r_j the tip cuts the next tissue (cut_j while inserting with the tip
     between r_j and r_{j+1}), and the shaft length in that band, clip(l - r_j, 0, r_{j+1} - r_j),
     carries its own friction density fric_j (N/mm, signed by the pre-sliding-aware direction s).
+    Once the tip has passed r_1, the first band clip(l, 0, r_1) carries fric_0 as well: the skin
+    the shaft went through holds on to it, most visibly in the retraction.
     """
     deepest = np.maximum.accumulate(l)
     for j, r in enumerate(rs):
@@ -389,6 +393,8 @@ def _layer_columns(m: Array, col: dict[str, int], i: int, rs: list[float], v: Ar
         m[:, col[f"layer{j + 1}_cut[{i}]"]] = np.where((v > V_REST_MM_S) & (l >= r) & (l < r1)
                                                        & (deepest <= l + 1e-9), 1.0, 0.0)
         m[:, col[f"layer{j + 1}_fric[{i}]"]] = s * np.clip(l - r, 0.0, r1 - r)
+    if rs:
+        m[:, col[f"layer0_fric[{i}]"]] = np.where(deepest >= rs[0], s * np.clip(l, 0.0, rs[0]), 0.0)
 
 
 #: bounds of the linear coefficients (by label prefix), enforced by a bounded least-squares solve

@@ -71,7 +71,8 @@ def _bounds_of(labels: tuple[str, ...]) -> tuple[Array, Array]:
 
 def solve_bounded(m: Array, y: Array, labels: list[str], rcond: float = 1e-12,
                   blocks: list[tuple[int, int]] | None = None, warm: dict | None = None,
-                  bounds: tuple[Array, Array] | None = None) -> Array:
+                  bounds: tuple[Array, Array] | None = None, bvls_cut: float | None = None
+                  ) -> Array:
     """Least squares with the documented coefficient bounds (effects.LIN_BOUNDS, or ``bounds``:
     see :func:`coef_bounds`).
 
@@ -88,6 +89,8 @@ def solve_bounded(m: Array, y: Array, labels: list[str], rcond: float = 1e-12,
     above that cut-off (1/|R^-1|_F > cut |R|_F), the sub-problems are solved by QR, and ``warm``
     (a dict kept by the caller across calls with the same columns) starts BVLS from the previous
     call's active set; otherwise by SVD (numpy lstsq), from the clipped minimum-norm solution.
+    ``bvls_cut`` replaces that relative cut-off on the sub-problems: the held-out refit
+    (score.heldout_sse) cuts them where its free solve cuts, sqrt(its rcond).
     """
     lo, hi = bounds_of(labels) if bounds is None else bounds
     out = np.zeros(m.shape[1])
@@ -102,7 +105,7 @@ def solve_bounded(m: Array, y: Array, labels: list[str], rcond: float = 1e-12,
     k = int(np.count_nonzero(used))
     r_tri, qy, rho2 = r[:k, :k] / norms[used], r[:k, k], float(r[k, k] ** 2)
     lo_s, hi_s = lo[used] * norms[used], hi[used] * norms[used]
-    cut = _EPS * max(m.shape[0], k)
+    cut = _EPS * max(m.shape[0], k) if bvls_cut is None else bvls_cut
     full_rank, rel_min = _rank_bound(r_tri)
     gram_cut = float(np.sqrt(rcond))
     if full_rank and rel_min > gram_cut:

@@ -314,7 +314,7 @@ def build(res: Result, inputs: list[str]) -> dict[str, Any]:
         "base_model": {"model": "II (alpha, f2 from the joint Model I fit; see DISCREPANCY.md), "
                                 "plus one parameter set per detected layer",
                        "params": export["params"], "fitted_params": base.__dict__,
-                       "floored": export["floored"],
+                       "floored": export["floored"], "from_layers": export["from_layers"],
                        "shape": {k: {"value": float(res.fits[0].nl[k]),
                                      "se": float(base_se[k]) if k in base_se else None}
                                  for k in ("p", "g0", "alpha")},
@@ -420,8 +420,11 @@ def render_md(rep: dict[str, Any], figures: list[str]) -> str:
     bm = rep["base_model"]
     L += ["", "## 1. Base model", "", "As written to estimator_config.json:", ""]
     for k, v in bm["params"].items():
-        fl = bm["floored"].get(k)
-        L.append(f"- {k} = {_fmt(v)}" + (f" (fitted {_fmt(fl['fitted'])}, floored)" if fl else ""))
+        fl, ly = bm["floored"].get(k), bm["from_layers"].get(k)
+        L.append(f"- {k} = {_fmt(v)}"
+                 + (f" (the layers' shaft friction over the depth; the base's own "
+                    f"{_fmt(ly['fitted'])})" if ly else "")
+                 + (f" (fitted {_fmt(fl['fitted'])}, floored)" if fl else ""))
     L += ["", "Shape of the fit (normalised):", ""]
     L += [f"- {k} = {_fmt(v['value'])}" + (f" ± {_fmt(v['se'])}" if v["se"] is not None else "")
           for k, v in bm["shape"].items()]
@@ -506,6 +509,34 @@ def readable_params(params: dict[str, float], noise_n: float, depth_max_mm: floa
     return out, floored
 
 
+def one_layer_friction(res: Result) -> float | None:
+    """The multi-layer base's shaft friction as one density over the depth, for a Model II
+    config (one sigma2 for every depth): per trial with ruptures, sigma2 plus each band's own
+    friction (fric_0 over [0, r_1], fric_j over [r_j, r_j+1]) times the length of the band the
+    needle reached, over the deepest tissue depth -- the layered model's friction at the deepest
+    point, spread evenly; the median over those trials.  None without ruptures (sigma2 is then
+    the whole friction).  Written as sigma2 because the base's own sigma2 carries only what no
+    band does: with every band's friction free, the fit puts it near 0 (skin-on-muscle records
+    1-5: 0.0007 N/mm, floored, and the estimator started there innovated 3x worse than with
+    the paper's defaults; config_loop_figures.py --workflow)."""
+    base = res.fits[0]
+    per_trial = []
+    for i, (p, t) in enumerate(zip(res.preps, res.evidence["per_trial"])):  # type: ignore
+        if not t["ruptures"]:
+            continue
+        corr = float(np.atleast_1d(base.nl["surface"])[i])
+        deepest = float(np.max(p.stage_mm - p.surface_mm)) - corr
+        if not deepest > 0.0:
+            continue
+        edges = [0.0] + [r["depth_mm"] - corr for r in t["ruptures"]] + [deepest]
+        keys = [f"layer0_fric[{i}]"] + [f"layer{j + 1}_fric[{i}]"
+                                        for j in range(len(t["ruptures"]))]
+        force = sum(base.coef.get(k, 0.0) * max(0.0, min(hi, deepest) - max(lo, 0.0))
+                    for k, lo, hi in zip(keys, edges[:-1], edges[1:]))
+        per_trial.append(base.coef["sigma2"] + force / deepest)
+    return float(np.median(per_trial)) if per_trial else None
+
+
 def _export(res: Result, values: dict[str, list[dict[str, Any]]]) -> dict[str, Any]:
     """The estimator configuration (schema in DISCREPANCY.md §7): the base fit's parameters,
     surfaces and layers, and the named effects' shared parameters from ``values`` (the rows
@@ -520,12 +551,18 @@ def _export(res: Result, values: dict[str, list[dict[str, Any]]]) -> dict[str, A
         layers.append({"trial": p.name, "ruptures_mm": [r["depth_mm"] for r in t["ruptures"]],
                        "coefficients": coefs})
     noise = float(np.median([p.noise_n for p in res.preps]))
-    params, floored = readable_params(base_paramset(base).__dict__, noise,
-                                      max(float(np.max(p.stage_mm - p.surface_mm))
-                                          for p in res.preps))
+    fitted = base_paramset(base).__dict__
+    spread = one_layer_friction(res)
+    layered = {}
+    if spread is not None:
+        layered["sigma2"] = {"fitted": float(fitted["sigma2"]), "written": spread}
+        fitted = {**fitted, "sigma2": spread}
+    params, floored = readable_params(fitted, noise, max(float(np.max(p.stage_mm - p.surface_mm))
+                                                         for p in res.preps))
     return _clean({
         "schema": CONFIG_SCHEMA, "source": "nte-discrepancy", "model": 2,
-        "params": params, "floored": floored, "r_n2": noise ** 2, "noise_n": noise,
+        "params": params, "floored": floored, "from_layers": layered,
+        "r_n2": noise ** 2, "noise_n": noise,
         "surface_mm": [p.surface_mm + float(np.atleast_1d(base.nl["surface"])[i])
                        for i, p in enumerate(res.preps)],
         "tare_n": [p.tare_n for p in res.preps],

@@ -16,7 +16,7 @@ import numpy as np
 
 from .effects import StateCache, TrialGrid, design
 from ..fmath import Array
-from .fit import Fit, solve_linear
+from .fit import Fit, solve_bounded, solve_linear
 
 BLOCK_S = 0.5
 N_FOLDS = 3
@@ -100,7 +100,10 @@ def heldout_sse(grids: list[TrialGrid], y: Array, f: Fit, masks: list[Array],
     total = 0.0
     for mask in masks:
         train = ~mask
-        c = solve_linear(m[train], y[train], HELDOUT_RCOND)
+        # bounded like the fit itself (a friction or stiffness the fit keeps >= 0 must not turn
+        # negative on the training rows), its sub-problems cut where the held-out solve cuts
+        c = solve_bounded(m[train], y[train], labels, HELDOUT_RCOND,
+                          bvls_cut=float(np.sqrt(HELDOUT_RCOND)))
         pred = m @ c
         r = y - pred
         for i in range(len(grids)):

@@ -5,7 +5,8 @@
 1. The workflow's config: `nte-discrepancy` on the tuning seeds' records (1-5) writes
    estimator_config.json; on each held-out record (seeds 101-110, files as recorded: air gap,
    tare) the one-step innovation RMS of the estimator with `--config` against Model II's
-   default (`--model 2`, no config).
+   default (`--model 2`, no config); `config_loop_figures.py --workflow [PRESET]` prints this
+   part alone.
 2. The atlas: identify on one record with `--model M --contact on --export-config`, predict
    the next record of the same condition (a different seed; the pairs cycle through the group)
    with `--config --predict-only --surface` (the record's true surface, as a robot registered
@@ -307,6 +308,9 @@ def main(presets: list[str]) -> None:
         if presets[:1] == ["--trials"]:
             atlas_other_trial(d)     # part 6 alone
             return
+        workflow_only = presets[:1] == ["--workflow"]
+        if workflow_only:
+            presets = presets[1:] or ["skin-on-muscle"]
         preset = presets[0]
         tune = [str(phantom(d, preset, s)) for s in TUNING]
         subprocess.run([str(VENV / "nte-discrepancy"), *tune, "--out", str(d / "disc"),
@@ -323,6 +327,8 @@ def main(presets: list[str]) -> None:
             ratios.append(b / a)
             print(f"   seed {s}: {a:.4f} | {b:.4f}  ({b / a:.2f}x)")
         print(f"   median ratio {np.median(ratios):.2f}, worst {np.max(ratios):.2f}")
+        if workflow_only:
+            return           # part 1 alone
         print("2. atlas: identify on seed k, predict seed k+1 (cyclic) from depth alone; "
               "RMSE / peak, median (worst); the export is the snapshot that replays its own "
               "record best, fitted to that record")
@@ -351,10 +357,11 @@ def main(presets: list[str]) -> None:
 if __name__ == "__main__":
     args = sys.argv[1:] or ["skin-on-muscle"]
     from reference_py.sim.calibration import PRESETS as TISSUES
-    unknown = [a for a in args if a not in ("--phases", "--forms", "--trials")
+    unknown = [a for a in args if a not in ("--phases", "--forms", "--trials", "--workflow")
                and a not in TISSUES]
     if unknown:
-        print(f"usage: config_loop_figures.py [--phases | --forms | --trials] [PRESET...] "
+        print(f"usage: config_loop_figures.py [--workflow | --phases | --forms | --trials] "
+              f"[PRESET...] "
               f"(presets: {', '.join(TISSUES)}); not one: {unknown[0]}", file=sys.stderr)
         raise SystemExit(2)
     main(args)

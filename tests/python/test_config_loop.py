@@ -114,6 +114,24 @@ def test_loop_figure_config_halves_the_innovation(loop):
     assert a <= 0.5 * b, (a, b)
 
 
+def test_the_layers_shaft_friction_becomes_sigma2(loop):
+    """With ruptures, each band of the multi-layer base has its own shaft friction and the
+    base's sigma2 only what none of them carries (near 0: floored before this, and the
+    estimator started there innovated 3x worse than Model II's default).  The config's sigma2
+    is the bands' friction averaged over the depth, so it lies within sigma2 plus the least and
+    the most any band carries, and report.md says where it came from."""
+    cfg = json.loads(loop["cfg"].read_text())
+    spread = cfg["from_layers"]["sigma2"]
+    assert cfg["params"]["sigma2"] == spread["written"] and "sigma2" not in cfg["floored"]
+    fric = [v for layer in cfg["layers"] for k, v in layer["coefficients"].items()
+            if k.endswith("_fric")]
+    assert len(fric) >= 2 * len(cfg["layers"])       # the first band's and each layer's
+    assert spread["fitted"] + min(fric) <= spread["written"] <= spread["fitted"] + max(fric)
+    assert spread["written"] > 10 * spread["fitted"]
+    md = (loop["dir"] / "disc" / "report.md").read_text()
+    assert "the layers' shaft friction over the depth; the base's own" in md
+
+
 BAD = [  # (file name, text, the message after "FILE: ")
     ("notjson.json", "{not json", "not valid JSON"),
     ("nan.json", '{"schema": NaN}', "not valid JSON"),
