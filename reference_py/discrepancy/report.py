@@ -517,8 +517,8 @@ def one_layer_friction(res: Result) -> float | None:
     point, spread evenly; the median over those trials.  None without ruptures (sigma2 is then
     the whole friction).  Written as sigma2 because the base's own sigma2 carries only what no
     band does: with every band's friction free, the fit puts it near 0 (skin-on-muscle records
-    1-5: 0.0007 N/mm, floored, and the estimator started there innovated 3x worse than with
-    the paper's defaults; config_loop_figures.py --workflow)."""
+    1-5: 0.0007 N/mm, floored; the estimator started there innovated 1.2x as much as from the
+    paper's defaults, 3x as much as from this value; config_loop_figures.py --workflow)."""
     base = res.fits[0]
     per_trial = []
     for i, (p, t) in enumerate(zip(res.preps, res.evidence["per_trial"])):  # type: ignore

@@ -117,7 +117,7 @@ def test_loop_figure_config_halves_the_innovation(loop):
 def test_the_layers_shaft_friction_becomes_sigma2(loop):
     """With ruptures, each band of the multi-layer base has its own shaft friction and the
     base's sigma2 only what none of them carries (near 0: floored before this, and the
-    estimator started there innovated 3x worse than Model II's default).  The config's sigma2
+    estimator started there innovated more than with Model II's default).  The config's sigma2
     is the bands' friction averaged over the depth, so it lies within sigma2 plus the least and
     the most any band carries, and report.md says where it came from."""
     cfg = json.loads(loop["cfg"].read_text())
