@@ -121,8 +121,11 @@ def test_a_layer_holds_no_more_than_the_trials_force():
 
 def test_a_six_trial_condition_within_its_time_budget():
     """Six phantom skin-on-muscle records of 3 247 samples (one condition): 42 s of CPU before
-    the reduced solve (commit 3aa9e21), about 9 s after; the budget leaves room for a busy
-    machine, and the result stays the one measured."""
+    the reduced solve (commit 3aa9e21), about 9 s after; 15.4 s (one BLAS thread, as `make
+    test` runs) since the held-out refit is bounded like the fit (BVLS on the full training
+    rows in every fold, without the fit's per-trial reduction or warm start: the next thing to
+    give it).  The budget leaves room for a busy machine, and the result stays the one
+    measured."""
     from discrepancy_measured_like import phantom_trial
     from reference_py.discrepancy.workflow import run
     trials, truth = [], []
@@ -138,4 +141,4 @@ def test_a_six_trial_condition_within_its_time_budget():
                                                   zip(res.predictions[k], truth)]))))
             for k in (0, -1)]
     assert rmse[0] > 0.25 and rmse[1] < 0.07, rmse   # measured: 0.293 -> 0.062 N
-    assert cpu <= 15.0, f"{cpu:.1f} s of CPU"
+    assert cpu <= 25.0, f"{cpu:.1f} s of CPU"
