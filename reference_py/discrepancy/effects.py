@@ -235,6 +235,16 @@ class StateCache:
         del kept[self.KEEP:]
 
 
+def ruptures_below_surface(ruptures_mm: list[float], nl: dict[str, Array], i: int
+                           ) -> list[float]:
+    """Trial i's rupture depths (mm) below the fitted surface: the evidence measures them from
+    the prepared surface, and the fit moves that surface by its correction nl["surface"][i]
+    (deeper tissue depths when the fitted surface is higher).  The layer columns and the
+    report's one-density friction (report.one_layer_friction) both read them here."""
+    corr = float(np.atleast_1d(nl["surface"])[i])
+    return [r - corr for r in ruptures_mm]
+
+
 def trial_inputs(tr: TrialGrid, i: int, effects: tuple[str, ...], nl: dict[str, Array],
                  cache: StateCache | None = None) -> tuple[Array, Array, Array, Array]:
     """Depth l (mm), direction s, zh and b(l) the model sees in trial i (tissue motion applied)."""
@@ -258,12 +268,10 @@ def trial_inputs(tr: TrialGrid, i: int, effects: tuple[str, ...], nl: dict[str, 
     l = np.maximum(l_raw, 0.0)
     p, q, alpha = float(nl["p"]), float(nl["g0"]) - float(nl["p"]), float(nl["alpha"])
     bl = 1.0 / (p + q * np.exp(-alpha * l))
-    # RK3 is stable for |lambda h| up to ~2.5: add sub-steps where the fit wanders into stiff
-    # parameters (lambda = l b) rather than let z blow up
-    base_sub = cache.substeps if cache is not None else 10
-    lam_dt = float(np.max(l * bl)) * float(np.max(np.diff(tr.t_s))) if len(l) > 1 else 0.0
+    # RK3 is stable for |lambda h| up to ~2.5 (lambda = l b): where a fit wanders into stiff
+    # parameters, the samples whose sub-steps see lambda h > 1 step exactly instead
     zh = state_trajectory(tr.t_s, l, p, q, alpha,
-                          substeps=int(min(max(base_sub, np.ceil(lam_dt / 1.0)), 400)))
+                          substeps=cache.substeps if cache is not None else 10, stiff_from=1.0)
     s = direction(v) * (l > 0.0)
     val = (l, s, zh, bl)
     if cache is not None:
@@ -335,8 +343,8 @@ def design_blocks(trials: list[TrialGrid], effects: tuple[str, ...], nl: dict[st
         m[:, col["C"]] = fric_c
         m[:, col["sigma2"]] = s * l
         if tr.ruptures:
-            corr = float(np.atleast_1d(nl["surface"])[i])
-            _layer_columns(m, col, i, [r - corr for r in tr.ruptures], tr.v_mm_s, l, s)
+            _layer_columns(m, col, i, ruptures_below_surface(tr.ruptures, nl, i), tr.v_mm_s,
+                           l, s)
         if "velocity_friction" in effects:
             m[:, col["b_visc"]] = tr.v_mm_s * l
         if "direction_asymmetry" in effects:

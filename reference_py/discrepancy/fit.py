@@ -86,9 +86,15 @@ def solve_bounded(m: Array, y: Array, labels: list[str], rcond: float = 1e-12,
     singular value (numpy's default on the samples x k matrix), not at one scaled to k: a cut
     scaled to k keeps near-null directions the tall solve drops, and a held-out fit extrapolates
     them (measured-like seed 38 went 10^3..10^8 N astray).  When every column subset is provably
-    above that cut-off (1/|R^-1|_F > cut |R|_F), the sub-problems are solved by QR, and ``warm``
-    (a dict kept by the caller across calls with the same columns) starts BVLS from the previous
-    call's active set; otherwise by SVD (numpy lstsq), from the clipped minimum-norm solution.
+    above that cut-off (1/|R^-1|_F > cut |R|_F), the sub-problems are solved by QR; otherwise by
+    SVD (numpy lstsq).  ``warm`` (a dict kept by the caller across calls with the same columns)
+    starts BVLS from the previous call's active set; without it, BVLS starts from the clipped
+    free (QR) or minimum-norm (SVD) solution.  Where columns are exactly dependent (in the
+    multi-layer base, sigma2's column s l is the bands' friction columns plus r_1 times the first
+    membrane's linear load column, which is l / r_1 while the tip advances towards r_1), the
+    split of the coefficients along the null direction depends on the start, the fitted values
+    m x do not (the optimum of a convex quadratic is unique in m x): a fit's residuals may start
+    warm, and its reported coefficients come from a cold solve (:func:`evaluate`).
     ``bvls_cut`` replaces that relative cut-off on the sub-problems: the held-out refit
     (score.heldout_sse) cuts them where its free solve cuts, sqrt(its rcond).
     """
@@ -118,14 +124,15 @@ def solve_bounded(m: Array, y: Array, labels: list[str], rcond: float = 1e-12,
     key = tuple(np.flatnonzero(used).tolist()) + (len(labels),)
     start = None
     fast = full_rank and rel_min > cut
-    if fast and warm is not None and warm.get("key") == key:
+    if warm is not None and warm.get("key") == key:
         start = warm["on_bound"]
-    if not fast:
+    if not fast and start is None:
         # start from the minimum-norm solution at the same cut-off (scipy's lsq_linear starts
-        # at rcond = eps, where a direction at eps-level either stays or goes by rounding)
+        # at rcond = eps, where a direction at eps-level either stays or goes by rounding); a
+        # warm start solves its free variables afresh, so it needs no x
         x = np.linalg.lstsq(r_tri, qy, rcond=cut)[0]
     x, on_bound = bvls(r_tri, qy, lo_s, hi_s, x, cut, fast, start, rho2)
-    if warm is not None and fast:
+    if warm is not None:
         warm["key"], warm["on_bound"] = key, on_bound
     out[used] = x / norms[used]
     return out

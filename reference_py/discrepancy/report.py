@@ -9,7 +9,8 @@ from typing import Any
 
 import numpy as np
 
-from .effects import EFFECT_MEANING, EFFECT_NL, EFFECT_PHASES, LIN_BOUNDS, NONE, lin_bound
+from .effects import (EFFECT_MEANING, EFFECT_NL, EFFECT_PHASES, LIN_BOUNDS, NONE, lin_bound,
+                      ruptures_below_surface)
 from .prep import PHASES
 from .accept import WORSEN_NOISE_X
 from .nextsteps import render as render_next
@@ -524,11 +525,12 @@ def one_layer_friction(res: Result) -> float | None:
     for i, (p, t) in enumerate(zip(res.preps, res.evidence["per_trial"])):  # type: ignore
         if not t["ruptures"]:
             continue
-        corr = float(np.atleast_1d(base.nl["surface"])[i])
-        deepest = float(np.max(p.stage_mm - p.surface_mm)) - corr
+        # the deepest stage position, measured like the ruptures (a rupture "at" it is there)
+        deepest = ruptures_below_surface([float(np.max(p.stage_mm - p.surface_mm))], base.nl, i)[0]
         if not deepest > 0.0:
             continue
-        edges = [0.0] + [r["depth_mm"] - corr for r in t["ruptures"]] + [deepest]
+        edges = [0.0] + ruptures_below_surface([r["depth_mm"] for r in t["ruptures"]], base.nl,
+                                               i) + [deepest]
         keys = [f"layer0_fric[{i}]"] + [f"layer{j + 1}_fric[{i}]"
                                         for j in range(len(t["ruptures"]))]
         force = sum(base.coef.get(k, 0.0) * max(0.0, min(hi, deepest) - max(lo, 0.0))

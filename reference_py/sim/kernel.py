@@ -49,3 +49,15 @@ def rk3_affine(h: Array, rates: tuple[tuple[Array, Array], ...], R: Real | None 
     a = 1 + h6 * ((k1a + four * k2a) + k3a)
     c = h6 * ((k1c + four * k2c) + k3c)
     return a, c
+
+
+def exp_affine(h: Array, p: Array, q: Array) -> tuple[Array, Array]:
+    """(a, c) of the exact step of dz/dt = p - q z over h with p and q frozen (q >= 0):
+    z -> e^{-qh} z + (1 - e^{-qh}) p / q, written as a = e^{-qh}, c = p h phi(qh), phi(x) =
+    (1 - e^{-x}) / x (-> 1 as x -> 0, so no division by a vanishing q).  Stable for every qh and,
+    when qh is large, z lands on the quasi-static value p / q, where an explicit step needs
+    qh <~ 2.5: the fits' integrator for stiff samples (fastsim.state_trajectory)."""
+    x = q * h
+    small = x < 1e-8
+    phi = np.where(small, 1.0 - 0.5 * x, -np.expm1(-x) / np.where(small, 1.0, x))
+    return np.exp(-x), p * h * phi

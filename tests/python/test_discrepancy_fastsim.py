@@ -34,3 +34,43 @@ def test_known_force_term_is_the_effect_alone() -> None:
                              t, d, v)
     moving = np.abs(v) > 0.02
     assert np.max(np.abs(relax[moving])) <= 1e-15 and relax.min() < -0.04
+
+
+def test_exponential_step_is_exact_for_frozen_rates() -> None:
+    """kernel.exp_affine against the closed form z(h) = p/q + (z0 - p/q) e^{-qh}, from a
+    vanishing qh (where p/q cannot be formed) to a very stiff one."""
+    from reference_py.sim.kernel import exp_affine
+    h, p, z0 = 0.01, 2.0, 0.3
+    for q in (0.0, 1e-9, 1.0, 50.0, 1e4, 1e7):
+        a, c = exp_affine(np.array(h), np.array(p), np.array(q))
+        x = q * h
+        if x < 1e-6:      # (1 - e^-x) / x by its series: p / q would cancel catastrophically
+            exact = z0 * np.exp(-x) + p * h * (1.0 - x / 2.0 + x * x / 6.0)
+        else:
+            exact = p / q + (z0 - p / q) * np.exp(-x)
+        assert abs(float(a * z0 + c) - exact) <= 1e-12 * max(1.0, abs(exact)), q
+
+
+def _ramp(rate_hz: float = 100.0) -> tuple[np.ndarray, np.ndarray]:
+    t = np.arange(0.0, 12.0, 1.0 / rate_hz)
+    l = np.interp(t, [0.0, 1.0, 6.0, 8.0, 11.0], [0.0, 0.0, 12.0, 12.0, 0.0])
+    return t, l
+
+
+def test_stiff_samples_step_exactly_and_others_do_not_move() -> None:
+    """Where a fit wanders into stiff parameters (lambda h = l b h up to 90 per sample here),
+    4 RK3 sub-steps blow up; with ``stiff_from`` those samples take exponential sub-steps and
+    follow 400 RK3 sub-steps (lambda h < 0.1 each, converged) closely, at 4 sub-steps' cost.
+    Parameters that are not stiff give the very same numbers as plain RK3."""
+    from reference_py.discrepancy.fastsim import state_trajectory
+    t, l = _ramp()
+    p, q, alpha = 0.001, 0.01, 0.3                   # b up to 790 /mm: lambda h up to 90
+    fine = state_trajectory(t, l, p, q, alpha, substeps=400)
+    plain = state_trajectory(t, l, p, q, alpha, substeps=4)
+    stiff = state_trajectory(t, l, p, q, alpha, substeps=4, stiff_from=1.0)
+    scale = float(np.max(np.abs(fine)))
+    assert not np.all(np.abs(plain - fine) <= 0.5 * scale)   # RK3 alone: unstable here
+    assert np.max(np.abs(stiff - fine)) <= 2e-3 * scale, np.max(np.abs(stiff - fine)) / scale
+    p, q = 2.0, 3.0                                  # b <= 0.5 /mm: lambda h <= 0.06
+    assert np.array_equal(state_trajectory(t, l, p, q, alpha, substeps=4, stiff_from=1.0),
+                          state_trajectory(t, l, p, q, alpha, substeps=4))

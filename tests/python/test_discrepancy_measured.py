@@ -72,6 +72,23 @@ def test_ruptures_on_the_trials_own_scale(kind: str, form: dict, at_least: int) 
     assert exact >= at_least, f"{kind}: {exact}/16 trials with every rupture counted"
 
 
+def test_four_evenly_spaced_layers_are_layers_and_a_sawtooth_is_not() -> None:
+    """Four ruptures whose three intervals happen to come out even (measured-like 166, 272, 361:
+    interval spread 0.091, 0.098, 0.075 of the mean) are layers: the rule that takes evenly
+    spaced drops for an oscillation threw all four away (361's final residual 72x the noise,
+    29x with them).  A stick-slip sawtooth with four drops (blind generator, stick_slip seed
+    10, its second trial: spread 0.043) is still no layer, nor one with many drops."""
+    from discrepancy_generator import make_case as blind_case
+    for seed in (166, 272, 361):
+        tr, _, _, n_layers = make_trial(seed)
+        assert n_layers == 4
+        assert rupture_count(collect([prepare(tr)])) == [4], seed
+    stick = blind_case("stick_slip", 10).trials[1]
+    assert rupture_count(collect([prepare(stick)])) == [0]
+    many = blind_case("stick_slip", 1).trials[0]          # 17 drops, spread 0.033
+    assert rupture_count(collect([prepare(many)])) == [0]
+
+
 @pytest.fixture(scope="module")
 def relaxing() -> tuple:
     case = make_case(4, trials=3)

@@ -73,13 +73,15 @@ def test_a_phase_made_worse(case, before, after, phase, refused):
 
 
 def test_tissue_motion_that_spoils_the_dwell_is_reported():
-    """Measured-like seed 26, three trials (layers, relaxation, Dahl pre-sliding; no motion):
+    """Measured-like seed 24, three trials (layers, relaxation, Dahl pre-sliding; no motion):
     tissue motion's refit lowers the error where it acts and held out, but raises the dwell the
-    model explained from 0.015 to 0.15 N RMS.  It is named (a refusal rule cost more true effects
-    than it saved on blind cases), with the warning, and the advice to try it otherwise.  (Seed
-    11 showed this until the first band carried its own friction; it names no motion now.)"""
+    model explained from 0.026 to 0.16 N RMS.  It is named (a refusal rule cost more true effects
+    than it saved on blind cases), with the warning, and the advice to try it otherwise.  (The
+    case moves between seeds when the fits' numbers move: seed 11 until the first band carried
+    its own friction, seed 26 until stiff samples stepped exactly; 4 of seeds 11-30 name this
+    false motion before and after both changes.)"""
     from discrepancy_measured_like import make_case
-    case = make_case(26, trials=3)
+    case = make_case(24, trials=3)
     res = run(case.trials)
     assert "tissue_motion" in res.named
     rep = build(res, [t.name for t in case.trials])
