@@ -50,8 +50,8 @@ SHRINK_XFAIL: dict[str, str] = {
                                "-46 %, irregular k=1, 3 -40 %, -29 %), target all",
 }
 NONE_XFAIL = ""
-PAIR_XFAIL = "relaxation + pre-sliding both named in 2/4 (k=0: pre-sliding not named; k=3: " \
-             "'none'), target >= 85 %"
+PAIR_XFAIL = "relaxation + pre-sliding both named in 3/4 (k=3, maxwell_total + elastoplastic: " \
+             "pre-sliding not named), target >= 85 %"
 BOUNDS_XFAIL = ""
 UNEXPLAINED_FIRES_XFAIL = "stick-slip flagged 'unexplained' in 2/4 (k=0, k=2 explained by a " \
                           "detected layer), target >= 90 %"
