@@ -235,14 +235,14 @@ class StateCache:
         del kept[self.KEEP:]
 
 
-def ruptures_below_surface(ruptures_mm: list[float], nl: dict[str, Array], i: int
-                           ) -> list[float]:
-    """Trial i's rupture depths (mm) below the fitted surface: the evidence measures them from
-    the prepared surface, and the fit moves that surface by its correction nl["surface"][i]
-    (deeper tissue depths when the fitted surface is higher).  The layer columns and the
+def depths_below_fitted_surface(depths_mm: list[float], nl: dict[str, Array], i: int
+                                ) -> list[float]:
+    """Trial i's depths (mm) measured from the prepared surface -- the evidence's ruptures, the
+    deepest point -- as depths below the fitted surface, which the fit moves by its correction
+    nl["surface"][i] (deeper when the fitted surface is higher).  The layer columns and the
     report's one-density friction (report.one_layer_friction) both read them here."""
     corr = float(np.atleast_1d(nl["surface"])[i])
-    return [r - corr for r in ruptures_mm]
+    return [d - corr for d in depths_mm]
 
 
 def trial_inputs(tr: TrialGrid, i: int, effects: tuple[str, ...], nl: dict[str, Array],
@@ -343,8 +343,8 @@ def design_blocks(trials: list[TrialGrid], effects: tuple[str, ...], nl: dict[st
         m[:, col["C"]] = fric_c
         m[:, col["sigma2"]] = s * l
         if tr.ruptures:
-            _layer_columns(m, col, i, ruptures_below_surface(tr.ruptures, nl, i), tr.v_mm_s,
-                           l, s)
+            _layer_columns(m, col, i, depths_below_fitted_surface(tr.ruptures, nl, i),
+                           tr.v_mm_s, l, s)
         if "velocity_friction" in effects:
             m[:, col["b_visc"]] = tr.v_mm_s * l
         if "direction_asymmetry" in effects:

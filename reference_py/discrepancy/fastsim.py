@@ -52,7 +52,7 @@ def state_trajectory(t_s: Array, l_mm: Array, p: float, q: float, alpha: float,
     d = ls * _b_of_l(ls, p, q, alpha)
     sa, sc = rk3_affine(h, ((ls[0] * beta, d[0]), (ls[1] * beta, d[1]), (ls[2] * beta, d[2])))
     if stiff_from is not None:
-        stiff = np.max(np.maximum(d[0], d[2]), axis=0) * h > stiff_from     # per sample
+        stiff = np.max(d, axis=(0, 1)) * h > stiff_from    # per sample, over every stage
         if stiff.any():
             ea, ec = exp_affine(h, ls[1] * beta, d[1])
             sa, sc = np.where(stiff, ea, sa), np.where(stiff, ec, sc)

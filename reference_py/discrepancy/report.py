@@ -9,8 +9,8 @@ from typing import Any
 
 import numpy as np
 
-from .effects import (EFFECT_MEANING, EFFECT_NL, EFFECT_PHASES, LIN_BOUNDS, NONE, lin_bound,
-                      ruptures_below_surface)
+from .effects import (EFFECT_MEANING, EFFECT_NL, EFFECT_PHASES, LIN_BOUNDS, NONE,
+                      depths_below_fitted_surface, lin_bound)
 from .prep import PHASES
 from .accept import WORSEN_NOISE_X
 from .nextsteps import render as render_next
@@ -525,12 +525,12 @@ def one_layer_friction(res: Result) -> float | None:
     for i, (p, t) in enumerate(zip(res.preps, res.evidence["per_trial"])):  # type: ignore
         if not t["ruptures"]:
             continue
-        # the deepest stage position, measured like the ruptures (a rupture "at" it is there)
-        deepest = ruptures_below_surface([float(np.max(p.stage_mm - p.surface_mm))], base.nl, i)[0]
+        deepest, *_ = depths_below_fitted_surface([float(np.max(p.stage_mm - p.surface_mm))],
+                                                  base.nl, i)
         if not deepest > 0.0:
             continue
-        edges = [0.0] + ruptures_below_surface([r["depth_mm"] for r in t["ruptures"]], base.nl,
-                                               i) + [deepest]
+        edges = [0.0] + depths_below_fitted_surface([r["depth_mm"] for r in t["ruptures"]],
+                                                    base.nl, i) + [deepest]
         keys = [f"layer0_fric[{i}]"] + [f"layer{j + 1}_fric[{i}]"
                                         for j in range(len(t["ruptures"]))]
         force = sum(base.coef.get(k, 0.0) * max(0.0, min(hi, deepest) - max(lo, 0.0))

@@ -11,7 +11,9 @@ simulate_force`: batches of parameter sets in any working precision, one map per
 one map per sample), so the algebra of the step lives here, once.
 
 The stages are those of :func:`reference_py.rk3.rk3_step`, the filters' own step (with
-sensitivities); that one stays apart: it is the twin of the C library.
+sensitivities); that one stays apart: it is the twin of the C library.  Where a fit wanders
+into stiff parameters, the fits' simulator steps a sample exactly instead (:func:`exp_affine`,
+the same kind of affine map), so both sub-steps live here.
 """
 from __future__ import annotations
 
