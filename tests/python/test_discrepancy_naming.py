@@ -72,34 +72,61 @@ def test_a_phase_made_worse(case, before, after, phase, refused):
     assert (ratio > 1.0) == refused, (case, name, ratio)
 
 
-def test_tissue_motion_that_spoils_the_dwell_is_reported():
-    """Measured-like seed 24, three trials (layers, relaxation, Dahl pre-sliding; no motion):
-    tissue motion's refit lowers the error where it acts and held out, but raises the dwell the
-    model explained from 0.026 to 0.16 N RMS.  It is named (a refusal rule cost more true effects
-    than it saved on blind cases), with the warning, and the advice to try it otherwise.  (The
-    case moves between seeds when the fits' numbers move: seed 11 until the first band carried
-    its own friction, seed 26 until stiff samples stepped exactly; 4 of seeds 11-30 name this
-    false motion before and after both changes.)"""
+@pytest.fixture(scope="module")
+def presliding_case() -> tuple:
     from discrepancy_measured_like import make_case
-    case = make_case(24, trials=3)
-    res = run(case.trials)
-    assert "tissue_motion" in res.named
-    rep = build(res, [t.name for t in case.trials])
-    k = rep["named"].index("tissue_motion")
-    w = rep["effects"][k]["worsens"]
-    assert w["phase"] == "dwell" and w["rmse_before_n"] <= UNEXPLAINED_X * case.noise_n * 1.5
-    assert w["rmse_after_n"] - w["rmse_before_n"] > WORSEN_NOISE_X * 0.01
-    assert w["rmse_after_n"] > 5 * w["rmse_before_n"]
-    md = render_md(rep, [])
-    assert (f"- WARNING: its refit makes the dwell phase, which the model explained, worse: "
-            f"RMSE {w['rmse_before_n']:.4g} -> {w['rmse_after_n']:.4g} N") in md
-    items = [d for d in rep["what_next"]["effects"] if d["source"] == f"effects[{k}].worsens"]
-    assert len(items) == 1 and items[0]["candidates"] == ["tissue_motion"]
-    # effects whose refit leaves every explained phase within the allowance carry no warning
-    for e in rep["effects"]:
-        if e["name"] not in ("tissue_motion", "layer_puncture"):
-            row = next(c for c in e["candidates"] if c["name"] == e["name"])
-            assert (e["worsens"] is None) == (row["worst_phase_ratio"] is None or
-                                              row["worst_phase_ratio"] <= 1.0)
-    # every candidate of the last round says why it was not named
+    case = make_case(43, trials=3)
+    return case, run(case.trials)
+
+
+def test_every_judged_candidate_carries_its_worst_explained_phase(presliding_case):
+    """Measured-like seed 43, three trials (layers, relaxation, Dahl pre-sliding): every
+    candidate the workflow judged carries the phase the model explained that its refit made
+    worse most (accept.worst_phase), so the report can warn; every candidate of the last round
+    says why it was not named."""
+    case, res = presliding_case
+    assert res.named[:3] == ["layer_puncture", "dwell_relaxation", "reversal_presliding"]
+    for step in res.steps:
+        if step.effect == "layer_puncture":        # found by the ruptures, not judged
+            continue
+        row = next(c for c in step.candidates if c["name"] == step.effect)
+        assert {"worst_phase", "worst_phase_rmse_before_n", "worst_phase_rmse_after_n",
+                "worst_phase_ratio"} <= set(row), row
     assert res.last_round and all(c.get("rejected") for c in res.last_round), res.last_round
+
+
+def test_an_effect_whose_refit_spoils_an_explained_phase_is_reported(presliding_case):
+    """A named effect whose refit raises a phase the model explained by more than the allowance
+    stays named (a refusal rule cost more true effects than it saved on blind cases: accept.py),
+    with a warning in report.md and the advice to try it otherwise; an effect within the
+    allowance carries none.  The case: seed 43's pre-sliding row set to a refit that raises the
+    insertion from 0.037 to 0.15 N -- what a false tissue motion did to the dwell of seed 24
+    (0.026 -> 0.16 N) until the tears were placed between their samples.  Since then no
+    measured-like condition of seeds 11-90 names one, and the only real case left (seed 43
+    itself, 0.037 -> 0.087 N) sits at 1.02 times the allowance: too close to the line for a test
+    that must hold on every machine."""
+    import copy
+    case, res = presliding_case
+    res = copy.deepcopy(res)
+    step = next(st for st in res.steps if st.effect == "reversal_presliding")
+    row = next(c for c in step.candidates if c["name"] == "reversal_presliding")
+    before, after = 0.037, 0.15
+    row.update(worst_phase="insertion", worst_phase_rmse_before_n=before,
+               worst_phase_rmse_after_n=after,
+               worst_phase_ratio=(after - before) / (WORSEN_NOISE_X * case.noise_n))
+    rep = build(res, [t.name for t in case.trials])
+    k = rep["named"].index("reversal_presliding")
+    w = rep["effects"][k]["worsens"]
+    assert w == {"phase": "insertion", "rmse_before_n": before, "rmse_after_n": after,
+                 "allowance_x_noise": WORSEN_NOISE_X}
+    md = render_md(rep, [])
+    assert (f"- WARNING: its refit makes the insertion phase, which the model explained, worse: "
+            f"RMSE {before:.4g} -> {after:.4g} N") in md
+    items = [d for d in rep["what_next"]["effects"] if d["source"] == f"effects[{k}].worsens"]
+    assert len(items) == 1 and items[0]["candidates"] == ["reversal_presliding"]
+    # within the allowance (ratio <= 1): no warning, no advice
+    row["worst_phase_ratio"] = 0.99
+    rep = build(res, [t.name for t in case.trials])
+    assert rep["effects"][k]["worsens"] is None
+    assert not [d for d in rep["what_next"]["effects"] if d["source"].endswith(".worsens")]
+    assert "WARNING: its refit makes" not in render_md(rep, [])
