@@ -134,9 +134,9 @@ def ruptures(p: Prepared) -> list[dict[str, float]]:
                 kk += 1
                 if f[kk] < f[low]:
                     low = kk
-            depth = float(l[ins[jm]])
             drop = float(f[jm] - f[low])
-            depth = _tear_depth(p.force_n[ins], l[ins], ins, jm, low, width, drop, depth)
+            depth = _tear_depth(p.force_n[ins], l[ins], ins, jm, low, width, drop,
+                                float(l[ins[jm]]))
             since = low
             if f[low] <= 0.0:
                 # a tissue that tore still holds the tip (cutting, friction): a fall to or below
