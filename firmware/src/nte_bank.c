@@ -559,10 +559,19 @@ static uint32_t run_filter(nte_t* self, step_ctx_t* c, const size_t i,
                            const nte_rk3_result_t* shared, filter_out_t* fo)
 {
     const size_t mi = model_index(self);
+    /* predict writes x and P, measure every row of h the filter has and the rest; h's other
+     * rows are cleared for the tear's prior.  Not a memset of the whole set: that library
+     * call cost more than the filter's covariance prediction. */
     filter_work_t w;
-    (void)memset(&w, 0, sizeof w);
-    w.names = subsets[mi][i];
     w.n = subset_count(self, i) + 1U;
+    w.names = subsets[mi][i];
+    for (size_t a = 0U; a < NTE_EKF_N_MAX; a++) {
+        w.x[a] = NTE_C(0.0);
+        w.h[a] = NTE_C(0.0);
+    }
+    w.innovation = NTE_C(0.0);
+    w.r_eff = NTE_C(0.0);
+    w.in_range = false;
     nte_rk3_result_t own;
     fo->innovation = NTE_C(0.0);
     fo->nis = NTE_C(0.0);
@@ -641,8 +650,15 @@ static void enter_layer_sets(nte_t* self, const nte_real_t l, const bool surface
 void nte_bank_advance(nte_t* self, const bool first, const nte_real_t dt, const nte_real_t l_in,
                       const nte_real_t v, const nte_real_t y, nte_output_t* out)
 {
+    /* every field is written below; these only where a branch may not write them (set here
+     * rather than by a memset of the whole context: a library call on every sample) */
     step_ctx_t c;
-    (void)memset(&c, 0, sizeof c);
+    c.s = NTE_C(0.0);
+    c.s_du = NTE_C(0.0);
+    c.turned = false;
+    c.tear = false;
+    c.tear_z = NTE_C(0.0);
+    c.tear_innovation = NTE_C(0.0);
     for (size_t i = 0U; i < NTE_FILTER_COUNT; i++) {
         out->filter_status[i] = 0U;
     }

@@ -4,6 +4,19 @@
  */
 #include "nte_ekf.h"
 
+/* The bank's filters have n = 2, 3 or 4 states.  A kernel written for any n and inlined where n
+ * is a constant runs with every loop written out: no counter, compare or taken branch (on the
+ * board they cost more than the multiply-add they guard), the same operations in the same
+ * order, so the same bits.  GCC and Clang inline only when asked to (the board build keeps
+ * -fno-inline-functions for flash); another compiler gets the loops. */
+#if defined(__GNUC__)
+#define NTE_EKF_SPECIALISE static inline __attribute__((always_inline))
+#define NTE_EKF_UNROLL _Pragma("GCC unroll 4")
+#else
+#define NTE_EKF_SPECIALISE static inline
+#define NTE_EKF_UNROLL
+#endif
+
 /* The Joseph update's sums of n products, accumulated left to right as ekf._dot does.  The
  * bank's filters have n = 3 or 4: written out for those, a sum runs without a loop's compare,
  * branch and counter, which cost about as much as the multiply and add they guard, in the same
@@ -76,29 +89,33 @@ void nte_ekf_predict(const size_t n, nte_mat3_t P, const nte_real_t* f, const nt
     }
 }
 
-nte_ekf_update_t nte_ekf_joseph_update(const size_t n, nte_real_t* x, nte_mat3_t P,
-                                       const nte_real_t* h, const nte_real_t innovation,
-                                       const nte_real_t r, const nte_real_t gate2,
-                                       const bool open_gate, const bool apply,
-                                       const nte_real_t step, const bool hold)
+NTE_EKF_SPECIALISE nte_ekf_update_t joseph(const size_t n, nte_real_t* x, nte_mat3_t P,
+                                      const nte_real_t* h, const nte_real_t innovation,
+                                      const nte_real_t r, const nte_real_t gate2,
+                                      const bool open_gate, const bool apply,
+                                      const nte_real_t step, const bool hold)
 {
     nte_ekf_update_t res;
     nte_real_t pht[NTE_EKF_N_MAX] = {NTE_C(0.0)};
     nte_real_t k[NTE_EKF_N_MAX] = {NTE_C(0.0)};
     nte_mat3_t a;
     nte_mat3_t ap;
+    NTE_EKF_UNROLL
     for (size_t i = 0U; i < n; i++) {
         nte_real_t acc = P[i][0] * h[0];
+        NTE_EKF_UNROLL
         for (size_t m = 1U; m < n; m++) {
             acc = acc + (P[i][m] * h[m]);
         }
         pht[i] = acc;
     }
     nte_real_t s = h[0] * pht[0];
+    NTE_EKF_UNROLL
     for (size_t m = 1U; m < n; m++) {
         s = s + (h[m] * pht[m]);
     }
     s = s + r;
+    NTE_EKF_UNROLL
     for (size_t i = 0U; i < n; i++) {
         /* hold: the parameters' gain rows are 0 (the Joseph form below is right for any gain) */
         k[i] = (hold && (i > 0U)) ? NTE_C(0.0) : (pht[i] / s);
@@ -114,17 +131,23 @@ nte_ekf_update_t nte_ekf_joseph_update(const size_t n, nte_real_t* x, nte_mat3_t
     if (!(apply && res.accepted)) {
         return res;
     }
+    NTE_EKF_UNROLL
     for (size_t i = 0U; i < n; i++) {
+        NTE_EKF_UNROLL
         for (size_t j = 0U; j < n; j++) {
             a[i][j] = ((i == j) ? NTE_C(1.0) : NTE_C(0.0)) - (k[i] * h[j]);
         }
     }
+    NTE_EKF_UNROLL
     for (size_t i = 0U; i < n; i++) {
+        NTE_EKF_UNROLL
         for (size_t j = 0U; j < n; j++) {
             ap[i][j] = dot_column(n, a[i], P, j);
         }
     }
+    NTE_EKF_UNROLL
     for (size_t i = 0U; i < n; i++) {
+        NTE_EKF_UNROLL
         for (size_t j = i; j < n; j++) {
             const nte_real_t v = dot_rows(n, ap[i], a[j]) + ((k[i] * r) * k[j]);
             P[i][j] = v;
@@ -135,6 +158,7 @@ nte_ekf_update_t nte_ekf_joseph_update(const size_t n, nte_real_t* x, nte_mat3_t
      * the whole update, z's change included, is shortened */
     nte_real_t xn[NTE_EKF_N_MAX];
     nte_real_t big = NTE_C(0.0);
+    NTE_EKF_UNROLL
     for (size_t i = 0U; i < n; i++) {
         xn[i] = x[i] + (k[i] * innovation);
         const nte_real_t d = nte_abs(xn[i] - x[i]);
@@ -142,10 +166,28 @@ nte_ekf_update_t nte_ekf_joseph_update(const size_t n, nte_real_t* x, nte_mat3_t
     }
     const bool over = (step > NTE_C(0.0)) && (big > step);
     const nte_real_t scale = over ? (step / big) : NTE_C(1.0);
+    NTE_EKF_UNROLL
     for (size_t i = 0U; i < n; i++) {
         x[i] = over ? (x[i] + ((xn[i] - x[i]) * scale)) : xn[i];
     }
     return res;
+}
+
+nte_ekf_update_t nte_ekf_joseph_update(const size_t n, nte_real_t* x, nte_mat3_t P,
+                                       const nte_real_t* h, const nte_real_t innovation,
+                                       const nte_real_t r, const nte_real_t gate2,
+                                       const bool open_gate, const bool apply,
+                                       const nte_real_t step, const bool hold)
+{
+    switch (n) {
+    case 2U: return joseph(2U, x, P, h, innovation, r, gate2, open_gate, apply, step, hold);
+    case 3U: return joseph(3U, x, P, h, innovation, r, gate2, open_gate, apply, step, hold);
+    case 4U: return joseph(4U, x, P, h, innovation, r, gate2, open_gate, apply, step, hold);
+    default: break;
+    }
+    /* not a filter of the bank: nothing updated, and the NaN variance says so */
+    const nte_ekf_update_t none = {(nte_real_t)NAN, (nte_real_t)NAN, false};
+    return none;
 }
 
 bool nte_ekf_positive_definite(const size_t n, nte_mat3_t P)

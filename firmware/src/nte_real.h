@@ -63,30 +63,9 @@ static inline nte_real_t nte_pow2(const int32_t n)
     return out;
 }
 
-/** exp(x), |x| clamped to NTE_K_EXP_XMAX; reference_py/fmath.py Real.exp. */
-static inline nte_real_t nte_exp(nte_real_t x)
-{
-    static const nte_real_t coeffs[NTE_K_EXP_DEGREE + 1] = NTE_K_EXP_COEFFS;
-    if (isnan(x)) {
-        return x;
-    }
-    if (x > NTE_K_EXP_XMAX) {
-        x = NTE_K_EXP_XMAX;
-    }
-    if (x < -NTE_K_EXP_XMAX) {
-        x = -NTE_K_EXP_XMAX;
-    }
-    nte_real_t t = x * NTE_K_EXP_LOG2E;
-    t = (t >= NTE_C(0.0)) ? (t + NTE_C(0.5)) : (t - NTE_C(0.5));
-    const int32_t n = (int32_t)t;
-    const nte_real_t nf = (nte_real_t)n;
-    const nte_real_t r = (x - (nf * NTE_K_EXP_LN2_HI)) - (nf * NTE_K_EXP_LN2_LO);
-    nte_real_t p = coeffs[NTE_K_EXP_DEGREE];
-    for (int i = NTE_K_EXP_DEGREE - 1; i >= 0; i--) {
-        p = (p * r) + coeffs[i];
-    }
-    return p * nte_pow2(n);
-}
+/** exp(x), |x| clamped to NTE_K_EXP_XMAX; reference_py/fmath.py Real.exp (nte_real.c: why
+ *  it is not inline). */
+nte_real_t nte_exp(nte_real_t x);
 
 /** tanh(x) = sign(x) (1 - e)/(1 + e), e = exp(-2|x|); reference_py/fmath.py Real.tanh. */
 static inline nte_real_t nte_tanh(const nte_real_t x)
