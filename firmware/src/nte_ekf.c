@@ -192,12 +192,22 @@ nte_ekf_update_t nte_ekf_joseph_update(const size_t n, nte_real_t* x, nte_mat3_t
 
 bool nte_ekf_positive_definite(const size_t n, nte_mat3_t P)
 {
+    /* every entry finite: x * 0 is 0 for a finite x and NaN for an infinite or NaN one, and a
+     * NaN stays NaN through a sum (so the sum is 0 or NaN), and one check at the end replaces
+     * one compare and branch
+     * per entry.  P is symmetric by construction (the prediction and the Joseph update write
+     * both triangles from one value, the guard's reset is diagonal): the upper triangle holds
+     * every value. */
+    const nte_real_t o = NTE_C(0.0);
+    nte_real_t zero = P[0][0] * o;
     bool ok = P[0][0] > NTE_C(0.0);
     if (n >= 2U) {
+        zero = (zero + (P[0][1] * o)) + (P[1][1] * o);
         const nte_real_t d2 = (P[0][0] * P[1][1]) - (P[0][1] * P[1][0]);
         ok = ok && (d2 > NTE_C(0.0));
     }
     if (n >= 3U) {
+        zero = ((zero + (P[0][2] * o)) + (P[1][2] * o)) + (P[2][2] * o);
         const nte_real_t c0 = (P[1][1] * P[2][2]) - (P[1][2] * P[2][1]);
         const nte_real_t c1 = (P[1][0] * P[2][2]) - (P[1][2] * P[2][0]);
         const nte_real_t c2 = (P[1][0] * P[2][1]) - (P[1][1] * P[2][0]);
@@ -206,6 +216,7 @@ bool nte_ekf_positive_definite(const size_t n, nte_mat3_t P)
     }
 #if NTE_EKF_N_MAX >= 4
     if (n >= 4U) {
+        zero = (((zero + (P[0][3] * o)) + (P[1][3] * o)) + (P[2][3] * o)) + (P[3][3] * o);
         /* Laplace expansion along rows 0, 1: their 2x2 minors s_ij times the complementary
          * minors c_kl of rows 2, 3 (ekf.py positive_definite, same order) */
         const nte_real_t s01 = (P[0][0] * P[1][1]) - (P[0][1] * P[1][0]);
@@ -226,15 +237,5 @@ bool nte_ekf_positive_definite(const size_t n, nte_mat3_t P)
         ok = ok && (d4 > NTE_C(0.0));
     }
 #endif
-    /* P is symmetric by construction (the prediction and the Joseph update write both
-     * triangles from one value, the guard's reset is diagonal): the upper triangle holds every
-     * value, and the lower one would repeat the check (3 n (n - 1) / 2 loop passes a step) */
-    for (size_t i = 0U; i < n; i++) {
-        for (size_t j = i; j < n; j++) {
-            if (!nte_isfinite(P[i][j])) {
-                return false;
-            }
-        }
-    }
-    return ok;
+    return ok && nte_isfinite(zero);
 }
