@@ -554,6 +554,20 @@ static uint32_t update_and_guard(nte_t* self, const size_t i, const nte_depth_te
     return status;
 }
 
+/* The depth terms at this sample's depth with the current theta: the prediction's end when
+ * it ran with this theta (same_theta: the filter's own prediction, or the shared one before
+ * any filter updated) and ended at the same depth.  Both depths are clamped (never NaN, never
+ * -0), so equal values are equal bits: one exp and one division fewer per filter. */
+static void depth_terms_now(const nte_t* self, const step_ctx_t* c, const nte_rk3_result_t* pred,
+                            const bool same_theta, nte_depth_terms_t* d)
+{
+    if (same_theta && !(pred->end.l < c->l) && !(pred->end.l > c->l)) {
+        *d = pred->end;
+    } else {
+        nte_model_depth_terms(d, &self->th, c->l);
+    }
+}
+
 /* One filter of the bank at a running sample (one pass of bank._advance's loop). */
 static uint32_t run_filter(nte_t* self, step_ctx_t* c, const size_t i,
                            const nte_rk3_result_t* shared, filter_out_t* fo)
@@ -587,7 +601,7 @@ static uint32_t run_filter(nte_t* self, step_ctx_t* c, const size_t i,
     /* predict_only: the model alone, no filter updates (z is filter 0's prior, guarded) */
     fo->active = fo->active && !self->cfg.predict_only;
     nte_depth_terms_t d;
-    nte_model_depth_terms(&d, &self->th, c->l);
+    depth_terms_now(self, c, pred, !c->rotate || (i == 0U), &d);
     predict(self, c, i, pred, &d, &w);
     uint32_t status = measure(self, c, &d, fo->active, &w);
     if ((i == 0U) && (self->cfg.model == 3) && self->cfg.layers) {

@@ -153,7 +153,8 @@ void nte_model_rk3(nte_rk3_result_t* res, const nte_theta_t* th, nte_real_t z, c
     nte_real_t s_u[NTE_MODEL_PARAM_COUNT] = {NTE_C(0.0)};
     /* the end of one sub-step is the start of the next: its depth terms are computed once */
     nte_depth_terms_t d1;
-    nte_model_depth_terms(&d1, th, nte_model_clamp_depth(l_a + (dl * (NTE_C(0.0) / n))));
+    /* tau = 0 / n, which is 0 for every n >= 1: no division */
+    nte_model_depth_terms(&d1, th, nte_model_clamp_depth(l_a + (dl * NTE_C(0.0))));
     for (int32_t j = 0; j < substeps; j++) {
         const nte_real_t taum = (nte_real_t)((2 * j) + 1) / (n * NTE_C(2.0));
         const nte_real_t tau1 = (nte_real_t)(j + 1) / n;
@@ -225,6 +226,7 @@ void nte_model_rk3(nte_rk3_result_t* res, const nte_theta_t* th, nte_real_t z, c
     }
     res->z = z;
     res->dz_dz0 = s_z;
+    res->end = d1;
     for (size_t p = 0U; (p < count) && (p < (size_t)NTE_MODEL_PARAM_COUNT); p++) {
         res->dz_du[ids[p]] = s_u[p];
     }

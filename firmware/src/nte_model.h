@@ -31,6 +31,9 @@ typedef struct nte_rk3_result_t {
     nte_real_t z;
     nte_real_t dz_dz0;
     nte_real_t dz_du[NTE_PARAM_COUNT]; /**< indexed by nte_param_id_t; only requested ones set */
+    /** the depth terms at the step's end, clamp(l_a + (l_b - l_a)), with the step's theta:
+     *  the bank's own at l_b when the two depths are the same bits (nte_bank.c) */
+    nte_depth_terms_t end;
 } nte_rk3_result_t;
 
 /** f1's split, written once (reference_py/params.py f1_kappa, f1_excess): kappa = 1 when
