@@ -17,21 +17,14 @@
 #define NTE_EKF_UNROLL
 #endif
 
-/* The Joseph update's sums of n products, accumulated left to right as ekf._dot does.  The
- * bank's filters have n = 3 or 4: written out for those, a sum runs without a loop's compare,
- * branch and counter, which cost about as much as the multiply and add they guard, in the same
- * order, so with the same bits; any other n takes the loop. */
+/* The Joseph update's sums of n products, accumulated left to right as ekf._dot does (with n
+ * a constant where they are inlined, written out) */
 
 /* sum_m a[m] b[m] */
 static inline nte_real_t dot_rows(const size_t n, const nte_real_t* a, const nte_real_t* b)
 {
-    if (n == 4U) {
-        return (((a[0] * b[0]) + (a[1] * b[1])) + (a[2] * b[2])) + (a[3] * b[3]);
-    }
-    if (n == 3U) {
-        return ((a[0] * b[0]) + (a[1] * b[1])) + (a[2] * b[2]);
-    }
     nte_real_t acc = a[0] * b[0];
+    NTE_EKF_UNROLL
     for (size_t m = 1U; m < n; m++) {
         acc = acc + (a[m] * b[m]);
     }
@@ -42,13 +35,8 @@ static inline nte_real_t dot_rows(const size_t n, const nte_real_t* a, const nte
 static inline nte_real_t dot_column(const size_t n, const nte_real_t* a, nte_mat3_t M,
                                     const size_t j)
 {
-    if (n == 4U) {
-        return (((a[0] * M[0][j]) + (a[1] * M[1][j])) + (a[2] * M[2][j])) + (a[3] * M[3][j]);
-    }
-    if (n == 3U) {
-        return ((a[0] * M[0][j]) + (a[1] * M[1][j])) + (a[2] * M[2][j]);
-    }
     nte_real_t acc = a[0] * M[0][j];
+    NTE_EKF_UNROLL
     for (size_t m = 1U; m < n; m++) {
         acc = acc + (a[m] * M[m][j]);
     }
@@ -90,10 +78,10 @@ void nte_ekf_predict(const size_t n, nte_mat3_t P, const nte_real_t* f, const nt
 }
 
 NTE_EKF_SPECIALISE nte_ekf_update_t joseph(const size_t n, nte_real_t* x, nte_mat3_t P,
-                                      const nte_real_t* h, const nte_real_t innovation,
-                                      const nte_real_t r, const nte_real_t gate2,
-                                      const bool open_gate, const bool apply,
-                                      const nte_real_t step, const bool hold)
+                                           const nte_real_t* h, const nte_real_t innovation,
+                                           const nte_real_t r, const nte_real_t gate2,
+                                           const bool open_gate, const bool apply,
+                                           const nte_real_t step, const bool hold)
 {
     nte_ekf_update_t res;
     nte_real_t pht[NTE_EKF_N_MAX] = {NTE_C(0.0)};

@@ -25,7 +25,9 @@ typedef struct nte_ekf_update_t {
     bool accepted;  /**< the gate let the update through (or open_gate forced it) */
 } nte_ekf_update_t;
 
-/** Scalar measurement update in Joseph form behind an innovation gate (ekf.joseph_update).
+/** Scalar measurement update in Joseph form behind an innovation gate (ekf.joseph_update), for
+ *  the bank's filters, 2 <= n <= NTE_EKF_N_MAX (any other n: nothing updated, s and nis NaN,
+ *  not accepted).
  *  x and P are updated in place only when `apply` and accepted; s, nis and accepted are always
  *  computed (the reference evaluates them for idle filters too).  step > 0 bounds the update
  *  (ekf.bound_step): where the largest |change| of x[1..n) exceeds it, the whole update, x[0]
