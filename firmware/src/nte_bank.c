@@ -505,22 +505,27 @@ static uint32_t update_and_guard(nte_t* self, const size_t i, const nte_depth_te
     const size_t na = n - 1U;
     uint32_t status = 0U;
     nte_real_t xn[NTE_EKF_N_MAX];
-    /* the update and the guard work on the filter's own covariance, from a copy of the prior
-     * (w->P stays the prior, which the checks below judge) */
-    nte_real_t(*const Pn)[NTE_EKF_N_MAX] = self->P[i];
     for (size_t a = 0U; a < n; a++) {
         xn[a] = w->x[a];
-        for (size_t b = 0U; b < n; b++) {
-            Pn[a][b] = w->P[a][b];
-        }
     }
+    /* the update writes the posterior into the filter's own covariance (w->P stays the prior,
+     * which the checks below judge), and the guard works on it */
+    nte_real_t(*const Pn)[NTE_EKF_N_MAX] = self->P[i];
     /* a gate that refused too many samples in a row would lock the filter out: open it */
     const bool open_gate = (self->gated_run[i] >= (uint32_t)self->cfg.gate_reopen_after) || tear;
     /* u_step_max: the update's step bound (reference_py/config.py U_STEP_MAX); frozen: the
      * parameters held (nte.h HELD PARAMETERS) */
-    const nte_ekf_update_t upd = nte_ekf_joseph_update(n, xn, Pn, w->h, w->innovation, w->r_eff,
-                                                       self->gate2, open_gate, fo->active,
+    const nte_ekf_update_t upd = nte_ekf_joseph_update(n, xn, w->P, Pn, w->h, w->innovation,
+                                                       w->r_eff, self->gate2, open_gate, fo->active,
                                                        self->cfg.u_step_max, self->frozen);
+    if (!(fo->active && upd.accepted)) {
+        /* not updated: the posterior is the prior */
+        for (size_t a = 0U; a < n; a++) {
+            for (size_t b = 0U; b < n; b++) {
+                Pn[a][b] = w->P[a][b];
+            }
+        }
+    }
     if (fo->active) {
         if (upd.accepted) {
             self->gated_run[i] = 0U;

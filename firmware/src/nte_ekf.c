@@ -78,10 +78,10 @@ void nte_ekf_predict(const size_t n, nte_mat3_t P, const nte_real_t* f, const nt
 }
 
 NTE_EKF_SPECIALISE nte_ekf_update_t joseph(const size_t n, nte_real_t* x, nte_mat3_t P,
-                                           const nte_real_t* h, const nte_real_t innovation,
-                                           const nte_real_t r, const nte_real_t gate2,
-                                           const bool open_gate, const bool apply,
-                                           const nte_real_t step, const bool hold)
+                                           nte_mat3_t P_out, const nte_real_t* h,
+                                           const nte_real_t innovation, const nte_real_t r,
+                                           const nte_real_t gate2, const bool open_gate,
+                                           const bool apply, const nte_real_t step, const bool hold)
 {
     nte_ekf_update_t res;
     nte_real_t pht[NTE_EKF_N_MAX] = {NTE_C(0.0)};
@@ -138,8 +138,8 @@ NTE_EKF_SPECIALISE nte_ekf_update_t joseph(const size_t n, nte_real_t* x, nte_ma
         NTE_EKF_UNROLL
         for (size_t j = i; j < n; j++) {
             const nte_real_t v = dot_rows(n, ap[i], a[j]) + ((k[i] * r) * k[j]);
-            P[i][j] = v;
-            P[j][i] = v;
+            P_out[i][j] = v;
+            P_out[j][i] = v;
         }
     }
     /* the step bound (ekf.bound_step): the largest change of x[1..n), from 0, strict; over it
@@ -162,15 +162,15 @@ NTE_EKF_SPECIALISE nte_ekf_update_t joseph(const size_t n, nte_real_t* x, nte_ma
 }
 
 nte_ekf_update_t nte_ekf_joseph_update(const size_t n, nte_real_t* x, nte_mat3_t P,
-                                       const nte_real_t* h, const nte_real_t innovation,
-                                       const nte_real_t r, const nte_real_t gate2,
-                                       const bool open_gate, const bool apply,
-                                       const nte_real_t step, const bool hold)
+                                       nte_mat3_t P_out, const nte_real_t* h,
+                                       const nte_real_t innovation, const nte_real_t r,
+                                       const nte_real_t gate2, const bool open_gate,
+                                       const bool apply, const nte_real_t step, const bool hold)
 {
     switch (n) {
-    case 2U: return joseph(2U, x, P, h, innovation, r, gate2, open_gate, apply, step, hold);
-    case 3U: return joseph(3U, x, P, h, innovation, r, gate2, open_gate, apply, step, hold);
-    case 4U: return joseph(4U, x, P, h, innovation, r, gate2, open_gate, apply, step, hold);
+    case 2U: return joseph(2U, x, P, P_out, h, innovation, r, gate2, open_gate, apply, step, hold);
+    case 3U: return joseph(3U, x, P, P_out, h, innovation, r, gate2, open_gate, apply, step, hold);
+    case 4U: return joseph(4U, x, P, P_out, h, innovation, r, gate2, open_gate, apply, step, hold);
     default: break;
     }
     /* not a filter of the bank: nothing updated, and the NaN variance says so */

@@ -28,15 +28,19 @@ typedef struct nte_ekf_update_t {
 /** Scalar measurement update in Joseph form behind an innovation gate (ekf.joseph_update), for
  *  the bank's filters, 2 <= n <= NTE_EKF_N_MAX (any other n: nothing updated, s and nis NaN,
  *  not accepted).
- *  x and P are updated in place only when `apply` and accepted; s, nis and accepted are always
- *  computed (the reference evaluates them for idle filters too).  step > 0 bounds the update
+ *  Only when `apply` and accepted: x is updated in place and P_out gets the posterior
+ *  covariance of the prior P (P is read only; P_out may be P, else P_out is not written
+ *  otherwise: the caller copies the prior when the update is not applied, which spares the
+ *  copy on the usual path).  s, nis and accepted are always computed (the reference
+ *  evaluates them for idle filters too).  step > 0 bounds the update
  *  (ekf.bound_step): where the largest |change| of x[1..n) exceeds it, the whole update, x[0]
  *  included, is scaled by step / largest; step <= 0: no bound.
  *  hold: the gain's rows 1..n) are 0, so x[1..n) stays bit for bit and P follows that gain
  *  (the parameters held, nte.h HELD PARAMETERS). */
-nte_ekf_update_t nte_ekf_joseph_update(size_t n, nte_real_t* x, nte_mat3_t P, const nte_real_t* h,
-                                       nte_real_t innovation, nte_real_t r, nte_real_t gate2,
-                                       bool open_gate, bool apply, nte_real_t step, bool hold);
+nte_ekf_update_t nte_ekf_joseph_update(size_t n, nte_real_t* x, nte_mat3_t P, nte_mat3_t P_out,
+                                       const nte_real_t* h, nte_real_t innovation, nte_real_t r,
+                                       nte_real_t gate2, bool open_gate, bool apply,
+                                       nte_real_t step, bool hold);
 
 /** Sylvester's criterion on the leading minors, and every entry finite (P read only; P must be
  *  symmetric, as every covariance of the bank is: only its upper triangle is checked for
