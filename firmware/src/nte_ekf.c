@@ -4,18 +4,8 @@
  */
 #include "nte_ekf.h"
 
-/* The bank's filters have n = 2, 3 or 4 states.  A kernel written for any n and inlined where n
- * is a constant runs with every loop written out: no counter, compare or taken branch (on the
- * board they cost more than the multiply-add they guard), the same operations in the same
- * order, so the same bits.  GCC and Clang inline only when asked to (the board build keeps
- * -fno-inline-functions for flash); another compiler gets the loops. */
-#if defined(__GNUC__)
-#define NTE_EKF_SPECIALISE static inline __attribute__((always_inline))
-#define NTE_EKF_UNROLL _Pragma("GCC unroll 4")
-#else
-#define NTE_EKF_SPECIALISE static inline
-#define NTE_EKF_UNROLL
-#endif
+/* The bank's filters have n = 2, 3 or 4 states: the kernels below are inlined for each n
+ * (NTE_SPECIALISE, NTE_UNROLL in nte_real.h), so their loops run written out. */
 
 /* The Joseph update's sums of n products, accumulated left to right as ekf._dot does (with n
  * a constant where they are inlined, written out) */
@@ -24,7 +14,7 @@
 static inline nte_real_t dot_rows(const size_t n, const nte_real_t* a, const nte_real_t* b)
 {
     nte_real_t acc = a[0] * b[0];
-    NTE_EKF_UNROLL
+    NTE_UNROLL
     for (size_t m = 1U; m < n; m++) {
         acc = acc + (a[m] * b[m]);
     }
@@ -36,7 +26,7 @@ static inline nte_real_t dot_column(const size_t n, const nte_real_t* a, nte_mat
                                     const size_t j)
 {
     nte_real_t acc = a[0] * M[0][j];
-    NTE_EKF_UNROLL
+    NTE_UNROLL
     for (size_t m = 1U; m < n; m++) {
         acc = acc + (a[m] * M[m][j]);
     }
@@ -77,33 +67,33 @@ void nte_ekf_predict(const size_t n, nte_mat3_t P, const nte_real_t* f, const nt
     }
 }
 
-NTE_EKF_SPECIALISE nte_ekf_update_t joseph(const size_t n, nte_real_t* x, nte_mat3_t P,
-                                           nte_mat3_t P_out, const nte_real_t* h,
-                                           const nte_real_t innovation, const nte_real_t r,
-                                           const nte_real_t gate2, const bool open_gate,
-                                           const bool apply, const nte_real_t step, const bool hold)
+NTE_SPECIALISE nte_ekf_update_t joseph(const size_t n, nte_real_t* x, nte_mat3_t P,
+                                       nte_mat3_t P_out, const nte_real_t* h,
+                                       const nte_real_t innovation, const nte_real_t r,
+                                       const nte_real_t gate2, const bool open_gate,
+                                       const bool apply, const nte_real_t step, const bool hold)
 {
     nte_ekf_update_t res;
     nte_real_t pht[NTE_EKF_N_MAX] = {NTE_C(0.0)};
     nte_real_t k[NTE_EKF_N_MAX] = {NTE_C(0.0)};
     nte_mat3_t a;
     nte_mat3_t ap;
-    NTE_EKF_UNROLL
+    NTE_UNROLL
     for (size_t i = 0U; i < n; i++) {
         nte_real_t acc = P[i][0] * h[0];
-        NTE_EKF_UNROLL
+        NTE_UNROLL
         for (size_t m = 1U; m < n; m++) {
             acc = acc + (P[i][m] * h[m]);
         }
         pht[i] = acc;
     }
     nte_real_t s = h[0] * pht[0];
-    NTE_EKF_UNROLL
+    NTE_UNROLL
     for (size_t m = 1U; m < n; m++) {
         s = s + (h[m] * pht[m]);
     }
     s = s + r;
-    NTE_EKF_UNROLL
+    NTE_UNROLL
     for (size_t i = 0U; i < n; i++) {
         /* hold: the parameters' gain rows are 0 (the Joseph form below is right for any gain) */
         k[i] = (hold && (i > 0U)) ? NTE_C(0.0) : (pht[i] / s);
@@ -119,23 +109,23 @@ NTE_EKF_SPECIALISE nte_ekf_update_t joseph(const size_t n, nte_real_t* x, nte_ma
     if (!(apply && res.accepted)) {
         return res;
     }
-    NTE_EKF_UNROLL
+    NTE_UNROLL
     for (size_t i = 0U; i < n; i++) {
-        NTE_EKF_UNROLL
+        NTE_UNROLL
         for (size_t j = 0U; j < n; j++) {
             a[i][j] = ((i == j) ? NTE_C(1.0) : NTE_C(0.0)) - (k[i] * h[j]);
         }
     }
-    NTE_EKF_UNROLL
+    NTE_UNROLL
     for (size_t i = 0U; i < n; i++) {
-        NTE_EKF_UNROLL
+        NTE_UNROLL
         for (size_t j = 0U; j < n; j++) {
             ap[i][j] = dot_column(n, a[i], P, j);
         }
     }
-    NTE_EKF_UNROLL
+    NTE_UNROLL
     for (size_t i = 0U; i < n; i++) {
-        NTE_EKF_UNROLL
+        NTE_UNROLL
         for (size_t j = i; j < n; j++) {
             const nte_real_t v = dot_rows(n, ap[i], a[j]) + ((k[i] * r) * k[j]);
             P_out[i][j] = v;
@@ -146,7 +136,7 @@ NTE_EKF_SPECIALISE nte_ekf_update_t joseph(const size_t n, nte_real_t* x, nte_ma
      * the whole update, z's change included, is shortened */
     nte_real_t xn[NTE_EKF_N_MAX];
     nte_real_t big = NTE_C(0.0);
-    NTE_EKF_UNROLL
+    NTE_UNROLL
     for (size_t i = 0U; i < n; i++) {
         xn[i] = x[i] + (k[i] * innovation);
         const nte_real_t d = nte_abs(xn[i] - x[i]);
@@ -154,7 +144,7 @@ NTE_EKF_SPECIALISE nte_ekf_update_t joseph(const size_t n, nte_real_t* x, nte_ma
     }
     const bool over = (step > NTE_C(0.0)) && (big > step);
     const nte_real_t scale = over ? (step / big) : NTE_C(1.0);
-    NTE_EKF_UNROLL
+    NTE_UNROLL
     for (size_t i = 0U; i < n; i++) {
         x[i] = over ? (x[i] + ((xn[i] - x[i]) * scale)) : xn[i];
     }

@@ -46,7 +46,7 @@ nte_real_t nte_real_from_i64(const int64_t x)
 /*
  * exp(x), |x| clamped to NTE_K_EXP_XMAX: reference_py/fmath.py Real.exp operation for
  * operation.  Not inline: every depth term, RK3 stage, parameter and tanh takes one, and two
- * dozen inlined copies cost the board about 2.5 KiB of its 32 KiB of flash for a call's few
+ * dozen inlined copies cost the board about 1.8 KiB of its 32 KiB of flash for a call's few
  * cycles.
  */
 nte_real_t nte_exp(nte_real_t x)
@@ -66,26 +66,12 @@ nte_real_t nte_exp(nte_real_t x)
     const int32_t n = (int32_t)t;
     const nte_real_t nf = (nte_real_t)n;
     const nte_real_t r = (x - (nf * NTE_K_EXP_LN2_HI)) - (nf * NTE_K_EXP_LN2_LO);
-    /* Horner from the top coefficient down, written out: on the board the loop's load,
-     * compare and taken branch cost twice the multiply-add they guard (about 60 of an exp's
-     * 150 cycles, cycles.py --functions), and every depth term and RK3 stage takes an exp */
+    /* Horner from the top coefficient down, the loop written out (NTE_UNROLL): every depth
+     * term and RK3 stage takes an exp */
     nte_real_t p = coeffs[NTE_K_EXP_DEGREE];
-#if NTE_K_EXP_DEGREE == 13
-    p = (p * r) + coeffs[12];
-    p = (p * r) + coeffs[11];
-    p = (p * r) + coeffs[10];
-    p = (p * r) + coeffs[9];
-    p = (p * r) + coeffs[8];
-    p = (p * r) + coeffs[7];
-#elif NTE_K_EXP_DEGREE != 7
-#error "nte_exp writes out the Horner steps of degrees 7 (float) and 13 (double) only"
-#endif
-    p = (p * r) + coeffs[6];
-    p = (p * r) + coeffs[5];
-    p = (p * r) + coeffs[4];
-    p = (p * r) + coeffs[3];
-    p = (p * r) + coeffs[2];
-    p = (p * r) + coeffs[1];
-    p = (p * r) + coeffs[0];
+    NTE_UNROLL
+    for (int i = NTE_K_EXP_DEGREE - 1; i >= 0; i--) {
+        p = (p * r) + coeffs[i];
+    }
     return p * nte_pow2(n);
 }
