@@ -106,8 +106,8 @@
  *   Schedule "all": 3 filters x (RK3 with sensitivities: 2n+1 exp and depth-term divisions,
  *   whose last ones the filter's measurement reuses, 3x3 covariance prediction, scalar
  *   Joseph update: 1 div per state) + the output's depth terms + up to 3 exp to refresh
- *   parameters; roughly 700 flops and 16 exp for n = 1 (Model II; README: the cycle model).  Schedule "rotate" costs about half.  Bounded: no
- *   loop depends on the data.  Model III: filter 1's covariance is 4 x 4 (prediction and
+ *   parameters; roughly 700 flops and 16 exp for n = 1 (Model II; README: the cycle model).
+ *   Schedule "rotate" costs about half.  Bounded: no loop depends on the data.  Model III: filter 1's covariance is 4 x 4 (prediction and
  *   Joseph update about 2.4x those of Model II's 2 x 2 filter 1), plus per sample 1 exp and
  *   1 div for the direction state (instead of tanh), 1 exp and 1 div per relaxation branch,
  *   and per filter about 10 flops and 1 div for the memories and the Jacobian's scaling, up

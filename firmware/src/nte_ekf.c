@@ -171,11 +171,10 @@ nte_ekf_update_t nte_ekf_joseph_update(const size_t n, nte_real_t* x, nte_mat3_t
 bool nte_ekf_positive_definite(const size_t n, nte_mat3_t P)
 {
     /* every entry finite: x * 0 is 0 for a finite x and NaN for an infinite or NaN one, and a
-     * NaN stays NaN through a sum (so the sum is 0 or NaN), and one check at the end replaces
-     * one compare and branch
-     * per entry.  P is symmetric by construction (the prediction and the Joseph update write
-     * both triangles from one value, the guard's reset is diagonal): the upper triangle holds
-     * every value. */
+     * NaN stays NaN through a sum, so the sum of the products is 0 or NaN and one check at the
+     * end replaces a compare and branch per entry.  P is symmetric by construction (the
+     * prediction and the Joseph update write both triangles from one value, the guard's reset
+     * is diagonal): the upper triangle holds every value. */
     const nte_real_t o = NTE_C(0.0);
     nte_real_t zero = P[0][0] * o;
     bool ok = P[0][0] > NTE_C(0.0);

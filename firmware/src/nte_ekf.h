@@ -29,12 +29,12 @@ typedef struct nte_ekf_update_t {
  *  the bank's filters, 2 <= n <= NTE_EKF_N_MAX (any other n: nothing updated, s and nis NaN,
  *  not accepted).
  *  Only when `apply` and accepted: x is updated in place and P_out gets the posterior
- *  covariance of the prior P (P is read only; P_out may be P, else P_out is not written
- *  otherwise: the caller copies the prior when the update is not applied, which spares the
- *  copy on the usual path).  s, nis and accepted are always computed (the reference
- *  evaluates them for idle filters too).  step > 0 bounds the update
- *  (ekf.bound_step): where the largest |change| of x[1..n) exceeds it, the whole update, x[0]
- *  included, is scaled by step / largest; step <= 0: no bound.
+ *  covariance of the prior P (P is read only; P_out may be P).  Otherwise P_out is not
+ *  written: the caller copies the prior then, which spares a copy on the usual path.  s, nis
+ *  and accepted are always computed (the reference evaluates them for idle filters too).
+ *  step > 0 bounds the update (ekf.bound_step): where the largest |change| of x[1..n)
+ *  exceeds it, the whole update, x[0] included, is scaled by step / largest; step <= 0: no
+ *  bound.
  *  hold: the gain's rows 1..n) are 0, so x[1..n) stays bit for bit and P follows that gain
  *  (the parameters held, nte.h HELD PARAMETERS). */
 nte_ekf_update_t nte_ekf_joseph_update(size_t n, nte_real_t* x, nte_mat3_t P, nte_mat3_t P_out,
