@@ -579,8 +579,9 @@ static uint32_t run_filter(nte_t* self, step_ctx_t* c, const size_t i,
 {
     const size_t mi = model_index(self);
     /* predict writes x and P, measure every row of h the filter has and the rest; h's other
-     * rows are cleared for the tear's prior.  Not a memset of the whole set: that library
-     * call cost more than the filter's covariance prediction. */
+     * rows are cleared for the tear's prior, and x and the scalars so that no field is ever
+     * read unset (what cppcheck checks of the whole set).  Not a memset of the whole set:
+     * that library call cost more than the filter's covariance prediction. */
     filter_work_t w;
     w.n = subset_count(self, i) + 1U;
     w.names = subsets[mi][i];

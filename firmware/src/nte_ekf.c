@@ -4,8 +4,11 @@
  */
 #include "nte_ekf.h"
 
-/* The bank's filters have n = 2, 3 or 4 states: the kernels below are inlined for each n
- * (NTE_SPECIALISE, NTE_UNROLL in nte_real.h), so their loops run written out. */
+/* The bank's filters have n = 2, 3 or 4 states: the Joseph update, their costliest kernel, is
+ * inlined once for each n (NTE_SPECIALISE, NTE_UNROLL in nte_real.h), so its loops and those
+ * of the sums below run written out.  The covariance prediction and check keep one body:
+ * written out too, the prediction would leave the board 32 B of flash (README, the cycle
+ * model). */
 
 /* The Joseph update's sums of n products, accumulated left to right as ekf._dot does (with n
  * a constant where they are inlined, written out) */
