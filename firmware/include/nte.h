@@ -103,16 +103,19 @@
  *   independent and may be used concurrently.
  *
  * COST (float build, one sample; n = substeps, default 1)
- *   Schedule "all": 3 filters x (RK3 with sensitivities: 2n+1 exp and depth-term divisions,
- *   whose last ones the filter's measurement reuses, 3x3 covariance prediction, scalar
- *   Joseph update: 1 div per state) + the output's depth terms + up to 3 exp to refresh
- *   parameters; roughly 700 flops and 16 exp for n = 1 (Model II; README: the cycle model).
+ *   Schedule "all": 2n+1 exp of the RK3 stage depths, shared by the filters (every filter's
+ *   prediction steps between the same depths with the same alpha) + 3 filters x (RK3 with
+ *   sensitivities: 2n+1 depth-term divisions, whose last one the filter's measurement
+ *   reuses, 3x3 covariance prediction, scalar Joseph update: 1 div per state) + the output's
+ *   depth terms (their exp shared too unless Model I's filter 3 moved alpha) + up to 3 exp
+ *   to refresh parameters; roughly 700 flops and 9 exp for n = 1 (Model II; README: the
+ *   cycle model).
  *   Schedule "rotate" costs about half.  Bounded: no loop depends on the data.  Model III: filter 1's covariance is 4 x 4 (prediction and
  *   Joseph update about 2.4x those of Model II's 2 x 2 filter 1), plus per sample 1 exp and
  *   1 div for the direction state (instead of tanh), 1 exp and 1 div per relaxation branch,
  *   and per filter about 10 flops and 1 div for the memories and the Jacobian's scaling, up
  *   to 2 exp more to refresh the strengths; with two branches roughly 1.3x Model II's
- *   flops and 20 exp.
+ *   flops and 13 exp.
  *
  * THE ROBUST ESTIMATOR (cfg.estimator = nte_estimator_robust; reference_py/robust.py)
  *   The bank above, plus a batch output-error refinement once per insertion.  While the needle
@@ -146,8 +149,8 @@
  *   leaves the tissue; bounded, independent of the data):
  *     2 starts x (fit_iterations + 1) simulations, each of (buffer_len - 1) entries x
  *     fit_substeps RK3 sub-steps with the sensitivities to n_p parameters (per sub-step 2 exp
- *     and 2 div of depth terms + 6 + ~8 n_p flops), plus per entry 1 exp (depth terms), 1
- *     tanh, the output and its n_p derivatives and the n_p (n_p + 3) / 2 products of J^T J and
+ *     and 2 div of depth terms + 6 + ~8 n_p flops), plus per entry the output's depth terms
+ *     (the RK3 step's end, reused when its depth has the same bits, else 1 exp), 1 tanh, the output and its n_p derivatives and the n_p (n_p + 3) / 2 products of J^T J and
  *     J^T r; plus per LM iteration one n_p x n_p LDL^T solve (n_p divisions, ~n_p^3/3 flops).
  *     Defaults (96 entries, 2 sub-steps, 8 iterations, Model II, n_p = 5): 18 simulations
  *     x 95 entries x 2 sub-steps = 3420 RK3 sub-steps with 5 sensitivities and 18 x 95 =

@@ -280,6 +280,9 @@ typedef struct step_ctx_t {
     bool tear;                  /* Model III: a layer tore at this sample (nte_layers_watch) */
     nte_real_t tear_z;          /* ... filter 1's prior z at it (tear_rescale) */
     nte_real_t tear_innovation; /* ... and its innovation, N */
+    /* exp(-alpha l) at this sample's RK3 stage depths, shared by the filters' predictions
+     * and, with alpha unchanged, the output (never NULL) */
+    nte_stage_exps_t* stage;
 } step_ctx_t;
 
 /* ---- Model III (reference_py/MODEL.md §3b, JACOBIANS.md §7) ---- */
@@ -559,6 +562,21 @@ static uint32_t update_and_guard(nte_t* self, const size_t i, const nte_depth_te
     return status;
 }
 
+/* The depth terms at this sample's depth with the current theta, from the sample's last
+ * stage exponential when it was taken at the same depth (both clamped: equal values are equal
+ * bits) with the same alpha (Model I's third filter may have changed it since). */
+static void sample_depth_terms(const nte_t* self, const step_ctx_t* c, nte_depth_terms_t* d)
+{
+    const nte_stage_exps_t* st = c->stage;
+    const nte_real_t alpha = self->th.v[nte_param_alpha];
+    if (st->ready && !(st->l_end < c->l) && !(st->l_end > c->l) && !(st->alpha < alpha) &&
+        !(st->alpha > alpha)) {
+        nte_model_depth_terms_e(d, &self->th, c->l, st->e[2 * self->cfg.substeps]);
+    } else {
+        nte_model_depth_terms(d, &self->th, c->l);
+    }
+}
+
 /* The depth terms at this sample's depth with the current theta: the prediction's end when
  * it ran with this theta (same_theta: the filter's own prediction, or the shared one before
  * any filter updated) and ended at the same depth.  Both depths are clamped (never NaN, never
@@ -569,7 +587,7 @@ static void depth_terms_now(const nte_t* self, const step_ctx_t* c, const nte_rk
     if (same_theta && !(pred->end.l < c->l) && !(pred->end.l > c->l)) {
         *d = pred->end;
     } else {
-        nte_model_depth_terms(d, &self->th, c->l);
+        sample_depth_terms(self, c, d);
     }
 }
 
@@ -600,7 +618,7 @@ static uint32_t run_filter(nte_t* self, step_ctx_t* c, const size_t i,
         fo->active = (self->k_mod3 == (uint8_t)i);
     } else {
         nte_model_rk3(&own, &self->th, c->z_prev, c->l_prev, c->l, c->dt, self->cfg.substeps,
-                      w.names, dynamic_count(w.names, w.n - 1U));
+                      w.names, dynamic_count(w.names, w.n - 1U), c->stage);
         pred = &own;
         fo->active = true;
     }
@@ -673,12 +691,19 @@ void nte_bank_advance(nte_t* self, const bool first, const nte_real_t dt, const 
     /* every field is written below; these only where a branch may not write them (set here
      * rather than by a memset of the whole context: a library call on every sample) */
     step_ctx_t c;
+    nte_stage_exps_t stage; /* its e[] is written before it is read (nte_model.h) */
+    stage.ready = false;
+    stage.l_end = NTE_C(0.0);
     c.s = NTE_C(0.0);
     c.s_du = NTE_C(0.0);
     c.turned = false;
     c.tear = false;
     c.tear_z = NTE_C(0.0);
     c.tear_innovation = NTE_C(0.0);
+    /* every filter's prediction steps from the same depths with the same alpha: one exp per
+     * stage for the three (and the output), not one per stage per filter; empty until the
+     * first prediction of the sample fills it */
+    c.stage = &stage;
     for (size_t i = 0U; i < NTE_FILTER_COUNT; i++) {
         out->filter_status[i] = 0U;
     }
@@ -728,7 +753,7 @@ void nte_bank_advance(nte_t* self, const bool first, const nte_real_t dt, const 
             const uint8_t* ids = NULL;
             const size_t n_ids = identified_ids(self, &ids);
             nte_model_rk3(&shared, &self->th, c.z_prev, c.l_prev, c.l, dt, self->cfg.substeps, ids,
-                          dynamic_count(ids, n_ids));
+                          dynamic_count(ids, n_ids), c.stage);
         }
         nte_real_t z_post = c.z_prev;
         for (size_t i = 0U; i < NTE_FILTER_COUNT; i++) {
@@ -758,7 +783,7 @@ void nte_bank_advance(nte_t* self, const bool first, const nte_real_t dt, const 
     /* posterior output with the final shared model */
     nte_depth_terms_t d;
     nte_output_terms_t o;
-    nte_model_depth_terms(&d, &self->th, c.l);
+    sample_depth_terms(self, &c, &d);
     if (first) {
         /* z starts at its steady state, as after a gap (0 out of tissue): a record or a
          * restarted node that begins inside the tissue does not start from a z the force

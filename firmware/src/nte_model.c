@@ -47,14 +47,28 @@ void nte_model_refresh(nte_theta_t* th, const nte_real_t nominal[NTE_PARAM_COUNT
 
 nte_real_t nte_model_clamp_depth(const nte_real_t l) { return (l > NTE_C(0.0)) ? l : NTE_C(0.0); }
 
-void nte_model_depth_terms(nte_depth_terms_t* d, const nte_theta_t* th, const nte_real_t l)
+/* The depth terms from e = exp(-alpha l); inlined into both entries below, so the bank's and
+ * the refinement's hot paths call one function, not two. */
+NTE_SPECIALISE void terms_from_e(nte_depth_terms_t* d, const nte_theta_t* th, const nte_real_t l,
+                                 const nte_real_t e)
 {
     d->l = l;
-    d->e = nte_exp(-(th->v[nte_param_alpha] * l));
+    d->e = e;
     d->g = th->v[nte_param_f1] + (th->v[nte_param_f2] * d->e);
     d->inv_g = NTE_C(1.0) / d->g;
     d->b = th->v[nte_param_sigma0] * d->inv_g;
     d->dg_dalpha = -(th->v[nte_param_f2] * (l * d->e));
+}
+
+void nte_model_depth_terms(nte_depth_terms_t* d, const nte_theta_t* th, const nte_real_t l)
+{
+    terms_from_e(d, th, l, nte_exp(-(th->v[nte_param_alpha] * l)));
+}
+
+void nte_model_depth_terms_e(nte_depth_terms_t* d, const nte_theta_t* th, const nte_real_t l,
+                             const nte_real_t e)
+{
+    terms_from_e(d, th, l, e);
 }
 
 nte_real_t nte_model_rate(const nte_theta_t* th, const nte_depth_terms_t* d, const nte_real_t z)
@@ -136,9 +150,24 @@ nte_real_t nte_model_smooth_sign(const nte_real_t v, const nte_real_t eps)
     return nte_tanh(v / eps);
 }
 
+/* The depth terms at stage k of the sample's RK3 step: from the shared exponential when
+ * another filter's step took it, else with its own exp, kept for the next filter. */
+static void stage_terms(nte_depth_terms_t* d, const nte_theta_t* th, const nte_real_t l,
+                        nte_stage_exps_t* shared, const int32_t k)
+{
+    if ((shared != NULL) && shared->ready) {
+        nte_model_depth_terms_e(d, th, l, shared->e[k]);
+    } else {
+        nte_model_depth_terms(d, th, l);
+        if (shared != NULL) {
+            shared->e[k] = d->e;
+        }
+    }
+}
+
 void nte_model_rk3(nte_rk3_result_t* res, const nte_theta_t* th, nte_real_t z, const nte_real_t l_a,
                    const nte_real_t l_b, const nte_real_t dt, const int32_t substeps,
-                   const uint8_t* ids, const size_t count)
+                   const uint8_t* ids, const size_t count, nte_stage_exps_t* shared)
 {
     const nte_real_t n = (nte_real_t)substeps;
     const nte_real_t h = dt / n;
@@ -154,14 +183,14 @@ void nte_model_rk3(nte_rk3_result_t* res, const nte_theta_t* th, nte_real_t z, c
     /* the end of one sub-step is the start of the next: its depth terms are computed once */
     nte_depth_terms_t d1;
     /* tau = 0 / n, which is 0 for every n >= 1: no division */
-    nte_model_depth_terms(&d1, th, nte_model_clamp_depth(l_a + (dl * NTE_C(0.0))));
-    for (int32_t j = 0; j < substeps; j++) {
+    stage_terms(&d1, th, nte_model_clamp_depth(l_a + (dl * NTE_C(0.0))), shared, 0);
+    for (int32_t j = 0; (j < substeps) && (j < NTE_RANGE_SUBSTEPS_MAX); j++) {
         const nte_real_t taum = (nte_real_t)((2 * j) + 1) / (n * NTE_C(2.0));
         const nte_real_t tau1 = (nte_real_t)(j + 1) / n;
         const nte_depth_terms_t d0 = d1;
         nte_depth_terms_t dm;
-        nte_model_depth_terms(&dm, th, nte_model_clamp_depth(l_a + (dl * taum)));
-        nte_model_depth_terms(&d1, th, nte_model_clamp_depth(l_a + (dl * tau1)));
+        stage_terms(&dm, th, nte_model_clamp_depth(l_a + (dl * taum)), shared, (2 * j) + 1);
+        stage_terms(&d1, th, nte_model_clamp_depth(l_a + (dl * tau1)), shared, (2 * j) + 2);
         const nte_real_t fz0 = nte_model_rate_dz(&d0);
         const nte_real_t fzm = nte_model_rate_dz(&dm);
         const nte_real_t fz1 = nte_model_rate_dz(&d1);
@@ -227,6 +256,11 @@ void nte_model_rk3(nte_rk3_result_t* res, const nte_theta_t* th, nte_real_t z, c
     res->z = z;
     res->dz_dz0 = s_z;
     res->end = d1;
+    if (shared != NULL) {
+        shared->l_end = d1.l;
+        shared->alpha = th->v[nte_param_alpha];
+        shared->ready = true;
+    }
     for (size_t p = 0U; (p < count) && (p < (size_t)NTE_MODEL_PARAM_COUNT); p++) {
         res->dz_du[ids[p]] = s_u[p];
     }

@@ -6,6 +6,7 @@
 #ifndef NTE_MODEL_H
 #define NTE_MODEL_H
 
+#include "nte_constants.h"
 #include "nte_real.h"
 
 /** Depth-dependent terms shared by rate and output (reference DepthTerms). */
@@ -61,6 +62,28 @@ void nte_model_refresh(nte_theta_t* th, const nte_real_t nominal[NTE_PARAM_COUNT
 
 nte_real_t nte_model_clamp_depth(nte_real_t l);
 void nte_model_depth_terms(nte_depth_terms_t* d, const nte_theta_t* th, nte_real_t l);
+/** The same, given e = exp(-alpha l) computed before with the same alpha and l (the bank's
+ *  stage exponentials below): the same bits without the exp. */
+void nte_model_depth_terms_e(nte_depth_terms_t* d, const nte_theta_t* th, nte_real_t l,
+                             nte_real_t e);
+
+/** Stage depths of one RK3 step of n sub-steps: 2n + 1, at most this many. */
+#define NTE_MODEL_STAGES_MAX ((2 * NTE_RANGE_SUBSTEPS_MAX) + 1)
+
+/** exp(-alpha l) at one sample's RK3 stage depths, shared by the filters that step from the
+ *  same depths with the same alpha: every filter's prediction of a sample (a filter that
+ *  identifies alpha, Model I's third, changes it only with its update, after its prediction),
+ *  so the three filters' 3 (2n + 1) exponentials are 2n + 1.  The first nte_model_rk3 given it
+ *  with ready false fills it (e[2j]: the start of sub-step j, e[2j + 1]: its middle, e[2n]:
+ *  the end, at depth l_end, mm, all with this alpha, 1/mm) and sets ready; the next ones read
+ *  it. */
+typedef struct nte_stage_exps_t {
+    nte_real_t e[NTE_MODEL_STAGES_MAX];
+    nte_real_t l_end;
+    nte_real_t alpha;
+    bool ready;
+} nte_stage_exps_t;
+
 nte_real_t nte_model_rate(const nte_theta_t* th, const nte_depth_terms_t* d, nte_real_t z);
 nte_real_t nte_model_rate_dz(const nte_depth_terms_t* d);
 /** d(dz/dt)/du_id; *present = false when the rate does not depend on it (sigma1, sigma2). */
@@ -82,9 +105,10 @@ bool nte_model_decay_du(const nte_theta_t* th, const nte_depth_terms_t* d, uint8
 
 /** One sample on `substeps` sub-steps, each Kutta's RK3 where h max(lambda) <= 1, else the
  *  exponential midpoint step, from depth l_a to l_b over dt seconds,
- *  with dz/dz0 and dz/du_id for every id in ids[0..count) (rk3.py rk3_step). */
+ *  with dz/dz0 and dz/du_id for every id in ids[0..count) (rk3.py rk3_step).  shared: the
+ *  sample's stage exponentials with th's alpha (filled here when not ready), or NULL. */
 void nte_model_rk3(nte_rk3_result_t* res, const nte_theta_t* th, nte_real_t z, nte_real_t l_a,
                    nte_real_t l_b, nte_real_t dt, int32_t substeps, const uint8_t* ids,
-                   size_t count);
+                   size_t count, nte_stage_exps_t* shared);
 
 #endif /* NTE_MODEL_H */

@@ -216,11 +216,17 @@ static void sim_run(nte_t* self, const uint32_t count)
         const nte_real_t l_b = nte_model_clamp_depth(rb->buf[ROW_L][i]);
         const nte_real_t dt = live ? (t_b - t_a) : NTE_C(0.0);
         nte_rk3_result_t pred;
-        nte_model_rk3(&pred, &th, rb->z, l_a, l_b, dt, self->cfg.robust.fit_substeps, ids, n);
+        nte_model_rk3(&pred, &th, rb->z, l_a, l_b, dt, self->cfg.robust.fit_substeps, ids, n, NULL);
         const bool in_tissue = l_b > zero;
         rb->z = in_tissue ? pred.z : zero;
+        /* the step's end is l_b's depth terms when the two depths are the same bits (both
+         * clamped, the same theta): one exp and one division fewer per entry */
         nte_depth_terms_t d;
-        nte_model_depth_terms(&d, &th, l_b);
+        if (!(pred.end.l < l_b) && !(pred.end.l > l_b)) {
+            d = pred.end;
+        } else {
+            nte_model_depth_terms(&d, &th, l_b);
+        }
         const nte_real_t vel = rb->buf[ROW_V][i];
         const nte_real_t s = nte_model_smooth_sign(vel, self->cfg.eps_mm_s);
         nte_output_terms_t o;

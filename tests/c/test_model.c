@@ -82,9 +82,32 @@ static size_t model_row(const mv_point_t* p, nte_real_t* row)
     }
     row[k++] = nte_model_steady_state_z(&th, &d);
     nte_rk3_result_t res;
-    nte_model_rk3(&res, &th, z, nte_model_clamp_depth((nte_real_t)p->l),
-                  nte_model_clamp_depth((nte_real_t)p->l_b), (nte_real_t)p->dt, p->substeps, all,
-                  NP);
+    const nte_real_t l_a = nte_model_clamp_depth((nte_real_t)p->l);
+    const nte_real_t l_b = nte_model_clamp_depth((nte_real_t)p->l_b);
+    nte_model_rk3(&res, &th, z, l_a, l_b, (nte_real_t)p->dt, p->substeps, all, NP, NULL);
+    /* the same step twice more sharing its stage exponentials, as the bank's filters do: the
+     * first fills them, the second reads them; every result has the same bits, and the last
+     * stage's depth and exponential are the step's end */
+    nte_stage_exps_t stage;
+    stage.ready = false;
+    nte_rk3_result_t filled;
+    nte_rk3_result_t shared;
+    nte_model_rk3(&filled, &th, z, l_a, l_b, (nte_real_t)p->dt, p->substeps, all, NP, &stage);
+    const int was_ready = stage.ready;
+    nte_model_rk3(&shared, &th, z, l_a, l_b, (nte_real_t)p->dt, p->substeps, all, NP, &stage);
+    int same = was_ready && same_bits(stage.l_end, res.end.l) &&
+               same_bits(stage.e[2 * p->substeps], res.end.e);
+    for (int r = 0; r < 2; r++) {
+        const nte_rk3_result_t* q = (r == 0) ? &filled : &shared;
+        same = same && same_bits(q->z, res.z) && same_bits(q->dz_dz0, res.dz_dz0);
+        for (int j = 0; j < NP; j++) {
+            same = same && same_bits(q->dz_du[j], res.dz_du[j]);
+        }
+    }
+    if (!same) {
+        fail_msg("rk3 with shared stage exponentials differs (l %.9g, substeps %d)", (double)p->l,
+                 (int)p->substeps);
+    }
     row[k++] = res.z;
     row[k++] = res.dz_dz0;
     for (int j = 0; j < NP; j++) {
@@ -164,7 +187,7 @@ static nte_real_t rk3_at(const double* u, const double z)
     nte_rk3_result_t res;
     make_theta(&th, u);
     nte_model_rk3(&res, &th, (nte_real_t)z, (nte_real_t)10.0, (nte_real_t)10.5, (nte_real_t)0.05, 4,
-                  NULL, 0);
+                  NULL, 0, NULL);
     return res.z;
 }
 
@@ -238,7 +261,7 @@ static void test_jacobians_finite_differences(void** state)
     nte_rk3_result_t res;
     make_theta(&th, u0);
     nte_model_rk3(&res, &th, (nte_real_t)z0, (nte_real_t)10.0, (nte_real_t)10.5, (nte_real_t)0.05,
-                  4, all, NP);
+                  4, all, NP, NULL);
     const double fd_z = ((double)rk3_at(u0, z0 + hstep) - (double)rk3_at(u0, z0 - hstep)) /
                         (2.0 * hstep);
     check_close("rk3 (z0)", -1, (double)res.dz_dz0, fd_z, 1.0);
