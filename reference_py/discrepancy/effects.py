@@ -48,13 +48,14 @@ effect: subtract the term from the measurement before the update (bank.py is lef
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property, lru_cache
 from typing import Any
 
 import numpy as np
 
 from ..fmath import Array
 from ..params import BETA0_DEFAULT, ParamSet
-from .fastsim import state_trajectory
+from .fastsim import Stages, stage_depths, state_on_stages
 
 #: the fixed vocabulary of effect names (report.json and text); "none" when nothing is missing
 VOCABULARY: tuple[str, ...] = ("dwell_relaxation", "reversal_presliding", "velocity_friction",
@@ -151,6 +152,14 @@ class TrialGrid:
     def t_mid(self) -> float:
         return 0.5 * float(self.t_s[0] + self.t_s[-1])
 
+    @cached_property
+    def stage_direction(self) -> Array:
+        """direction(v_mm_s), made once: every simulation of the trial without tissue motion
+        needs it (read only)."""
+        s = direction(self.v_mm_s)
+        s.flags.writeable = False
+        return s
+
 
 def find_dwells(t_s: Array, depth_mm: Array, v_mm_s: Array) -> list[tuple[int, int]]:
     """Index ranges [i0, i1) where the needle rests inside the tissue for >= MIN_DWELL_S."""
@@ -246,8 +255,9 @@ def depths_below_fitted_surface(depths_mm: list[float], nl: dict[str, Array], i:
 
 
 def trial_inputs(tr: TrialGrid, i: int, effects: tuple[str, ...], nl: dict[str, Array],
-                 cache: StateCache | None = None) -> tuple[Array, Array, Array, Array]:
-    """Depth l (mm), direction s, zh and b(l) the model sees in trial i (tissue motion applied)."""
+                 cache: StateCache | None = None) -> tuple[Array, Array, Array, Array, Array]:
+    """Depth l (mm), direction s, zh, b(l) and e(l) = exp(-alpha l) the model sees in trial i
+    (tissue motion applied)."""
     surf = tr.surface_mm + float(np.atleast_1d(nl["surface"])[i])
     key: tuple[float, ...] = (float(nl["p"]), float(nl["g0"]), float(nl["alpha"]), surf)
     moving = "tissue_motion" in effects
@@ -258,6 +268,40 @@ def trial_inputs(tr: TrialGrid, i: int, effects: tuple[str, ...], nl: dict[str, 
         hit = cache.get(i, key)
         if hit is not None:
             return hit
+    substeps = cache.substeps if cache is not None else 10
+    l, s, stages = _trial_where(tr, i, nl, moving, surf, substeps, cache)
+    p, q, alpha = float(nl["p"]), float(nl["g0"]) - float(nl["p"]), float(nl["alpha"])
+    # exp(-alpha l) at the samples and at the stages: kept while only p or g0 move
+    decay_key = (id(tr), len(tr.t_s), substeps) + key[2:]
+    decays = cache.get(("decay", i), decay_key) if cache is not None else None
+    if decays is None:
+        decays = (np.exp(-alpha * l), np.exp(-alpha * stages.ls))
+        if cache is not None:
+            cache.put(("decay", i), decay_key, decays)
+    e = decays[0]                       # the friction column C needs it too
+    bl = 1.0 / (p + q * e)
+    # RK3 is stable for |lambda h| up to ~2.5 (lambda = l b): where a fit wanders into stiff
+    # parameters, the samples whose sub-steps see lambda h > 1 step exactly instead
+    zh = state_on_stages(stages, p, q, alpha, stiff_from=1.0, decay=decays[1])
+    val = (l, s, zh, bl, e)
+    if cache is not None:
+        cache.put(i, key, val)
+    return val
+
+
+def _trial_where(tr: TrialGrid, i: int, nl: dict[str, Array], moving: bool, surf: float,
+                 substeps: int, cache: StateCache | None) -> tuple[Array, Array, Stages]:
+    """Depth l, direction s and the simulation's Stages of trial i: where the needle is in the
+    tissue, which only the surface and the tissue motion change (kept while p, g0, alpha or
+    another effect's values move)."""
+    key: tuple = (id(tr), len(tr.t_s), substeps, surf)
+    if moving:
+        key += (float(nl["motion_freq_hz"]), float(nl["motion_a_mm"][i]),
+                float(nl["motion_b_mm"][i]))
+    if cache is not None:
+        hit = cache.get(("where", i), key)
+        if hit is not None:
+            return hit
     l_raw = tr.stage_mm - surf
     v = tr.v_mm_s
     if moving:
@@ -266,16 +310,11 @@ def trial_inputs(tr: TrialGrid, i: int, effects: tuple[str, ...], nl: dict[str, 
         l_raw = l_raw - (a * np.sin(w * tr.t_s) + b * np.cos(w * tr.t_s))
         v = v - w * (a * np.cos(w * tr.t_s) - b * np.sin(w * tr.t_s))
     l = np.maximum(l_raw, 0.0)
-    p, q, alpha = float(nl["p"]), float(nl["g0"]) - float(nl["p"]), float(nl["alpha"])
-    bl = 1.0 / (p + q * np.exp(-alpha * l))
-    # RK3 is stable for |lambda h| up to ~2.5 (lambda = l b): where a fit wanders into stiff
-    # parameters, the samples whose sub-steps see lambda h > 1 step exactly instead
-    zh = state_trajectory(tr.t_s, l, p, q, alpha,
-                          substeps=cache.substeps if cache is not None else 10, stiff_from=1.0)
-    s = direction(v) * (l > 0.0)
-    val = (l, s, zh, bl)
+    s = (direction(v) if moving else tr.stage_direction) * (l > 0.0)
+    val = (l, s, stage_depths(tr.t_s, l, substeps))
     if cache is not None:
-        cache.put(i, key, val)
+        l.flags.writeable = s.flags.writeable = False     # shared by the entries that use it
+        cache.put(("where", i), key, val)
     return val
 
 
@@ -285,14 +324,37 @@ def design(trials: list[TrialGrid], effects: tuple[str, ...], nl: dict[str, Arra
 
     force = design @ coefficients; the coefficients are the linear parameters named by the labels.
     """
-    blocks, labels = design_blocks(trials, effects, nl, cache)
-    return np.vstack(blocks), labels
+    parts, cols, labels = design_parts(trials, effects, nl, cache)
+    m = np.zeros((sum(len(part) for part in parts), len(labels)))
+    row = 0
+    for part, c in zip(parts, cols):
+        m[row:row + len(part), c] = part
+        row += len(part)
+    return m, labels
 
 
-def design_blocks(trials: list[TrialGrid], effects: tuple[str, ...], nl: dict[str, Array],
-                  cache: StateCache | None = None) -> tuple[list[Array], list[str]]:
-    """:func:`design`'s rows trial by trial (with a cache, a trial whose values did not change
-    gets the very array of the last call: callers may key work on it by identity; read only)."""
+@lru_cache(maxsize=64)
+def trial_columns(labels: tuple[str, ...], n_trials: int) -> list[tuple[Array, dict[str, int]]]:
+    """Per trial, the columns its rows can fill -- the shared ones (no trial index) and its own
+    ("...[i]") -- ascending, and each label's position among them.  Every other column of a
+    trial's rows is 0 (another trial's terms): :func:`design_parts` leaves them out."""
+    owner = [int(lab[lab.rindex("[") + 1:-1]) if lab.endswith("]") else -1 for lab in labels]
+    out = []
+    for i in range(n_trials):
+        cols = np.array([j for j, o in enumerate(owner) if o in (-1, i)], dtype=np.intp)
+        cols.flags.writeable = False
+        out.append((cols, {labels[j]: q for q, j in enumerate(cols)}))
+    return out
+
+
+def design_parts(trials: list[TrialGrid], effects: tuple[str, ...], nl: dict[str, Array],
+                 cache: StateCache | None = None
+                 ) -> tuple[list[Array], list[Array], list[str]]:
+    """:func:`design` trial by trial and without the columns that are 0 in a trial's rows: part
+    i holds trial i's rows on the columns cols[i] (:func:`trial_columns`), the design's other
+    entries in those rows are 0.  A fit reads and copies a fifth of the design this way.  With a
+    cache, a trial whose values did not change gets the very array of the last call: callers may
+    key work on it by identity (read only)."""
     n_tr = len(trials)
     labels = ["A", "C", "sigma2"]
     for i, tr in enumerate(trials):
@@ -315,36 +377,41 @@ def design_blocks(trials: list[TrialGrid], effects: tuple[str, ...], nl: dict[st
         labels += [f"relax_hold[{i}]" for i in range(n_tr)] + \
                   [f"relax_fast[{i}]" for i in range(n_tr)] + \
                   [f"relax_slow[{i}]" for i in range(n_tr)]
-    col = {name: j for j, name in enumerate(labels)}
+    columns = trial_columns(tuple(labels), n_tr)
     blocks = []
+    shared_key: tuple = ()
+    per_trial_values: list[tuple[str, list[float]]] = []
+    if cache is not None:
+        # the values every trial's key holds, read once per call, not once per trial
+        shared_key = (effects, len(labels)) + tuple(
+            (k, float(v)) for k, v in nl.items() if np.ndim(v) != 1)
+        per_trial_values = [(k, np.asarray(v, dtype=float).tolist()) for k, v in nl.items()
+                            if np.ndim(v) == 1]
     for i, tr in enumerate(trials):
         # a trial's rows depend on the shared values and its own: a fit that moves another
         # trial's surface (a Jacobian column) finds them in the cache
         key: tuple = ()
         if cache is not None:
-            key = (id(tr), len(tr.t_s), effects, len(labels)) + tuple(
-                (k, float(v[i]) if np.ndim(v) == 1 else float(v)) for k, v in nl.items())
+            key = (id(tr), len(tr.t_s)) + shared_key + tuple(
+                (k, v[i]) for k, v in per_trial_values)
             hit = cache.get(("design", i), key)
             if hit is not None:
                 blocks.append(hit)
                 continue
-        l, s, zh, bl = trial_inputs(tr, i, effects, nl, cache)
+        l, s, zh, bl, e = trial_inputs(tr, i, effects, nl, cache)
         n = len(l)
-        m = np.zeros((n, len(labels)))
-        e = np.exp(-float(nl["alpha"]) * l)
-        if "reversal_presliding" in effects:
-            d = travel_since_reversal(l, s)
-            fade = np.exp(-d / float(nl["presliding_mm"]))
-            s = s * (1.0 - fade)
-            m[:, col[f"presliding_carry[{i}]"]] = np.where((tr.v_mm_s < -V_REST_MM_S) & (l > 0),
-                                                           fade, 0.0)
+        col = columns[i][1]
+        m = np.zeros((n, len(col)))
+        s, carry, layers = _trial_geometry(tr, i, effects, nl, cache, l, s)
+        if carry is not None:
+            m[:, col[f"presliding_carry[{i}]"]] = carry
         fric_c = s * l * e * (1.0 - bl * zh)
         m[:, col["A"]] = zh * l
         m[:, col["C"]] = fric_c
         m[:, col["sigma2"]] = s * l
-        if tr.ruptures:
-            _layer_columns(m, col, i, depths_below_fitted_surface(tr.ruptures, nl, i),
-                           tr.v_mm_s, l, s)
+        if layers is not None:       # the trial's layer columns follow one another
+            first = col[f"layer1_load1[{i}]"]
+            m[:, first:first + layers.shape[1]] = layers
         if "velocity_friction" in effects:
             m[:, col["b_visc"]] = tr.v_mm_s * l
         if "direction_asymmetry" in effects:
@@ -374,12 +441,49 @@ def design_blocks(trials: list[TrialGrid], effects: tuple[str, ...], nl: dict[st
             m.flags.writeable = False
             cache.put(("design", i), key, m)
         blocks.append(m)
-    return blocks, labels
+    return blocks, [c for c, _ in columns], labels
 
 
-def _layer_columns(m: Array, col: dict[str, int], i: int, rs: list[float], v: Array, l: Array,
-                   s: Array) -> None:
-    """The multi-layer base model's columns for trial i (ruptures at tissue depths r_1 < r_2 ...).
+def _trial_geometry(tr: TrialGrid, i: int, effects: tuple[str, ...], nl: dict[str, Array],
+                    cache: StateCache | None, l: Array, s: Array
+                    ) -> tuple[Array, Array | None, Array | None]:
+    """What trial i's rows take from where the needle is, not from the state: the direction s
+    with pre-sliding's fade applied, the pre-sliding carry column (None without the effect) and
+    the layer columns (None without ruptures).  They depend on the trial's surface correction,
+    its tissue motion and the pre-sliding travel only, so a fit moving the base model's shape
+    (p, g0, alpha) or another effect's values finds them in the cache."""
+    key: tuple = (id(tr), len(tr.t_s), float(np.atleast_1d(nl["surface"])[i]))
+    if "tissue_motion" in effects:
+        key += (float(nl["motion_freq_hz"]), float(nl["motion_a_mm"][i]),
+                float(nl["motion_b_mm"][i]))
+    presliding = "reversal_presliding" in effects
+    if presliding:
+        key += (float(nl["presliding_mm"]),)
+    if cache is not None:
+        hit = cache.get(("geometry", i), key)
+        if hit is not None:
+            return hit
+    carry = None
+    if presliding:
+        d = travel_since_reversal(l, s)
+        fade = np.exp(-d / float(nl["presliding_mm"]))
+        s = s * (1.0 - fade)
+        carry = np.where((tr.v_mm_s < -V_REST_MM_S) & (l > 0), fade, 0.0)
+    layers = None
+    if tr.ruptures:
+        layers = _layer_columns(depths_below_fitted_surface(tr.ruptures, nl, i), tr.v_mm_s, l, s)
+    val = (s, carry, layers)
+    if cache is not None:
+        for a in val:
+            if a is not None:
+                a.flags.writeable = False
+        cache.put(("geometry", i), key, val)
+    return val
+
+
+def _layer_columns(rs: list[float], v: Array, l: Array, s: Array) -> Array:
+    """The multi-layer base model's columns for one trial (ruptures at tissue depths r_1 < r_2
+    ...), in the order of design's labels: load1, load2, cut and fric of each layer, then fric0.
 
     Layer j (between r_{j-1}, r_0 = 0, and its rupture r_j) loads as k1 u + k2 u^2, u = (l -
     r_{j-1}) / (r_j - r_{j-1}), while the needle advances (or rests) and the layer is intact (the
@@ -390,19 +494,25 @@ def _layer_columns(m: Array, col: dict[str, int], i: int, rs: list[float], v: Ar
     Once the tip has passed r_1, the first band clip(l, 0, r_1) carries fric_0 as well: the skin
     the shaft went through holds on to it, most visibly in the retraction.
     """
+    out = np.zeros((len(l), 4 * len(rs) + 1))
+    if not rs:
+        return out
     deepest = np.maximum.accumulate(l)
-    for j, r in enumerate(rs):
-        r0 = rs[j - 1] if j else 0.0
-        r1 = rs[j + 1] if j + 1 < len(rs) else np.inf
-        u = np.clip((l - r0) / max(r - r0, 1e-6), 0.0, 1.0)
-        load = (deepest < r) & (l > r0) & (v >= -V_REST_MM_S)
-        m[:, col[f"layer{j + 1}_load1[{i}]"]] = np.where(load, u, 0.0)
-        m[:, col[f"layer{j + 1}_load2[{i}]"]] = np.where(load, u * u, 0.0)
-        m[:, col[f"layer{j + 1}_cut[{i}]"]] = np.where((v > V_REST_MM_S) & (l >= r) & (l < r1)
-                                                       & (deepest <= l + 1e-9), 1.0, 0.0)
-        m[:, col[f"layer{j + 1}_fric[{i}]"]] = s * np.clip(l - r, 0.0, r1 - r)
-    if rs:
-        m[:, col[f"layer0_fric[{i}]"]] = np.where(deepest >= rs[0], s * np.clip(l, 0.0, rs[0]), 0.0)
+    # every layer at once, one row per layer (layer j spans r0 = r_{j-1} .. r = r_j, the next
+    # band ends at r1 = r_{j+1})
+    r = np.array(rs, dtype=float)[:, None]
+    r0 = np.concatenate([[0.0], rs[:-1]])[:, None]
+    r1 = np.concatenate([rs[1:], [np.inf]])[:, None]
+    u = np.clip((l - r0) / np.maximum(r - r0, 1e-6), 0.0, 1.0)
+    load = (deepest < r) & (l > r0) & (v >= -V_REST_MM_S)
+    n_cols = 4 * len(rs)
+    out[:, 0:n_cols:4] = np.where(load, u, 0.0).T
+    out[:, 1:n_cols:4] = np.where(load, u * u, 0.0).T
+    out[:, 2:n_cols:4] = np.where((v > V_REST_MM_S) & (l >= r) & (l < r1)
+                                  & (deepest <= l + 1e-9), 1.0, 0.0).T
+    out[:, 3:n_cols:4] = (s * np.clip(l - r, 0.0, r1 - r)).T
+    out[:, -1] = np.where(deepest >= rs[0], s * np.clip(l, 0.0, rs[0]), 0.0)
+    return out
 
 
 #: bounds of the linear coefficients (by label prefix), enforced by a bounded least-squares solve

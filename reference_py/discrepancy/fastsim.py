@@ -13,6 +13,8 @@ on b(l) = 1 / (p + q exp(-alpha l)) with p = f1 / sigma0 and q = f2 / sigma0.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from ..fmath import Array
@@ -22,8 +24,39 @@ from ..sim.kernel import exp_affine, rk3_affine, substep_fractions
 SUBSTEPS = 10
 
 
-def _b_of_l(l: Array, p: float, q: float, alpha: float) -> Array:
-    return 1.0 / (p + q * np.exp(-alpha * l))
+def _b_of_l(l: Array, p: float, q: float, alpha: float, decay: Array | None = None) -> Array:
+    """b(l); ``decay``: exp(-alpha l) when the caller has it already."""
+    return 1.0 / (p + q * (np.exp(-alpha * l) if decay is None else decay))
+
+
+@dataclass(frozen=True)
+class Stages:
+    """What a simulation along one depth record needs that no parameter changes: the sub-step
+    length of each sample interval, every sub-step's stage depths (:func:`stage_depths`) and
+    whether each sample's end is in the tissue.  A fit that moves p, g0 or alpha, not where
+    the tissue is, simulates on the same Stages again (effects.trial_inputs keeps them)."""
+
+    n: int               # samples
+    substeps: int
+    h: Array             # (n - 1,)
+    ls: Array            # (2 substeps + 1, n - 1)
+    inside: Array        # (n - 1,)
+
+
+def stage_depths(t_s: Array, l_mm: Array, substeps: int = SUBSTEPS) -> Stages:
+    """The Stages of depth ``l_mm`` (already >= 0) sampled at ``t_s``."""
+    n = len(t_s)
+    if n < 2:
+        return Stages(n, substeps, np.zeros(0), np.zeros((2 * substeps + 1, 0)), np.zeros(0, bool))
+    dt = np.diff(t_s)
+    la, lb = l_mm[:-1], l_mm[1:]
+    dl = lb - la
+    h = dt / substeps
+    # every sub-step's stage depths at once: its start, its middle, its end -- which is the next
+    # sub-step's start (the same fraction, the same float), so computed once:
+    # rows 0..substeps the sub-step boundaries, then the middles; shape (2 substeps + 1, n - 1)
+    ls = np.maximum(la + dl * _stage_fractions(substeps), 0.0)
+    return Stages(n, substeps, h, ls, l_mm[1:] > 0.0)
 
 
 def state_trajectory(t_s: Array, l_mm: Array, p: float, q: float, alpha: float,
@@ -38,37 +71,56 @@ def state_trajectory(t_s: Array, l_mm: Array, p: float, q: float, alpha: float,
 
     Cost: O(n * substeps) vectorised work plus an O(n) scalar loop.
     """
-    n = len(t_s)
-    z = np.zeros(n)
-    if n < 2:
+    return state_on_stages(stage_depths(t_s, l_mm, substeps), p, q, alpha, beta, stiff_from)
+
+
+def state_on_stages(st: Stages, p: float, q: float, alpha: float, beta: float = 1.0,
+                    stiff_from: float | None = None, decay: Array | None = None) -> Array:
+    """:func:`state_trajectory` on the record's Stages; ``decay``: exp(-alpha st.ls) when the
+    caller has it (a fit moving p or g0 keeps alpha)."""
+    z = np.zeros(st.n)
+    if st.n < 2:
         return z
-    dt = np.diff(t_s)
-    la, lb = l_mm[:-1], l_mm[1:]
-    dl = lb - la
-    h = dt / substeps
-    # every sub-step's three stage depths at once: shape (3, substeps, n - 1)
-    fr = np.stack(substep_fractions(substeps))[:, :, None]
-    ls = np.maximum(la + dl * fr, 0.0)
-    d = ls * _b_of_l(ls, p, q, alpha)
-    sa, sc = rk3_affine(h, ((ls[0] * beta, d[0]), (ls[1] * beta, d[1]), (ls[2] * beta, d[2])))
+    substeps, h, ls = st.substeps, st.h, st.ls
+    d = ls * _b_of_l(ls, p, q, alpha, decay)
+    start, mid, end = slice(0, substeps), slice(substeps + 1, None), slice(1, substeps + 1)
+    sa, sc = rk3_affine(h, ((ls[start] * beta, d[start]), (ls[mid] * beta, d[mid]),
+                            (ls[end] * beta, d[end])))
     if stiff_from is not None:
-        stiff = np.max(d, axis=(0, 1)) * h > stiff_from    # per sample, over every stage
+        stiff = np.max(d, axis=0) * h > stiff_from    # per sample, over every stage
         if stiff.any():
-            ea, ec = exp_affine(h, ls[1] * beta, d[1])
+            ea, ec = exp_affine(h, ls[mid] * beta, d[mid])
             sa, sc = np.where(stiff, ea, sa), np.where(stiff, ec, sc)
     # the sample's map is the sub-steps' maps composed, first sub-step innermost
     big_a, big_c = sa[0], sc[0]
     for j in range(1, substeps):
         big_a, big_c = sa[j] * big_a, sa[j] * big_c + sc[j]
-    inside = (l_mm[1:] > 0.0)
-    big_a = np.where(inside, big_a, 0.0).tolist()
-    big_c = np.where(inside, big_c, 0.0).tolist()
-    out = [0.0] * n
+    big_a = np.where(st.inside, big_a, 0.0).tolist()
+    big_c = np.where(st.inside, big_c, 0.0).tolist()
+    out = [0.0]
+    append = out.append
     zk = 0.0
-    for k in range(n - 1):
-        zk = big_a[k] * zk + big_c[k]
-        out[k + 1] = zk
+    for a_k, c_k in zip(big_a, big_c):     # zip, not indexing: the loop is the hot spot
+        zk = a_k * zk + c_k
+        append(zk)
     return np.asarray(out)
+
+
+_FRACTIONS: dict[int, Array] = {}
+
+
+def _stage_fractions(substeps: int) -> Array:
+    """kernel.substep_fractions as a column (2 substeps + 1, 1): the sub-steps' starts and the
+    last one's end (the other ends are the next starts, the very same floats), then their
+    middles; made once per sub-step count: a fit simulates thousands of times with one count."""
+    fr = _FRACTIONS.get(substeps)
+    if fr is None:
+        first, middle, last = substep_fractions(substeps)
+        assert np.array_equal(first[1:], last[:-1])
+        fr = np.concatenate([first, last[-1:], middle])[:, None]
+        fr.flags.writeable = False
+        _FRACTIONS[substeps] = fr
+    return fr
 
 
 def exact_sign(v: Array) -> Array:

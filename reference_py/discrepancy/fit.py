@@ -18,7 +18,7 @@ import numpy as np
 from scipy.linalg import lapack, solve_triangular
 from scipy.optimize import least_squares
 
-from .effects import NLParam, StateCache, TrialGrid, design, design_blocks, lin_bound, nl_specs
+from .effects import NLParam, StateCache, TrialGrid, design, design_parts, lin_bound, nl_specs
 from ..fmath import Array
 
 
@@ -112,26 +112,32 @@ def solve_bounded(m: Array, y: Array, labels: list[str], rcond: float = 1e-12,
     r_tri, qy, rho2 = r[:k, :k] / norms[used], r[:k, k], float(r[k, k] ** 2)
     lo_s, hi_s = lo[used] * norms[used], hi[used] * norms[used]
     cut = _EPS * max(m.shape[0], k) if bvls_cut is None else bvls_cut
-    full_rank, rel_min = _rank_bound(r_tri)
     gram_cut = float(np.sqrt(rcond))
-    if full_rank and rel_min > gram_cut:
-        x = solve_triangular(r_tri, qy, check_finite=False)
-    else:
-        x = np.linalg.lstsq(r_tri, qy, rcond=gram_cut)[0]
-    if np.all((x >= lo_s - 1e-12 * norms[used]) & (x <= hi_s + 1e-12 * norms[used])):
-        out[used] = x / norms[used]
-        return out
+    full_rank, rel_min = _rank_bound(r_tri, needed=min(gram_cut, cut))
     key = tuple(np.flatnonzero(used).tolist()) + (len(labels),)
     start = None
     fast = full_rank and rel_min > cut
     if warm is not None and warm.get("key") == key:
         start = warm["on_bound"]
+    tol = 1e-12 * norms[used]
+    if full_rank and rel_min > gram_cut:
+        x = _solve_upper(r_tri, qy)
+    elif start is not None and _surely_outside(r_tri, qy, lo_s - tol, hi_s + tol, gram_cut):
+        # BVLS from a warm start reads no x (it solves its free variables afresh): all the
+        # free solution would decide is that it is not used, and that is known already
+        x = None
+    else:
+        x = np.linalg.lstsq(r_tri, qy, rcond=gram_cut)[0]
+    if x is not None and np.all((x >= lo_s - tol) & (x <= hi_s + tol)):
+        out[used] = x / norms[used]
+        return out
     if not fast and start is None:
         # start from the minimum-norm solution at the same cut-off (scipy's lsq_linear starts
         # at rcond = eps, where a direction at eps-level either stays or goes by rounding); a
         # warm start solves its free variables afresh, so it needs no x
         x = np.linalg.lstsq(r_tri, qy, rcond=cut)[0]
-    x, on_bound = bvls(r_tri, qy, lo_s, hi_s, x, cut, fast, start, rho2)
+    x, on_bound = bvls(r_tri, qy, lo_s, hi_s, np.zeros(k) if x is None else x, cut, fast, start,
+                       rho2)
     if warm is not None:
         warm["key"], warm["on_bound"] = key, on_bound
     out[used] = x / norms[used]
@@ -139,6 +145,64 @@ def solve_bounded(m: Array, y: Array, labels: list[str], rcond: float = 1e-12,
 
 
 _EPS = float(np.finfo(float).eps)
+#: safety factor on the error bound of :func:`_surely_outside` (the bound's constants are of
+#: order one; this leaves room for what a first-order bound leaves out)
+_OUTSIDE_SAFETY = 1e3
+
+
+def _surely_outside(r_tri: Array, b: Array, lo: Array, hi: Array, rcond: float) -> bool:
+    """Whether numpy's lstsq(r_tri, b, rcond) -- r_tri upper triangular with unit columns; the
+    minimum-norm solution on the singular values above rcond x the largest -- certainly leaves
+    the box [lo, hi].  False means "not known", never "inside": the caller then solves.
+
+    Made for the multi-layer base, whose triangle has one exactly dependent column: one tiny
+    pivot R_pp (the next singular value ~0.04 sigma_1).  With R_pp set to 0 the triangle R0 has
+    rank k - 1, and its minimum-norm least-squares solution takes one triangular inverse, of T
+    (R without row and column p, still triangular), instead of an SVD (5-10x the cost): b
+    loses its part along R0's left null vector w, T solves the rest with x_p = 0, and x loses
+    its part along the null vector n.  It is the lstsq solution to rounding when the rank is
+    provably the SVD's -- sigma_{k-1} >= 1/|T^-1|_F - |R_pp| clearly above rcond |R|_F >=
+    rcond sigma_1, sigma_k <= |R n|/|n| clearly below rcond x the largest column norm <= rcond
+    sigma_1 -- and a coefficient is taken to leave the box only by more than a bound on how far
+    the two can be apart (a truncated least-squares solution perturbed by rounding and by R_pp,
+    times the condition number, for the solution and for its residual, with a safety factor:
+    ~1e-7 of the solution there, where the two differ by ~1e-14 and the coefficients BVLS has to
+    move lie outside by a fraction of it)."""
+    k = r_tri.shape[1]
+    if k < 2:
+        return False
+    diag = np.abs(np.diag(r_tri))
+    p = int(np.argmin(diag))
+    keep = np.delete(np.arange(k), p)
+    with np.errstate(all="ignore"):
+        try:
+            t_inv = _solve_upper(r_tri[np.ix_(keep, keep)], np.eye(k - 1))
+        except np.linalg.LinAlgError:         # another zero pivot: not this case
+            return False
+        n = np.zeros(k)                       # R0 n = 0
+        n[p] = 1.0
+        n[:p] = -t_inv[:p, :p] @ r_tri[:p, p]
+        sigma_kept = 1.0 / float(np.linalg.norm(t_inv)) - float(diag[p])   # Weyl: R = R0 + R_pp
+        sigma_dropped = float(np.linalg.norm(r_tri @ n) / np.linalg.norm(n))
+        fro = float(np.linalg.norm(r_tri))
+        col_max = float(np.max(np.sqrt(np.einsum("ij,ij->j", r_tri, r_tri))))
+        if not (np.isfinite(sigma_kept) and np.isfinite(sigma_dropped)
+                and sigma_kept > 2.0 * rcond * fro and sigma_dropped < 0.5 * rcond * col_max):
+            return False
+        w = np.zeros(k)                       # w^T R0 = 0
+        w[p] = 1.0
+        w[p + 1:] = -t_inv[p:, p:].T @ r_tri[p, p + 1:]
+        b0 = b - w * (w @ b) / (w @ w)        # the part of b that R0 reaches
+        x = np.zeros(k)
+        x[keep] = t_inv @ b0[keep]
+        x -= n * (n @ x) / (n @ n)            # the minimum-norm one
+        kappa = fro / sigma_kept
+        res = float(np.linalg.norm(b - r_tri @ x))
+        err = _OUTSIDE_SAFETY * (k * _EPS + float(diag[p]) / col_max) * kappa * \
+            (float(np.linalg.norm(x)) + kappa * res / col_max)
+    if not np.isfinite(err):
+        return False
+    return bool(np.any((x < lo - err) | (x > hi + err)))
 #: BVLS stops when no variable violates the optimality conditions by more than this (gradient of
 #: the unit-scaled problem), or when an iteration lowers the cost by less than this fraction
 BVLS_TOL = 1e-10
@@ -158,15 +222,17 @@ def _reduce(m: Array, y: Array, blocks: list[tuple[int, int]] | None,
     stacked and factorised again (a tall-skinny QR: as backward stable as one factorisation).
     Householder QR is backward stable column by column, so R of the unit-scaled columns is this
     R's columns scaled, and an all-zero column of m stays an all-zero column of R.  ``memo``
-    (kept by a fit, whose y does not change) holds ``parts``, the design's arrays of the blocks,
-    and the triangles of the last ones seen: a block whose array is the same object is not
-    factorised again (a Jacobian column that moves one trial's surface changes one block)."""
+    (kept by a fit, whose y does not change) holds ``parts`` and ``cols``, the blocks as
+    effects.design_parts made them (each block's values on the columns it can fill), and the
+    triangles of the last ones seen: a block whose part is the same object is not factorised
+    again (a Jacobian column that moves one trial's surface changes one block)."""
     k = m.shape[1]
     if blocks is None or len(blocks) < 2:
         return _pad(_qr_r(np.column_stack([m, y])))
     parts = memo.get("parts") if memo is not None else None
     if parts is not None and len(parts) != len(blocks):
         parts = None
+    cols = memo.get("cols") if parts is not None else None   # type: ignore[union-attr]
     tri = []
     for i, (a, b) in enumerate(blocks):
         hit = None
@@ -174,9 +240,12 @@ def _reduce(m: Array, y: Array, blocks: list[tuple[int, int]] | None,
             kept = memo.setdefault(("qr", i), [])   # type: ignore[union-attr]
             hit = next((r for part, r in kept if part is parts[i]), None)
         if hit is None:
-            blk = m[a:b]
-            nz = np.flatnonzero(np.any(blk != 0.0, axis=0))
-            rb = _qr_r(np.column_stack([blk[:, nz], y[a:b]]))
+            # the block's non-zero columns (a float is true where it is not 0, or NaN), read
+            # off the part design_parts made when there is one: the rest of its row is 0
+            blk, blk_cols = (parts[i], cols[i]) if cols is not None else (m[a:b], None)
+            nz_in = np.flatnonzero(blk.any(axis=0))
+            nz = nz_in if blk_cols is None else blk_cols[nz_in]
+            rb = _qr_r(np.column_stack([blk[:, nz_in], y[a:b]]))
             hit = np.zeros((rb.shape[0], k + 1))
             hit[:, np.append(nz, k)] = rb
             if parts is not None:
@@ -195,7 +264,17 @@ def _qr_r(a: Array) -> Array:
     qr, _, info = _geqrf(a)
     if info != 0:
         raise np.linalg.LinAlgError(f"dgeqrf: info {info}")
-    return np.triu(qr[:min(a.shape)])
+    top = qr[:min(a.shape)]
+    return np.where(_below_diagonal(top.shape), 0.0, top)     # np.triu, its mask made once
+
+
+@lru_cache(maxsize=256)
+def _below_diagonal(shape: tuple[int, int]) -> Array:
+    """The mask np.triu clears (below the diagonal) for a matrix of ``shape``: the fits take
+    R of the same few shapes thousands of times."""
+    mask = np.tri(shape[0], shape[1], k=-1, dtype=bool)
+    mask.flags.writeable = False
+    return mask
 
 
 def _geqrf(a: Array) -> tuple[Array, Array, int]:
@@ -203,18 +282,45 @@ def _geqrf(a: Array) -> tuple[Array, Array, int]:
     return qr, tau, int(info)
 
 
-def _rank_bound(r_tri: Array) -> tuple[bool, float]:
+def _rank_bound(r_tri: Array, needed: float = 0.0) -> tuple[bool, float]:
     """Whether R is invertible, and a lower bound on sigma_min / sigma_max of R -- and of every
     subset of its columns, whose smallest singular value is no smaller and largest no larger:
-    1 / (|R^-1|_F |R|_F)."""
+    1 / (|R^-1|_F |R|_F).
+
+    ``needed``: the caller only asks whether the bound is above this.  R^-1 holds 1/R_ii on its
+    diagonal, so the bound is at most min |R_ii| / |R|_F; when that is below half of ``needed``
+    (room for rounding), R^-1 is not formed and (False, that upper bound) returned -- the answer
+    to the caller's question as the full computation gives it (the multi-layer base's triangle,
+    with an exactly dependent column, every time)."""
     k = r_tri.shape[1]
     d = np.abs(np.diag(r_tri))
     if k == 0 or not np.all(d > 0):
         return False, 0.0
+    upper = float(np.min(d) / np.linalg.norm(r_tri))
+    if upper < 0.5 * needed:
+        return False, upper
     with np.errstate(all="ignore"):
-        inv = solve_triangular(r_tri, np.eye(k), check_finite=False)
+        inv = _solve_upper(r_tri, np.eye(k))
         bound = 1.0 / (np.linalg.norm(inv) * np.linalg.norm(r_tri))
     return (bool(np.isfinite(bound)) and bound > 0), float(bound) if np.isfinite(bound) else 0.0
+
+
+def _solve_upper(r: Array, b: Array) -> Array:
+    """solve_triangular(r, b, check_finite=False) for an upper-triangular r: the very LAPACK call
+    it makes (dtrtrs; on r^T as a lower triangle when r is not Fortran-ordered), without its
+    argument handling, which costs more than the solve itself at these sizes (k <= ~100) and
+    runs thousands of times per fit."""
+    if b.size == 0 or r.dtype != np.float64 or b.dtype != np.float64:
+        return solve_triangular(r, b, check_finite=False)
+    if r.flags.f_contiguous:
+        x, info = lapack.dtrtrs(r, b, lower=0, trans=0)
+    else:
+        x, info = lapack.dtrtrs(r.T, b, lower=1, trans=1)
+    if info > 0:
+        raise np.linalg.LinAlgError(f"singular matrix: resolution failed at diagonal {info - 1}")
+    if info < 0:
+        raise ValueError(f"illegal value in {-info}-th argument of internal trtrs")
+    return x
 
 
 def _free_solve(a: Array, b: Array, cut: float, fast: bool) -> Array:
@@ -222,7 +328,7 @@ def _free_solve(a: Array, b: Array, cut: float, fast: bool) -> Array:
     cut-off, else the SVD with it (numpy lstsq)."""
     if fast:
         q, rr = np.linalg.qr(a)
-        return solve_triangular(rr, q.T @ b, check_finite=False)
+        return _solve_upper(rr, q.T @ b)
     return np.linalg.lstsq(a, b, rcond=cut)[0]
 
 
@@ -377,13 +483,14 @@ def fit(trials: list[TrialGrid], y: Array, effects: tuple[str, ...], nl0: dict[s
     blocks = trial_rows(trials)
     warm: dict = {}          # the bounded solve's last active set: the next call starts there
     lims: dict = {}
+    stack = _BlockStack(blocks)
 
     def res(x: Array) -> Array:
         nl = _unpack(x, nl0, slots)
-        parts, labels = design_blocks(trials, effects, nl, cache)
-        m = np.vstack(parts)
-        warm["parts"] = parts
-        if not np.all(np.isfinite(m)):
+        parts, cols, labels = design_parts(trials, effects, nl, cache)
+        m, finite = stack.update(parts, cols, len(labels))
+        warm["parts"], warm["cols"] = parts, cols
+        if not finite:
             return np.full_like(y, 10.0)     # a failed simulation is a very bad fit
         if lims.get("labels") != labels:
             lims["labels"], lims["bounds"] = labels, coef_bounds(labels, trials)
@@ -395,6 +502,37 @@ def fit(trials: list[TrialGrid], y: Array, effects: tuple[str, ...], nl0: dict[s
     out = evaluate(trials, y, effects, _unpack(sol.x, nl0, slots), cache)
     out.nl_se = _nl_se(sol.jac, out, slots, len(trials))
     return out
+
+
+class _BlockStack:
+    """The design (effects.design) assembled from its trial parts (effects.design_parts) into
+    one array kept across a fit's residual calls: a part that is the same object as last time
+    (design_parts hands back the cached array when the trial's values did not move, as for every
+    trial but one in a Jacobian column that moves one surface) is neither copied again nor
+    checked for finiteness again, and the zeros around the parts are written once.  The array is
+    overwritten by the next call: a caller must not keep it."""
+
+    def __init__(self, rows: list[tuple[int, int]]) -> None:
+        self.rows = rows
+        self.buf: Array | None = None
+        self.cols: list[Array | None] = [None] * len(rows)
+        self.parts: list[Array | None] = [None] * len(rows)
+        self.finite = [False] * len(rows)
+
+    def update(self, parts: list[Array], cols: list[Array], n_cols: int) -> tuple[Array, bool]:
+        """The design and whether every entry is finite (the zeros around the parts are)."""
+        shape = (self.rows[-1][1], n_cols)
+        if self.buf is None or self.buf.shape != shape or \
+                any(c is not kept for c, kept in zip(cols, self.cols)):
+            self.buf = np.zeros(shape)
+            self.cols = list(cols)
+            self.parts = [None] * len(self.rows)
+        for i, (part, (a, b)) in enumerate(zip(parts, self.rows)):
+            if part is not self.parts[i]:
+                self.buf[a:b, cols[i]] = part
+                self.parts[i] = part
+                self.finite[i] = bool(np.all(np.isfinite(part)))
+        return self.buf, all(self.finite)
 
 
 def _nl_se(jac: Array, f: Fit, slots: list[tuple[NLParam, int | None]], n_tr: int
