@@ -106,6 +106,76 @@ def test_a_null_direction_is_cut_as_the_tall_solve_cuts_it(seed):
     assert np.linalg.norm(c * norms) <= np.linalg.norm(ref * norms) * (1 + 1e-6)
 
 
+def _dependent_triangle(rng: np.random.Generator, k: int) -> np.ndarray:
+    """An upper-triangular R with unit columns and one exactly dependent column (a pivot at
+    rounding level), as the multi-layer base's reduced triangle has."""
+    a = rng.normal(size=(4 * k, k)) * 10.0 ** rng.uniform(-2, 2, k)
+    p = int(rng.integers(1, k))
+    a[:, p] = a[:, :p] @ rng.normal(size=p)
+    r = np.linalg.qr(a, mode="r")
+    return r / np.linalg.norm(r, axis=0)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_outside_shortcut_never_calls_an_inside_solution_outside(seed):
+    """fit._surely_outside replaces the SVD only to say that numpy's minimum-norm solution
+    leaves the box: over boxes around that solution (inside it by a little or a lot, or left
+    by a coordinate), it never says "outside" of a solution inside, and it does say it of
+    solutions well outside (else the shortcut would never be taken)."""
+    from reference_py.discrepancy.fit import _surely_outside
+    rng = np.random.default_rng(seed)
+    rcond = float(np.sqrt(1e-12))
+    said_outside = 0
+    for _ in range(60):
+        k = int(rng.integers(3, 12))
+        r = _dependent_triangle(rng, k)
+        b = rng.normal(size=k)
+        x = np.linalg.lstsq(r, b, rcond=rcond)[0]
+        width = np.abs(x) * 10.0 ** rng.uniform(-6, 0, k) + 1e-300
+        lo, hi = x - width, x + width
+        assert not _surely_outside(r, b, lo, hi, rcond)
+        j = int(rng.integers(k))
+        hi_out = hi.copy()
+        hi_out[j] = x[j] - 0.5 * abs(x[j])          # coordinate j now well outside
+        lo_out = np.minimum(lo, hi_out)
+        said_outside += _surely_outside(r, b, lo_out, hi_out, rcond)
+    assert said_outside >= 30, said_outside
+
+
+def test_a_warm_solve_whose_free_solution_leaves_the_box_runs_bvls(monkeypatch):
+    """When the shortcut says the free solution leaves the box, the solve goes on to BVLS:
+    with 0 inside every coefficient's box, a placeholder for the skipped free solution must not
+    be taken for the answer (the warm solve equals the cold one's fitted values)."""
+    import reference_py.discrepancy.fit as fit_mod
+    calls = []
+    real = fit_mod._surely_outside
+
+    def spy(*args):
+        calls.append(real(*args))
+        return calls[-1]
+
+    monkeypatch.setattr(fit_mod, "_surely_outside", spy)
+    m, y, blocks = _problem(2, collinear=True)
+    wide = 1e6 / np.sqrt(np.sum(m * m, axis=0))
+    free = solve_bounded(m, y, LABELS, blocks=blocks, bounds=(-wide, wide))
+    j = int(np.argmax(np.abs(free) * np.sqrt(np.sum(m * m, axis=0))))
+    lo, hi = -wide, wide.copy()
+    lo = lo.copy()
+    if free[j] > 0:
+        hi[j] = 0.5 * free[j]
+    else:
+        lo[j] = 0.5 * free[j]
+    warm: dict = {}
+    solve_bounded(m, y, LABELS, blocks=blocks, bounds=(lo, hi), warm=warm)
+    m2 = m.copy()
+    m2[:300, 1] *= 1.0 + 1e-5
+    again = solve_bounded(m2, y, LABELS, blocks=blocks, bounds=(lo, hi), warm=warm)
+    cold = solve_bounded(m2, y, LABELS, blocks=blocks, bounds=(lo, hi))
+    assert any(calls), "the shortcut was not taken: the test does not reach its case"
+    fit_warm, fit_cold = m2 @ again, m2 @ cold
+    assert np.max(np.abs(fit_warm - fit_cold)) <= 1e-7 * np.max(np.abs(fit_cold))
+
+
 def test_block_and_single_factorisation_agree():
     m, y, blocks = _problem(3)
     a = solve_bounded(m, y, LABELS, blocks=blocks)
