@@ -110,12 +110,12 @@
  *   depth terms (their exp shared too unless Model I's filter 3 moved alpha) + up to 3 exp
  *   to refresh parameters; roughly 700 flops and 9 exp for n = 1 (Model II; README: the
  *   cycle model).
- *   Schedule "rotate" costs about half.  Bounded: no loop depends on the data.  Model III: filter 1's covariance is 4 x 4 (prediction and
- *   Joseph update about 2.4x those of Model II's 2 x 2 filter 1), plus per sample 1 exp and
- *   1 div for the direction state (instead of tanh), 1 exp and 1 div per relaxation branch,
- *   and per filter about 10 flops and 1 div for the memories and the Jacobian's scaling, up
- *   to 2 exp more to refresh the strengths; with two branches roughly 1.3x Model II's
- *   flops and 13 exp.
+ *   Schedule "rotate" costs about half.  Bounded: no loop depends on the data.
+ *   Model III: filter 1's covariance is 4 x 4 (prediction and Joseph update about 2.4x those
+ *   of Model II's 2 x 2 filter 1), plus per sample 1 exp and 1 div for the direction state
+ *   (instead of tanh), 1 exp and 1 div per relaxation branch, and per filter about 10 flops
+ *   and 1 div for the memories and the Jacobian's scaling, up to 2 exp more to refresh the
+ *   strengths; with two branches roughly 1.3x Model II's flops and 13 exp.
  *
  * THE ROBUST ESTIMATOR (cfg.estimator = nte_estimator_robust; reference_py/robust.py)
  *   The bank above, plus a batch output-error refinement once per insertion.  While the needle
@@ -150,7 +150,8 @@
  *     2 starts x (fit_iterations + 1) simulations, each of (buffer_len - 1) entries x
  *     fit_substeps RK3 sub-steps with the sensitivities to n_p parameters (per sub-step 2 exp
  *     and 2 div of depth terms + 6 + ~8 n_p flops), plus per entry the output's depth terms
- *     (the RK3 step's end, reused when its depth has the same bits, else 1 exp), 1 tanh, the output and its n_p derivatives and the n_p (n_p + 3) / 2 products of J^T J and
+ *     (the RK3 step's end, reused when its depth has the same bits, else 1 exp), 1 tanh,
+ *     the output and its n_p derivatives and the n_p (n_p + 3) / 2 products of J^T J and
  *     J^T r; plus per LM iteration one n_p x n_p LDL^T solve (n_p divisions, ~n_p^3/3 flops).
  *     Defaults (96 entries, 2 sub-steps, 8 iterations, Model II, n_p = 5): 18 simulations
  *     x 95 entries x 2 sub-steps = 3420 RK3 sub-steps with 5 sensitivities and 18 x 95 =
