@@ -626,7 +626,7 @@ def test_cycles_by_function_add_up(cycle_model) -> None:
 
 @pytest.mark.xfail(strict=True, reason="measured: the refinement's slices take up to 0.39 M "
                    "cycles (one simulation of the buffer each; every bank is below 20 000, "
-                   "Model III's 12 761); a slice of one buffer entry (~4 000 on the robust "
+                   "Model III's 12 761); a slice of one buffer entry (~3 900 on the robust "
                    "step's 11 727) would fit, but the fit would take 1 728 samples (issue 24)")
 def test_no_step_above_its_real_time_budget(cycle_model) -> None:
     """Every configuration's worst step (upper bound) within STEP_CYCLES_MAX: a 200 Hz loop on a
