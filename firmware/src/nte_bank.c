@@ -571,7 +571,7 @@ static void sample_depth_terms(const nte_t* self, const step_ctx_t* c, nte_depth
     const nte_real_t alpha = self->th.v[nte_param_alpha];
     if (st->ready && !(st->l_end < c->l) && !(st->l_end > c->l) && !(st->alpha < alpha) &&
         !(st->alpha > alpha)) {
-        nte_model_depth_terms_e(d, &self->th, c->l, st->e[2 * self->cfg.substeps]);
+        nte_model_depth_terms_e(d, &self->th, c->l, st->e[(size_t)2U * (size_t)self->cfg.substeps]);
     } else {
         nte_model_depth_terms(d, &self->th, c->l);
     }
