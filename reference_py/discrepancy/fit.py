@@ -466,7 +466,9 @@ def evaluate(trials: list[TrialGrid], y: Array, effects: tuple[str, ...], nl: di
                       bounds=coef_bounds(labels, trials))
     resid = y - m @ c
     used = np.any(mm != 0, axis=0)
-    n_nl = sum(len(trials) if p.per_trial else 1 for p in nl_specs(effects))
+    # a parameter that only refines an effect's form counts once it has left its plain value
+    n_nl = sum(len(trials) if p.per_trial else 1 for p in nl_specs(effects)
+               if p.screened or not np.all(np.asarray(nl[p.name]) == p.init))
     r = resid if rows is None else resid[rows]
     return Fit(effects, nl, dict(zip(labels, c.tolist())), float(r @ r), len(yy),
                int(np.count_nonzero(used)) + n_nl, resid)

@@ -124,6 +124,8 @@ def parameter_flags(res: Result) -> list[dict[str, Any]]:
     def nl_flags(f: Any, specs: Any, fit_name: str) -> None:
         se = f.nl_se or {}
         for par in specs:
+            if not par.flag_bounds:
+                continue
             vals = np.atleast_1d(np.asarray(f.nl[par.name], dtype=float))
             ses = np.atleast_1d(np.asarray(se[par.name], dtype=float)) if par.name in se \
                 else np.full(len(vals), np.nan)

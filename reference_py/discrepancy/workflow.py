@@ -340,7 +340,7 @@ def _local_gate(cand: str, ev: dict[str, object]) -> tuple[bool | None, str]:
 def _screen(cand: str, cur: Fit, grids: list[TrialGrid], y: Array, cache: StateCache) -> Fit:
     """Fit the current model plus ``cand``, moving only the candidate's own nonlinear values."""
     effects = tuple(e for e in VOCABULARY if e in cur.effects or e == cand)
-    free = {p.name for p in EFFECT_NL[cand]}
+    free = {p.name for p in EFFECT_NL[cand] if p.screened}
     best: Fit | None = None
     starts = _inits(cand, cur, grids, y, cache)
     if len(starts) > SCREEN_STARTS:
@@ -356,9 +356,33 @@ def _screen(cand: str, cur: Fit, grids: list[TrialGrid], y: Array, cache: StateC
 
 
 def _refine(f: Fit, grids: list[TrialGrid], y: Array, cache: StateCache) -> Fit:
-    free = {p.name for p in nl_specs(f.effects)}
+    free = {p.name for p in nl_specs(f.effects) if p.screened}
     g = fit(grids, y, f.effects, f.nl, free, cache, max_nfev=40)
     return g if g.sse <= f.sse else f
+
+
+def _screened_nl(cand: str) -> tuple:
+    """The candidate's own nonlinear parameters that naming moves (and pays for)."""
+    return tuple(p for p in EFFECT_NL[cand] if p.screened)
+
+
+def _polish(f: Fit, grids: list[TrialGrid], y: Array, cache: StateCache) -> Fit:
+    """The final model with the parameters that refine a named effect's form freed too
+    (``NLParam.screened`` False: the relaxation's memory after a dwell), kept when the fit
+    improves by what a parameter must be worth (BIC_MIN per parameter freed).
+
+    Why last: naming judges each effect in its plain form, so what is named does not depend on
+    them; freed while candidates were refined and judged, the memory traded the dwell's fit for
+    the retraction's and a relaxation was no longer named (held-out generator forms 7/8 -> 3/8)."""
+    extra = [p for p in nl_specs(f.effects) if not p.screened]
+    if not extra:
+        return f
+    free = {p.name for p in nl_specs(f.effects)}
+    g = fit(grids, y, f.effects, f.nl, free, cache, max_nfev=40)
+    worth = BIC_MIN * sum(len(grids) if p.per_trial else 1 for p in extra)
+    if g.sse > 0 and f.n * np.log(f.sse / g.sse) >= worth:
+        return g
+    return f
 
 
 def _errors(preps: list[Prepared], pred: list[Array]) -> dict[str, dict[str, float]]:
@@ -478,7 +502,7 @@ def _validate(grids: list[TrialGrid], y: Array, bnd: list[tuple[int, int]], fina
                               "trials_fit": list(range(k)), "trials_held_out": list(range(k, n))}
     for name, f0 in (("base", base), ("final", final)):
         nl_tr = {kk: (v[:k] if np.ndim(v) == 1 else v) for kk, v in f0.nl.items()}
-        free = {p.name for p in nl_specs(f0.effects) if not p.per_trial}
+        free = {p.name for p in nl_specs(f0.effects) if not p.per_trial and p.screened}
         ftr = fit(tr_g, y_tr, f0.effects, nl_tr, free, StateCache(FIT_SUBSTEPS), max_nfev=15)
         sse = cnt = 0.0
         for j, g in enumerate(te_g):
@@ -565,7 +589,7 @@ def run(trials: list[Trial], max_effects: int = len(VOCABULARY), force_sign: flo
                 continue
             f = _screen(cand, cur, grids, y, cache)
             rows = _phase_rows(grids, phs, cand)
-            dbic = delta_bic_local(cur, f, bnd, rows, EFFECT_NL[cand], len(grids))
+            dbic = delta_bic_local(cur, f, bnd, rows, _screened_nl(cand), len(grids))
             screened.append((dbic + (1e6 if gate else 0.0), cand, f))
             raw[cand] = dbic
             round_scores.append({"name": cand, "delta_bic": dbic, "local": why,
@@ -579,7 +603,7 @@ def run(trials: list[Trial], max_effects: int = len(VOCABULARY), force_sign: flo
                 break
             f = _refine(f, grids, y, cache)
             rows = _phase_rows(grids, phs, cand)
-            dbic = delta_bic_local(cur, f, bnd, rows, EFFECT_NL[cand], len(grids))
+            dbic = delta_bic_local(cur, f, bnd, rows, _screened_nl(cand), len(grids))
             gate = gates[cand][0] if cand != "tissue_motion" else None
             refined.append((dbic + (1e6 if gate else 0.0), cand, f))
             raw[cand] = dbic
@@ -615,6 +639,10 @@ def run(trials: list[Trial], max_effects: int = len(VOCABULARY), force_sign: flo
         steps.append(accepted)
         cur = accepted.fit
         fits.append(cur)
+    if steps:
+        polished = _polish(cur, grids, y, cache)
+        if polished is not cur:
+            steps[-1].fit = fits[-1] = polished
     preds = [_predict(preps, f, rupt) for f in fits]
     errors = [_errors(preps, pr) for pr in preds]
     res_before = [p.force_n + p.tare_n - pr for p, pr in zip(preps, preds[0])]
