@@ -84,8 +84,9 @@ class NLParam:
     log: bool = True
     per_trial: bool = False
     doc: str = ""
-    #: moved when the effect is screened as a candidate; False: only when the accepted model is
-    #: refined, from ``init`` (a refinement of the effect's form whose init is the plain form)
+    #: moved when the effect is screened, refined and judged as a candidate; False: a value
+    #: that refines the effect's form (``init`` is the plain form), moved only in the last fit
+    #: of the named model (workflow._polish)
     screened: bool = True
     #: False when both bounds are values the parameter can mean (a share in [0, 1]): sitting on
     #: one is a finding, not a fit held back, so the report does not flag it

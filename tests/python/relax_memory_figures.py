@@ -3,8 +3,10 @@ discrepancy workflow's final model with and without it (workflow._polish), one t
 
     PYTHONPATH=.:tests/python .venv/bin/python tests/python/relax_memory_figures.py [--jobs 2]
 
-Records, none of them used to design the memory: `lab` phantom seeds 2132-2141, measured-like
-seeds 470-479 and the five phantom presets with seed 202.  Per record, in units of the record's
+Records none of them used to design the memory (``--set first``, default: `lab` phantom seeds
+2132-2141, measured-like seeds 470-479 and the five phantom presets with seed 202, on which how
+the memory is fitted was chosen; ``--set second``: 2142-2151, 480-489, seed 203, looked at once,
+after).  Per record, in units of the record's
 noise: the RMSE of the final model to the noise-free force, overall and over the retraction, and
 the model's step at the reversal (prediction just after the retraction starts less just before;
 the truth's own step is about one noise sd); then the medians.
@@ -23,9 +25,12 @@ import numpy as np  # noqa: E402
 
 from discrepancy_measured_like import make_case, phantom_trial  # noqa: E402
 
-RECORDS = ([("lab", s) for s in range(2132, 2142)] + [("measured-like", s) for s in range(470, 480)]
-           + [(p, 202) for p in ("skin", "skin-on-muscle", "artery-filled", "muscle",
-                                 "skin-incision")])
+PRESETS = ("skin", "skin-on-muscle", "artery-filled", "muscle", "skin-incision")
+#: first: the records the variants were compared on; second: records looked at only once, after
+SETS = {"first": [("lab", s) for s in range(2132, 2142)]
+        + [("measured-like", s) for s in range(470, 480)] + [(p, 202) for p in PRESETS],
+        "second": [("lab", s) for s in range(2142, 2152)]
+        + [("measured-like", s) for s in range(480, 490)] + [(p, 203) for p in PRESETS]}
 
 
 def _record(kind: str, seed: int) -> tuple:
@@ -68,11 +73,15 @@ def one(job: tuple[str, int]) -> dict[str, object]:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
+    ap.add_argument("--set", choices=sorted(SETS), default="first",
+                    help="first: lab 2132-2141, measured-like 470-479, presets seed 202 (the "
+                         "variants were compared on them); second: lab 2142-2151, "
+                         "measured-like 480-489, presets seed 203")
     args = ap.parse_args(argv)
     if args.jobs < 1:
         ap.error("--jobs: at least 1")
     with get_context("spawn").Pool(args.jobs) as pool:
-        rows = pool.map(one, RECORDS, chunksize=1)
+        rows = pool.map(one, SETS[args.set], chunksize=1)
     print("| record | memory | overall, without → with | retraction | step at the reversal |")
     print("|---|---|---|---|---|")
     for r in rows:
@@ -80,15 +89,16 @@ def main(argv: list[str] | None = None) -> int:
         print(f"| {r['record']} | {r['memory']:.2f} | {a['overall']:.2f} → {b['overall']:.2f} | "
               f"{a['retraction']:.2f} → {b['retraction']:.2f} | "
               f"{a['step']:+.1f} → {b['step']:+.1f} |")
-    for group in ("lab", "measured-like", "202"):
+    for group in ("lab", "measured-like", "20"):
         sel = [r for r in rows if group in str(r["record"])]
         if not sel:
             continue
         med = {k: (float(np.median([r["without"][k] for r in sel])),
-                   float(np.median([r["with"][k] for r in sel]))) for k in ("overall", "retraction")}
+                   float(np.median([r["with"][k] for r in sel])))
+               for k in ("overall", "retraction")}
         worse = sum(r["with"]["overall"] > 1.01 * r["without"]["overall"] for r in sel)
         kept = sum(r["memory"] > 0.0 for r in sel)
-        name = "phantom presets" if group == "202" else group
+        name = "phantom presets" if group == "20" else group
         print(f"{name} ({len(sel)}): memory kept in {kept}; median overall "
               f"{med['overall'][0]:.2f} → {med['overall'][1]:.2f}, retraction "
               f"{med['retraction'][0]:.2f} → {med['retraction'][1]:.2f}; worse by > 1 %: {worse}")

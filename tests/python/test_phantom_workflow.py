@@ -7,7 +7,8 @@ the final residual is <= 3x the sensor noise (median).  Where the workflow falls
 a strict xfail whose reason carries the measured figure.  Measured (this file, --runxfail):
 relaxation named in 6/6, median shrink 0.81 (0.68 to 0.90), layers right 5/6, median final
 residual 3.4x the noise (3.8x before the first band carried its own friction: lab-2006 29x -> 5.0x;
-3.6x before the tears were placed between their samples: lab-2006 5.0x -> 4.7x).
+3.6x before the tears were placed between their samples: lab-2006 5.0x -> 4.7x; lab-2007
+12x -> 7.6x with the relaxation's memory after a dwell, the median unchanged).
 
 Trials: lab tissues of five seeds in 2001-2007 (drawn from the measured statistics; not used to
 tune the phantom) and the four-layer preset at 30 mN; all have a 5.26 s dwell.  Six trials keep
@@ -87,7 +88,8 @@ def test_rmse_to_the_noise_free_record_shrinks_by_half(rows):
 
 @pytest.mark.xfail(strict=True,
                    reason="measured: median final residual 3.4x the noise (target <= 3x; "
-                          "lab-2007 12x, lab-2006 4.7x)")
+                          "lab-2007 7.6x, 12x before the relaxation's memory after a dwell; "
+                          "lab-2006 4.7x)")
 def test_final_residual_is_within_three_times_the_noise(rows):
     med = float(np.median([r["resid_x_noise"] for r in rows]))
     assert med <= 3.0, f"median final residual {med:.1f}x noise: " + _summary(rows, "resid_x_noise")
