@@ -67,10 +67,11 @@ def test_the_columns_after_a_dwell_hold_the_share_and_fade_with_tau():
 def test_the_memory_ends_where_the_needle_advances_again():
     g = _grid()
     (_, i1), = g.dwells
-    # a second push inwards half a second after the dwell, before any retraction
+    # half a second into the retraction the needle advances again (the stage held where it was,
+    # in the tissue: the memory ends on the velocity, not the depth)
     x = g.stage_mm.copy()
     push = (g.t_s >= g.t_s[i1] + 0.5)
-    x[push] = x[push][0] + 0.0
+    x[push] = x[push][0]
     v = g.v_mm_s.copy()
     v[push] = 2.0
     g2 = TrialGrid(g.t_s, x, v, 0.0, g.dwells)
