@@ -13,7 +13,9 @@ FILE    measured trials: CSV with t_s, depth_mm, force_n (optional velocity_mm_s
 --out   report directory: report.md, report.json, estimator_config.json and PNG figures
         (all written together or none; the directory is checked before the run).
 --each  run every FILE as its own condition, into DIR/<file stem>/ (with --jobs N in parallel).
---jobs  worker processes for --each (default 1).
+--jobs  worker processes (default: the CPUs this process may use): with --each, conditions side
+        by side; for one condition, its fits that do not depend on each other (the base
+        model's starts, a round's screens and refines).  The report is the same for every N.
 --force-unit, --time-unit, --depth-unit, --force-sign, --depth-sign, --no-units-check
         how the CSV was recorded (converted by the tools' CSV reader, which refuses implausible
         units or signs naming the likely option).  A record that still reads negative on
@@ -38,14 +40,15 @@ from pathlib import Path  # noqa: E402
 from ..tools.arguments import OneLineParser, add_unit_arguments, units_from  # noqa: E402
 from ..tools.safe_write import check_directory  # noqa: E402
 from .io import InputError, Trial, read_trial  # noqa: E402
+from .pool import available_cpus  # noqa: E402
 from .prep import TooShort  # noqa: E402
 
-def _one(job: tuple[list[Trial], list[str], str, bool]) -> tuple[str, str, list]:
-    trials, names, out, figs = job
+def _one(job: tuple[list[Trial], list[str], str, bool, int]) -> tuple[str, str, list]:
+    trials, names, out, figs, jobs = job
     from .report import write
     from .workflow import run
     try:
-        res = run(trials)
+        res = run(trials, jobs=jobs)
     except TooShort as exc:
         return out, f"error: {exc}", []
     try:
@@ -64,8 +67,8 @@ def main(argv: list[str] | None = None) -> int:
     add_unit_arguments(ap)
     ap.add_argument("--each", action="store_true",
                     help="run every FILE as its own condition, into DIR/<file stem>/")
-    ap.add_argument("--jobs", type=int, default=1, metavar="N",
-                    help="worker processes for --each")
+    ap.add_argument("--jobs", type=int, default=available_cpus(), metavar="N",
+                    help="worker processes (default: the CPUs this process may use)")
     args = ap.parse_args(argv)
     if args.jobs < 1:
         print(f"nte-discrepancy: --jobs {args.jobs}: must be >= 1", file=sys.stderr)
@@ -85,10 +88,12 @@ def main(argv: list[str] | None = None) -> int:
                   file=sys.stderr)
             return 2
         out.mkdir(exist_ok=True)
-        jobs = [([t], [f], str(out / Path(f).stem), figs)
+        jobs = [([t], [f], str(out / Path(f).stem), figs, 1)
                 for t, f in zip(trials, args.files)]
     else:
-        jobs = [(trials, list(args.files), str(out), figs)]
+        jobs = [(trials, list(args.files), str(out), figs, 1)]
+    if len(jobs) == 1:      # one condition: the workers share its fits
+        jobs = [(*jobs[0][:4], args.jobs)]
     if args.jobs > 1 and len(jobs) > 1:
         from concurrent.futures import ProcessPoolExecutor
         with ProcessPoolExecutor(max_workers=args.jobs) as pool:

@@ -15,6 +15,7 @@ from ..fmath import Array
 from .accept import worst_phase
 from .fit import Fit, evaluate, fit, solve_linear
 from .io import Trial
+from .pool import FitPool
 from .prep import PHASES, Prepared, TooShort, prepare
 from .score import delta_bic_local, folds, heldout_sse, lag1
 from .stats import phase_stats, speed_direction
@@ -337,22 +338,42 @@ def _local_gate(cand: str, ev: dict[str, object]) -> tuple[bool | None, str]:
     return None, ""
 
 
-def _screen(cand: str, cur: Fit, grids: list[TrialGrid], y: Array, cache: StateCache) -> Fit:
-    """Fit the current model plus ``cand``, moving only the candidate's own nonlinear values."""
-    effects = tuple(e for e in VOCABULARY if e in cur.effects or e == cand)
-    free = {p.name for p in _screened_nl(cand)}
-    best: Fit | None = None
+def _screen(cands: list[str], cur: Fit, grids: list[TrialGrid], y: Array, cache: StateCache,
+            pool: FitPool) -> list[Fit]:
+    """For each candidate, the current model plus it, fitted moving only the candidate's own
+    nonlinear values, from each of its starting points (the best kept, the first of equals).
+    Every start of every candidate is a task of its own: one candidate's starts (tissue motion's
+    frequencies) can take longer than all the others together."""
+    tasks = [(cand, cur, nl0) for cand in cands for nl0 in _screen_starts(cand, cur, grids, y,
+                                                                           cache)]
+    best: dict[str, Fit] = {}
+    for (cand, _, _), f in zip(tasks, pool.map(_screen_from, tasks)):
+        if cand not in best or f.sse < best[cand].sse:
+            best[cand] = f
+    return [best[cand] for cand in cands]
+
+
+def _screen_starts(cand: str, cur: Fit, grids: list[TrialGrid], y: Array, cache: StateCache
+                   ) -> list[dict[str, Array]]:
     starts = _inits(cand, cur, grids, y, cache)
     if len(starts) > SCREEN_STARTS:
         # many starting points (layer depths): fit only the few that already fit best
+        effects = _with(cur, cand)
         sse0 = [evaluate(grids, y, effects, nl0, cache).sse for nl0 in starts]
         starts = [starts[j] for j in np.argsort(sse0)[:SCREEN_STARTS]]
-    for nl0 in starts:
-        f = fit(grids, y, effects, nl0, free, cache, max_nfev=25)
-        if best is None or f.sse < best.sse:
-            best = f
-    assert best is not None
-    return best
+    return starts
+
+
+def _screen_from(cand: str, cur: Fit, nl0: dict[str, Array], grids: list[TrialGrid], y: Array,
+                 cache: StateCache) -> Fit:
+    """One start of a candidate's screen (a FitPool task)."""
+    free = {p.name for p in _screened_nl(cand)}
+    return fit(grids, y, _with(cur, cand), nl0, free, cache, max_nfev=25)
+
+
+def _with(cur: Fit, cand: str) -> tuple[str, ...]:
+    """The current model's effects and ``cand``, in the vocabulary's order."""
+    return tuple(e for e in VOCABULARY if e in cur.effects or e == cand)
 
 
 def _refine(f: Fit, grids: list[TrialGrid], y: Array, cache: StateCache) -> Fit:
@@ -475,9 +496,10 @@ def _unexplained(preps: list[Prepared], pred: list[Array]) -> list[dict[str, flo
 
 
 def _fit_base(grids: list[TrialGrid], y: Array, cache: StateCache, nfev: int = 60,
-              starts: int | None = None) -> Fit:
+              starts: int | None = None, pool: FitPool | None = None) -> Fit:
     """The base model, fitted from each of BASE_STARTS (``starts``: only from that many, those
-    that fit best as they are, one evaluation each), the best kept."""
+    that fit best as they are, one evaluation each), the best kept (the first of equals);
+    ``pool``: the starts fitted there (its grids and rows must be these)."""
     inits = []
     for p0, g0, a0 in BASE_STARTS:
         nl0 = nl_defaults((), len(grids))
@@ -486,13 +508,20 @@ def _fit_base(grids: list[TrialGrid], y: Array, cache: StateCache, nfev: int = 6
     if starts is not None and starts < len(inits):
         sse0 = [evaluate(grids, y, (), nl0, cache).sse for nl0 in inits]
         inits = [inits[j] for j in np.argsort(sse0)[:starts]]
-    best: Fit | None = None
-    for nl0 in inits:
-        f = fit(grids, y, (), nl0, {"p", "g0", "alpha", "surface"}, cache, max_nfev=nfev)
-        if best is None or f.sse < best.sse:
+    tasks = [(nl0, nfev) for nl0 in inits]
+    fits = (pool.map(_base_from, tasks) if pool is not None else
+            [_base_from(*t, grids, y, cache) for t in tasks])
+    best = fits[0]
+    for f in fits[1:]:
+        if f.sse < best.sse:
             best = f
-    assert best is not None
     return best
+
+
+def _base_from(nl0: dict[str, Array], nfev: int, grids: list[TrialGrid], y: Array,
+               cache: StateCache) -> Fit:
+    """The base model's fit from one start (a FitPool task)."""
+    return fit(grids, y, (), nl0, {"p", "g0", "alpha", "surface"}, cache, max_nfev=nfev)
 
 
 def _validate(grids: list[TrialGrid], y: Array, bnd: list[tuple[int, int]], final: Fit,
@@ -537,42 +566,14 @@ def _validate(grids: list[TrialGrid], y: Array, bnd: list[tuple[int, int]], fina
     return out
 
 
-def run(trials: list[Trial], max_effects: int = len(VOCABULARY), force_sign: float = 0.0,
-        depth_sign: float = 0.0) -> Result:
-    """Run the whole workflow on trials of one needle and tissue (shared base parameters).
-
-    ``force_sign`` / ``depth_sign``: +1 or -1 to state the records' sign convention, 0 (default)
-    to detect it per trial (see prep.detect_signs)."""
-    t_start = time.perf_counter()
-    preps: list[Prepared] = []
-    skipped: list[tuple[str, str]] = []
-    for tr in trials:
-        try:
-            preps.append(prepare(tr, force_sign, depth_sign))
-        except TooShort as exc:
-            skipped.append((tr.name, str(exc)))
-    if not preps:
-        raise TooShort("no trial could be split into phases")
-    # local evidence first: it does not depend on any fit
-    ev = evmod.collect(preps)
-    rupt = [[r["depth_mm"] for r in t["ruptures"]] for t in ev["per_trial"]]  # type: ignore
-    grids, ys, phs, fit_rows = [], [], [], []
-    for p, rp in zip(preps, rupt):
-        stride = int(np.ceil(len(p.t_s) / FIT_ROWS))
-        rows = np.arange(0, len(p.t_s), stride)
-        fit_rows.append(rows)
-        grids.append(_grid(p, rows, rp))
-        ys.append(p.force_n[rows])
-        phs.append(p.phase[rows])
-    y = np.concatenate(ys)
-    ph_all = np.concatenate(phs)
-    noise = float(np.median([p.noise_n for p in preps]))
-    bnd = _bounds(grids)
-    cache = StateCache(FIT_SUBSTEPS)
-    scheme, masks = folds(grids)
+def _name_effects(grids: list[TrialGrid], y: Array, phs: list[Array], ph_all: Array,
+                  bnd: list[tuple[int, int]], ev: dict, preps: list[Prepared], masks: list,
+                  noise: float, cache: StateCache, pool: FitPool, max_effects: int
+                  ) -> tuple[list[Fit], list[Step], list[dict[str, float | str]]]:
+    """Steps 1-4: the base model, then rounds of candidates until none is worth adding; the
+    fits (the base first), the steps and the last round's scores."""
     # 1. base model (multi-layer where ruptures were seen)
-    cur = _fit_base(grids, y, cache)
-    base_fit = cur
+    cur = _fit_base(grids, y, cache, pool=pool)
     fits, steps = [cur], []
     last_round: list[dict[str, float | str]] = []
     # 2-4. candidates: local evidence gates, own-phase gain, sharing-aware local BIC, held out
@@ -597,21 +598,26 @@ def run(trials: list[Trial], max_effects: int = len(VOCABULARY), force_sign: flo
             if gate is False:
                 round_scores.append({"name": cand, "local": why, "rejected": "no local evidence"})
                 continue
-            f = _screen(cand, cur, grids, y, cache)
+            round_scores.append({"name": cand})     # scored below, in this order
+        # the screens depend on the current model only: fitted side by side
+        to_screen = [rs["name"] for rs in round_scores if len(rs) == 1]
+        for cand, f in zip(to_screen, _screen(to_screen, cur, grids, y, cache, pool)):
             rows = _phase_rows(grids, phs, cand)
             dbic = delta_bic_local(cur, f, bnd, rows, _screened_nl(cand), len(grids))
-            screened.append((dbic + (1e6 if gate else 0.0), cand, f))
+            screened.append((dbic + (1e6 if gates[cand][0] else 0.0), cand, f))
             raw[cand] = dbic
-            round_scores.append({"name": cand, "delta_bic": dbic, "local": why,
-                                 "sse_gain": 1.0 - f.sse / cur.sse})
+            next(rs for rs in round_scores if rs["name"] == cand).update(
+                {"delta_bic": dbic, "local": gates[cand][1], "sse_gain": 1.0 - f.sse / cur.sse})
         screened = _motion_over_presliding(screened, raw, gates)
         screened.sort(key=lambda s: -s[0])
         accepted = None
         refined: list[tuple[float, str, Fit]] = []
-        for rank, (dbic, cand, f) in enumerate(screened[:REFINE_TOP]):
+        to_refine = []          # the best REFINE_TOP, down to the first below BIC_MIN
+        for dbic, cand, f in screened[:REFINE_TOP]:
             if dbic < BIC_MIN:
                 break
-            f = _refine(f, grids, y, cache)
+            to_refine.append((cand, f))
+        for (cand, _), f in zip(to_refine, pool.map(_refine, [(f,) for _, f in to_refine])):
             rows = _phase_rows(grids, phs, cand)
             dbic = delta_bic_local(cur, f, bnd, rows, _screened_nl(cand), len(grids))
             gate = gates[cand][0] if cand != "tissue_motion" else None
@@ -649,9 +655,51 @@ def run(trials: list[Trial], max_effects: int = len(VOCABULARY), force_sign: flo
         steps.append(accepted)
         cur = accepted.fit
         fits.append(cur)
+    return fits, steps, last_round
+
+
+def run(trials: list[Trial], max_effects: int = len(VOCABULARY), force_sign: float = 0.0,
+        depth_sign: float = 0.0, jobs: int = 1) -> Result:
+    """Run the whole workflow on trials of one needle and tissue (shared base parameters).
+
+    ``force_sign`` / ``depth_sign``: +1 or -1 to state the records' sign convention, 0 (default)
+    to detect it per trial (see prep.detect_signs).  ``jobs``: processes for the fits that do
+    not depend on each other (the base model's starts, the screens of a round, the refines);
+    the result is the same for every ``jobs`` (pool.py)."""
+    t_start = time.perf_counter()
+    preps: list[Prepared] = []
+    skipped: list[tuple[str, str]] = []
+    for tr in trials:
+        try:
+            preps.append(prepare(tr, force_sign, depth_sign))
+        except TooShort as exc:
+            skipped.append((tr.name, str(exc)))
+    if not preps:
+        raise TooShort("no trial could be split into phases")
+    # local evidence first: it does not depend on any fit
+    ev = evmod.collect(preps)
+    rupt = [[r["depth_mm"] for r in t["ruptures"]] for t in ev["per_trial"]]  # type: ignore
+    grids, ys, phs, fit_rows = [], [], [], []
+    for p, rp in zip(preps, rupt):
+        stride = int(np.ceil(len(p.t_s) / FIT_ROWS))
+        rows = np.arange(0, len(p.t_s), stride)
+        fit_rows.append(rows)
+        grids.append(_grid(p, rows, rp))
+        ys.append(p.force_n[rows])
+        phs.append(p.phase[rows])
+    y = np.concatenate(ys)
+    ph_all = np.concatenate(phs)
+    noise = float(np.median([p.noise_n for p in preps]))
+    bnd = _bounds(grids)
+    cache = StateCache(FIT_SUBSTEPS)
+    scheme, masks = folds(grids)
+    with FitPool(grids, y, cache, jobs) as pool:
+        fits, steps, last_round = _name_effects(grids, y, phs, ph_all, bnd, ev, preps, masks,
+                                                noise, cache, pool, max_effects)
+    base_fit = fits[0]
     if steps:
-        polished = _polish(cur, grids, y, cache)
-        if polished is not cur:
+        polished = _polish(fits[-1], grids, y, cache)
+        if polished is not fits[-1]:
             steps[-1].fit = fits[-1] = polished
     preds = [_predict(preps, f, rupt) for f in fits]
     errors = [_errors(preps, pr) for pr in preds]
