@@ -15,7 +15,8 @@ FILE    measured trials: CSV with t_s, depth_mm, force_n (optional velocity_mm_s
 --each  run every FILE as its own condition, into DIR/<file stem>/ (with --jobs N in parallel).
 --jobs  worker processes (default: the CPUs this process may use): with --each, conditions side
         by side; for one condition, its fits that do not depend on each other (the base
-        model's starts, a round's screens and refines).  The report is the same for every N.
+        model's starts, a round's screens and refines) and its figures.  The report is the
+        same for every N.
 --force-unit, --time-unit, --depth-unit, --force-sign, --depth-sign, --no-units-check
         how the CSV was recorded (converted by the tools' CSV reader, which refuses implausible
         units or signs naming the likely option).  A record that still reads negative on
@@ -52,7 +53,7 @@ def _one(job: tuple[list[Trial], list[str], str, bool, int]) -> tuple[str, str, 
     except TooShort as exc:
         return out, f"error: {exc}", []
     try:
-        rep = write(res, names, Path(out), figs)
+        rep = write(res, names, Path(out), figs, jobs)
     except ValueError as exc:       # an output the safe writer refuses
         return out, f"error: {exc}", res.skipped
     return out, f"named: {', '.join(rep['named'])}; {rep['verdict']['text']}", res.skipped

@@ -580,9 +580,10 @@ def estimator_config(res: Result) -> dict[str, Any]:
     return dict(build(res, [])["export"])
 
 
-def write(res: Result, inputs: list[str], out: Path, with_figures: bool = True) -> dict[str, Any]:
+def write(res: Result, inputs: list[str], out: Path, with_figures: bool = True, jobs: int = 1
+          ) -> dict[str, Any]:
     """The report in ``out`` through the tools' safe writer: report.json, report.md,
-    estimator_config.json and the figures, every file or none."""
+    estimator_config.json and the figures (drawn by ``jobs`` processes), every file or none."""
     from ..tools.safe_write import Outputs
     with Outputs() as outs:
         outs.directory(out, "--out")
@@ -590,7 +591,7 @@ def write(res: Result, inputs: list[str], out: Path, with_figures: bool = True) 
         figs: list[str] = []
         if with_figures:
             from .figures import draw
-            figs = draw(res, out, lambda p: outs.add(p, "--out"))
+            figs = draw(res, out, lambda p: outs.add(p, "--out"), jobs)
         rep["figures"] = figs
         rep["estimator_config"] = "estimator_config.json"
         outs.write_text(outs.add(out / "report.json", "--out"), json.dumps(rep, indent=1))

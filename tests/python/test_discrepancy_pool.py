@@ -58,7 +58,7 @@ def test_two_workers_give_the_same_result_bit_for_bit():
     assert _summary(two) == _summary(one)
 
 
-def test_cli_jobs_do_not_change_the_report(tmp_path: Path):
+def test_cli_jobs_do_not_change_the_report_or_its_figures(tmp_path: Path):
     from config_loop_figures import write_record
     case = make_case(32, trials=2)
     files = []
@@ -69,8 +69,13 @@ def test_cli_jobs_do_not_change_the_report(tmp_path: Path):
     reports = []
     for jobs in (1, 2):
         out = tmp_path / f"j{jobs}"
-        assert main(files + ["--out", str(out), "--no-figures", "--jobs", str(jobs)]) == 0
+        assert main(files + ["--out", str(out), "--jobs", str(jobs)]) == 0
         rep = json.loads((out / "report.json").read_text())
         rep.pop("runtime_s")
-        reports.append((rep, (out / "estimator_config.json").read_bytes()))
+        figures = [(out / name).read_bytes() for name in rep["figures"]]
+        reports.append((rep, (out / "estimator_config.json").read_bytes(), figures))
+    assert len(reports[0][2]) == 2 and all(len(b) > 10_000 for b in reports[0][2])
     assert reports[0] == reports[1]
+    # the safe writer's temporary files, written by the figure workers, all renamed
+    assert sorted(q.name for q in (tmp_path / "j2").iterdir()) == sorted(
+        ["report.json", "report.md", "estimator_config.json", *reports[0][0]["figures"]])
