@@ -115,11 +115,90 @@ static int check_depth(const char* path, const nte_trial_t* tr, const nte_units_
         return -1;
     }
     const double ns = share(neg, tr->n);
-    if (ns > NTE_UNITS_NEGATIVE_DEPTH_SHARE) {
+    if ((ns > NTE_UNITS_NEGATIVE_DEPTH_SHARE) && (u->depth_sign == 1)) {
         (void)snprintf(err, es,
                        "%s: column '%s': %.0f %% of the depths are negative (down to "
                        "%.4g mm): probably measured the other way: convert with --depth-sign -1",
                        path, u->columns.depth, 100.0 * ns, lo);
+        return -1;
+    }
+    if (ns > NTE_UNITS_NEGATIVE_DEPTH_SHARE) {
+        /* the sign was given: a stage that counts down to the tissue from a positive origin */
+        (void)snprintf(err, es,
+                       "%s: column '%s': %.0f %% of the depths are negative with --depth-sign -1 "
+                       "(down to %.4g mm): the stage counts from an origin beyond the tissue: "
+                       "subtract its start so the needle starts at 0 mm or above",
+                       path, u->columns.depth, 100.0 * ns, lo);
+        return -1;
+    }
+    return 0;
+}
+
+/* Rule 5b (csvio._check_direction): a depth that runs the other way although its values are
+ * positive (a stage counting down towards the tissue).  The needle loads the force as it goes
+ * in, so where the force first leaves its tare while the stage moves, the depth must grow: of
+ * the first INSERTING_MIN_SAMPLES moving samples that depart by more than SIGN_DEPART_SHARE of
+ * the largest departure, more than half rising while the depth falls is refused -- in a record
+ * that starts and ends in the air (its last TARE_SAMPLES forces back at the tare: one that
+ * starts in the tissue never comes back to its first "tare") and departs by more than
+ * DEPARTURE_MADS median absolute deviations of the tare's samples (not the air alone).
+ * v: n scratch values. */
+static int check_direction(const char* path, const nte_trial_t* tr, const nte_units_t* u,
+                           const double tare, double* v, char* err, size_t es)
+{
+    size_t moving = 0U;
+    double top = 0.0;
+    for (size_t k = 0U; k < tr->n; k++) {
+        if (isfinite(tr->force_n[k]) &&
+            (fabs(tr->velocity_mm_s[k]) > NTE_UNITS_INSERTING_SPEED_MM_S)) {
+            moving++;
+            const double dev = fabs(tr->force_n[k] - tare);
+            top = (dev > top) ? dev : top;
+        }
+    }
+    if (moving < NTE_UNITS_INSERTING_MIN_SAMPLES) {
+        return 0;
+    }
+    size_t seen = 0U;
+    size_t against = 0U;
+    size_t first = 0U;
+    for (size_t k = 0U; (k < tr->n) && (seen < NTE_UNITS_INSERTING_MIN_SAMPLES); k++) {
+        const double rel = tr->force_n[k] - tare;
+        if (isfinite(tr->force_n[k]) &&
+            (fabs(tr->velocity_mm_s[k]) > NTE_UNITS_INSERTING_SPEED_MM_S) &&
+            (fabs(rel) > (NTE_UNITS_SIGN_DEPART_SHARE * top))) {
+            first = (seen == 0U) ? k : first;
+            seen++;
+            against += ((tr->velocity_mm_s[k] < 0.0) && (rel > 0.0)) ? 1U : 0U;
+        }
+    }
+    if ((seen < NTE_UNITS_INSERTING_MIN_SAMPLES) || ((2U * against) <= seen)) {
+        return 0;
+    }
+    /* the median of the last TARE_SAMPLES forces, and the tare's median absolute deviation */
+    size_t m = 0U;
+    for (size_t k = tr->n; (k > 0U) && (m < NTE_UNITS_TARE_SAMPLES); k--) {
+        if (isfinite(tr->force_n[k - 1U])) {
+            v[m++] = tr->force_n[k - 1U];
+        }
+    }
+    const double end = median(v, m);
+    m = 0U;
+    for (size_t k = 0U; (k < tr->n) && (m < NTE_UNITS_TARE_SAMPLES); k++) {
+        if (isfinite(tr->force_n[k])) {
+            v[m++] = fabs(tr->force_n[k] - tare);
+        }
+    }
+    const double mad = median(v, m);
+    const int in_air = fabs(end - tare) <= (NTE_UNITS_SIGN_DEPART_SHARE * top);
+    if ((top > (NTE_UNITS_DEPARTURE_MADS * mad)) && in_air) {
+        (void)snprintf(err, es,
+                       "%s: column '%s': the force first rises from its tare while the depth "
+                       "decreases (from %.4g s, at %.4g mm): a needle goes in towards larger "
+                       "depths: probably measured the other way: %s",
+                       path, u->columns.depth, tr->t_s[first], tr->depth_mm[first],
+                       (u->depth_sign == 1) ? "convert with --depth-sign -1"
+                                            : "read it without --depth-sign -1");
         return -1;
     }
     return 0;
@@ -127,6 +206,7 @@ static int check_depth(const char* path, const nte_trial_t* tr, const nte_units_
 
 /* Rules 4 to 6: forces mostly beyond the range (mN read as N), one force beyond a thousand
  * times the range, the force mostly negative while inserting (the sensor's other sign).
+ * Between the last two, rule 5b (check_direction): the depth running the other way.
  * v: n scratch values. */
 static int check_force(const char* path, const nte_trial_t* tr, const nte_units_t* u,
                        const nte_limits_t* lim, double* v, char* err, size_t es)
@@ -178,6 +258,9 @@ static int check_force(const char* path, const nte_trial_t* tr, const nte_units_
         }
     }
     const double tare = (m > 0U) ? median(v, m) : 0.0;
+    if (check_direction(path, tr, u, tare, v, err, es) != 0) {
+        return -1;
+    }
     size_t inserting = 0U;
     double top = 0.0;
     for (size_t k = 0U; k < tr->n; k++) {

@@ -42,7 +42,7 @@ VERDICT_HEADER = ROOT / "firmware" / "host" / "nte_verdict_rules.h"
 #: check_units's thresholds at which tests/python/test_run_units.py probes both readers
 CHECK_INLINE = {name: getattr(csvio, name) for name in (
     "FORCE_IMPLAUSIBLE_FACTOR", "NEGATIVE_DEPTH_SHARE", "INSERTING_SPEED_MM_S",
-    "INSERTING_MIN_SAMPLES")}
+    "INSERTING_MIN_SAMPLES", "DEPARTURE_MADS")}
 
 
 def hex32(v: float) -> str:

@@ -326,6 +326,10 @@ INSERTING_SPEED_MM_S = 0.5
 INSERTING_MIN_SAMPLES = 10
 #: Above this share of negative depths the depth is probably measured the other way.
 NEGATIVE_DEPTH_SHARE = 0.5
+#: The direction of an insertion is judged only where the force departs from its tare by more
+#: than this many median absolute deviations of the tare's samples (a record in the air alone
+#: departs by its noise, either way).
+DEPARTURE_MADS = 15.0
 #: A force beyond this many times the configured range is not a force in N.
 FORCE_IMPLAUSIBLE_FACTOR = 1000.0
 #: The words a time step's hint gives the smaller units it proposes.
@@ -373,9 +377,15 @@ def check_units(tr: "Trial", units: Units = Units(), limits: Limits = Limits()) 
                          f"(less than {MIN_STROKE_MM:g} mm): {hint}")
     neg = float(np.mean(d < 0.0))
     if neg > NEGATIVE_DEPTH_SHARE:
-        raise UnitsError(f"{name}: column '{cd}': {_pct(neg)} of the depths are negative "
-                         f"(down to {float(np.min(d)):.4g} mm): probably measured the other "
-                         f"way: convert with --depth-sign -1")
+        if units.depth_sign == 1:
+            raise UnitsError(f"{name}: column '{cd}': {_pct(neg)} of the depths are negative "
+                             f"(down to {float(np.min(d)):.4g} mm): probably measured the "
+                             f"other way: convert with --depth-sign -1")
+        # the sign was given: a stage that counts down to the tissue from a positive origin
+        raise UnitsError(f"{name}: column '{cd}': {_pct(neg)} of the depths are negative with "
+                         f"--depth-sign -1 (down to {float(np.min(d)):.4g} mm): the stage "
+                         f"counts from an origin beyond the tissue: subtract its start so the "
+                         f"needle starts at 0 mm or above")
     f = tr.force_n
     present = np.isfinite(f)
     fa = np.abs(f[present])
@@ -394,12 +404,13 @@ def check_units(tr: "Trial", units: Units = Units(), limits: Limits = Limits()) 
             line = f":{tr.lines[k]}" if tr.lines else ""
             raise UnitsError(f"{name}{line}: column '{cf}': {float(f[k]):.4g} N is not a "
                              f"plausible force (the configured range is ±{fmax:g} N)")
+        # the force is judged less its tare, where it departs from the tare: a record starts
+        # in the air, and a negative tare over a long air gap is no sign
+        tare = float(np.median(f[present][:TARE_SAMPLES]))
+        rel = np.where(present, f - tare, 0.0)
+        _check_direction(tr, units, cd, tare, present)
         inserting = present & (tr.velocity_mm_s > INSERTING_SPEED_MM_S) & (d > 0.0)
         if np.count_nonzero(inserting) >= INSERTING_MIN_SAMPLES:
-            # judged on the force less its tare, where it departs from the tare: a record
-            # starts in the air, and a negative tare over a long air gap is no sign
-            tare = float(np.median(f[present][:TARE_SAMPLES]))
-            rel = np.where(present, f - tare, 0.0)
             top = float(np.max(np.abs(rel[inserting])))
             judged = inserting & (np.abs(rel) > SIGN_DEPART_SHARE * top)
             fi = rel[judged]
@@ -418,6 +429,52 @@ def check_units(tr: "Trial", units: Units = Units(), limits: Limits = Limits()) 
                          f"{limits.depth_min_mm:g}..{limits.depth_max_mm:g} mm, speed "
                          f"±{limits.speed_max_mm_s:g} mm/s, force ±{fmax:g} N): check the "
                          f"units (--time-unit, --depth-unit, --force-unit) and signs")
+
+
+def _check_direction(tr: "Trial", units: Units, column: str, tare: float,
+                     present: np.ndarray) -> None:
+    """Refuse a depth that runs the other way although its values are positive (a stage that
+    counts down towards the tissue; read as it is, its insertion looks like a retraction and
+    the force's sign would be blamed).  ``column``: the depth column's name in the file.
+
+    The needle loads the force as it goes in, so where the force first leaves its ``tare``
+    (the first TARE_SAMPLES forces') while the stage moves, the depth must grow.  The first
+    INSERTING_MIN_SAMPLES moving samples that depart by more than SIGN_DEPART_SHARE of the
+    largest departure decide: more than half rising while the depth falls is refused, if
+      * the record starts and ends in the air: its last TARE_SAMPLES forces are back at the
+        tare.  One that starts in the tissue is no such case: retracting first, its force
+        falls from its first "tare"; restarted mid-retraction, its first "tare" is the
+        friction's pull below 0, the force rises from it as the needle leaves and never
+        comes back to it;
+      * the largest departure exceeds DEPARTURE_MADS median absolute deviations of the
+        tare's samples: a record of the air alone departs by its noise, either way."""
+    v = tr.velocity_mm_s
+    rel = np.where(present, tr.force_n - tare, 0.0)
+    moving = present & (np.abs(v) > INSERTING_SPEED_MM_S)
+    if np.count_nonzero(moving) < INSERTING_MIN_SAMPLES:
+        return
+    top = float(np.max(np.abs(rel[moving])))
+    first = np.flatnonzero(moving & (np.abs(rel) > SIGN_DEPART_SHARE * top))
+    first = first[:INSERTING_MIN_SAMPLES]
+    if len(first) < INSERTING_MIN_SAMPLES:
+        return
+    against = int(np.count_nonzero((v[first] < 0.0) & (rel[first] > 0.0)))
+    # ... in a record that starts and ends in the air (its last forces back at the first ones'
+    # tare): one that starts in the tissue, a node restarted mid-retraction, has a first
+    # "tare" the needle's friction pulls below 0, and the force rises from it as it leaves
+    forces = tr.force_n[present]
+    end = float(np.median(forces[-TARE_SAMPLES:]))
+    mad = float(np.median(np.abs(forces[:TARE_SAMPLES] - tare)))
+    in_air = abs(end - tare) <= SIGN_DEPART_SHARE * top
+    if top > DEPARTURE_MADS * mad and in_air and 2 * against > len(first):
+        k = int(first[0])
+        hint = ("convert with --depth-sign -1" if units.depth_sign == 1 else
+                "read it without --depth-sign -1")
+        raise UnitsError(f"{tr.path}: column '{column}': the force "
+                         f"first rises from its tare while the depth decreases (from "
+                         f"{float(tr.t_s[k]):.4g} s, at {float(tr.depth_mm[k]):.4g} mm): a "
+                         f"needle goes in towards larger depths: probably measured the other "
+                         f"way: {hint}")
 
 
 def read_trial(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
