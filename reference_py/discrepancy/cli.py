@@ -41,7 +41,7 @@ from pathlib import Path  # noqa: E402
 from ..tools.arguments import OneLineParser, add_unit_arguments, units_from  # noqa: E402
 from ..tools.safe_write import check_directory  # noqa: E402
 from .io import InputError, Trial, read_trial  # noqa: E402
-from .pool import available_cpus  # noqa: E402
+from .pool import available_cpus, forked  # noqa: E402
 from .prep import TooShort  # noqa: E402
 
 def _one(job: tuple[list[Trial], list[str], str, bool, int]) -> tuple[str, str, list]:
@@ -96,8 +96,7 @@ def main(argv: list[str] | None = None) -> int:
     if len(jobs) == 1:      # one condition: the workers share its fits
         jobs = [(*jobs[0][:4], args.jobs)]
     if args.jobs > 1 and len(jobs) > 1:
-        from concurrent.futures import ProcessPoolExecutor
-        with ProcessPoolExecutor(max_workers=args.jobs) as pool:
+        with forked(args.jobs) as pool:
             results = list(pool.map(_one, jobs))
     else:
         results = [_one(j) for j in jobs]

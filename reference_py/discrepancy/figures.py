@@ -2,7 +2,6 @@
 depth, and the residual before and after the added effects."""
 from __future__ import annotations
 
-import multiprocessing
 from pathlib import Path
 from typing import Callable
 
@@ -12,6 +11,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from .pool import forked  # noqa: E402
 from .prep import PHASES  # noqa: E402
 from .workflow import Result  # noqa: E402
 
@@ -40,9 +40,7 @@ def draw(res: Result, out: Path, place: Callable[[Path], Path] = lambda p: p, jo
     names = [f"trial{i}_{p.name}.png" for i, p in enumerate(res.preps)]
     tasks = [(res, i, place(out / name)) for i, name in enumerate(names)]
     if jobs > 1 and len(tasks) > 1:
-        from concurrent.futures import ProcessPoolExecutor
-        with ProcessPoolExecutor(max_workers=jobs,
-                                 mp_context=multiprocessing.get_context("fork")) as pool:
+        with forked(jobs) as pool:
             list(pool.map(_draw_trial, *zip(*tasks)))
     else:
         for t in tasks:

@@ -34,6 +34,13 @@ def available_cpus() -> int:
         return os.cpu_count() or 1
 
 
+def forked(jobs: int, **kw: Any) -> ProcessPoolExecutor:
+    """An executor of ``jobs`` forked workers (the one kind the workflow's tools use: a forked
+    worker starts with this process's modules and data, nothing is imported again)."""
+    return ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("fork"),
+                               **kw)
+
+
 def _start_worker(grids: list[TrialGrid], y: Array, substeps: int) -> None:
     _WORKER.update(grids=grids, y=y, cache=StateCache(substeps))
 
@@ -53,9 +60,8 @@ class FitPool:
         self.grids, self.y, self.cache = grids, y, cache
         self._executor: ProcessPoolExecutor | None = None
         if jobs > 1:
-            self._executor = ProcessPoolExecutor(
-                max_workers=jobs, mp_context=multiprocessing.get_context("fork"),
-                initializer=_start_worker, initargs=(grids, y, cache.substeps))
+            self._executor = forked(jobs, initializer=_start_worker,
+                                    initargs=(grids, y, cache.substeps))
 
     def map(self, fn: Callable[..., Any], args: Iterable[tuple]) -> list[Any]:
         tasks = list(args)
@@ -75,4 +81,4 @@ class FitPool:
         self.close()
 
 
-__all__ = ["FitPool", "available_cpus"]
+__all__ = ["FitPool", "available_cpus", "forked"]
