@@ -355,6 +355,7 @@ def _screen(cands: list[str], cur: Fit, grids: list[TrialGrid], y: Array, cache:
 
 def _screen_starts(cand: str, cur: Fit, grids: list[TrialGrid], y: Array, cache: StateCache
                    ) -> list[dict[str, Array]]:
+    """The starting points a candidate's screen fits from (at most SCREEN_STARTS)."""
     starts = _inits(cand, cur, grids, y, cache)
     if len(starts) > SCREEN_STARTS:
         # many starting points (layer depths): fit only the few that already fit best
