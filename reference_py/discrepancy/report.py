@@ -15,7 +15,8 @@ from .prep import PHASES
 from .accept import WORSEN_NOISE_X
 from .nextsteps import render as render_next
 from .nextsteps import what_next
-from .workflow import UNEXPLAINED_WINDOW_S, UNEXPLAINED_X, Result, base_paramset
+from .unexplained import UNEXPLAINED_WINDOW_S, UNEXPLAINED_X
+from .workflow import Result, base_paramset
 
 
 def _clean(x: Any) -> Any:

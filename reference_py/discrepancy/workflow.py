@@ -8,7 +8,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import evidence as evmod
-from . import shape as shmod
 from .effects import (EFFECT_NL, EFFECT_PHASES, NONE, VOCABULARY, StateCache, TrialGrid, design,
                       find_dwells, nl_defaults, nl_specs, to_paramset)
 from ..fmath import Array
@@ -19,6 +18,7 @@ from .pool import FitPool
 from .prep import PHASES, Prepared, TooShort, prepare
 from .score import delta_bic_local, folds, heldout_sse, lag1
 from .stats import phase_stats, speed_direction
+from .unexplained import UNEXPLAINED_X, unexplained
 
 #: at most this many samples per trial enter the fits (evenly strided); reports use all samples
 FIT_ROWS = 400
@@ -31,12 +31,6 @@ FIT_SUBSTEPS = 4
 SCREEN_STARTS = 6
 #: BIC difference that counts as strong evidence
 BIC_MIN = 10.0
-#: structure left in a phase counts as "unexplained" above this multiple of the noise (RMS of
-#: the residual smoothed over UNEXPLAINED_WINDOW_S, against the noise standard deviation)
-UNEXPLAINED_X = 3.0
-UNEXPLAINED_WINDOW_S = 0.5
-#: the largest this many stretches are described by their shape (drop, slope change, ...)
-UNEXPLAINED_SHAPES = 10
 #: an effect must lower the error in its own phases by at least this fraction to be named
 OWN_PHASE_MIN_GAIN = 0.05
 #: base-model starting points (p, g0, alpha) from the paper's presets
@@ -452,50 +446,6 @@ def _relabel(label: str, i: int) -> str:
     return label.replace("[0]", f"[{i}]")
 
 
-def _unexplained(preps: list[Prepared], pred: list[Array]) -> list[dict[str, float | str]]:
-    """Stretches where the final residual, smoothed over UNEXPLAINED_WINDOW_S, stays above
-    UNEXPLAINED_X noise standard deviations: phase, time and depth span, size, and for the
-    largest ones what the residual looks like there (shape.classify: drop, slope change, ...)."""
-    out: list[dict[str, float | str]] = []
-    spans: list[tuple[Prepared, Array, int, int]] = []
-    for p, pr in zip(preps, pred):
-        r = p.force_n + p.tare_n - pr
-        dt = float(np.median(np.diff(p.t_s)))
-        w = max(int(round(UNEXPLAINED_WINDOW_S / dt)), 1)
-        rs = evmod.smooth(r, w)
-        hot = np.abs(rs) > UNEXPLAINED_X * p.noise_n
-        if not hot.any():
-            continue
-        edges = np.flatnonzero(np.diff(np.concatenate([[0], hot.astype(int), [0]])))
-        for a, b in zip(edges[::2], edges[1::2]):
-            if p.t_s[b - 1] - p.t_s[a] < UNEXPLAINED_WINDOW_S:
-                continue
-            ph = np.bincount(p.phase[a:b], minlength=len(PHASES))
-            l = p.stage_mm[a:b] - p.surface_mm
-            out.append({"trial": p.name, "phase": PHASES[int(np.argmax(ph))],
-                        "t_from_s": float(p.t_s[a]), "t_to_s": float(p.t_s[b - 1]),
-                        "depth_from_mm": float(np.min(l)), "depth_to_mm": float(np.max(l)),
-                        "peak_n": float(np.max(np.abs(rs[a:b]))),
-                        "rms_n": float(np.sqrt(np.mean(r[a:b] ** 2))),
-                        "over_noise": float(np.max(np.abs(rs[a:b])) / p.noise_n)})
-            # the smoothing spreads a step over a window: look from a window before to a window
-            # after, where the level on either side shows
-            spans.append((p, r, max(a - w, 0), min(b + w, len(r))))
-    order = sorted(range(len(out)), key=lambda i: -float(out[i]["over_noise"]))
-    out = [out[i] for i in order]
-    for d, i in zip(out[:UNEXPLAINED_SHAPES], order):
-        p, r, a, b = spans[i]
-        sh = shmod.classify(p.t_s[a:b], r[a:b])
-        k = min(int(np.searchsorted(p.t_s, float(sh["at_s"]))), len(p.t_s) - 1)
-        d.update({"looks_like": str(sh["shape"]), "at_s": float(sh["at_s"]),
-                  "at_depth_mm": float(p.stage_mm[k] - p.surface_mm),
-                  "size_n": float(sh["size_n"]), "frequency_hz": float(sh["frequency_hz"])})
-        if "until_s" in sh:                   # a drop or rise that comes back
-            d["until_s"] = float(sh["until_s"])
-        d["description"] = shmod.describe(sh, float(d["at_depth_mm"]))
-    return out
-
-
 def _fit_base(grids: list[TrialGrid], y: Array, cache: StateCache, nfev: int = 60,
               starts: int | None = None, pool: FitPool | None = None) -> Fit:
     """The base model, fitted from each of BASE_STARTS (``starts``: only from that many, those
@@ -713,7 +663,7 @@ def run(trials: list[Trial], max_effects: int = len(VOCABULARY), force_sign: flo
                      "apart from the base model's friction (not a candidate).")
     notes.append(f"lag-1 autocorrelation of the final residual: {lag1(fits[-1].resid, bnd):.2f}")
     notes += [p.note for p in preps if getattr(p, "note", "")]
-    unexpl = _unexplained(preps, preds[-1])
+    unexpl = unexplained(preps, preds[-1])
     try:
         val = _validate(grids, y, bnd, fits[-1], base_fit)
     except (np.linalg.LinAlgError, ValueError) as exc:

@@ -10,7 +10,8 @@ from reference_py.discrepancy.fit import Fit
 from reference_py.discrepancy.prep import PHASES
 from reference_py.discrepancy.accept import WORSEN_NOISE_X, worst_phase
 from reference_py.discrepancy.report import build, render_md
-from reference_py.discrepancy.workflow import UNEXPLAINED_X, run
+from reference_py.discrepancy.unexplained import UNEXPLAINED_X
+from reference_py.discrepancy.workflow import run
 
 SIGMA = 0.01
 

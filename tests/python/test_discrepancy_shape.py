@@ -11,7 +11,7 @@ import pytest
 
 from reference_py.discrepancy.prep import prepare
 from reference_py.discrepancy.shape import classify, describe
-from reference_py.discrepancy.workflow import _unexplained
+from reference_py.discrepancy.unexplained import unexplained
 
 sys.path.insert(0, str(Path(__file__).parent))
 from discrepancy_measured_like import make_trial  # noqa: E402
@@ -79,7 +79,7 @@ def test_the_verdict_says_the_largest_stretch_is_a_drop_and_where() -> None:
     pred = truth.copy()
     after = (np.arange(len(pred)) > k_tear) & (p.v_mm_s > 0)
     pred[after] += missed
-    where = _unexplained([p], [pred])
+    where = unexplained([p], [pred])
     assert where, "a 1 N miss must be unexplained"
     w = where[0]
     assert w["looks_like"] == "drop"
