@@ -409,7 +409,7 @@ def check_units(tr: "Trial", units: Units = Units(), limits: Limits = Limits()) 
         # in the air, and a negative tare over a long air gap is no sign
         tare = float(np.median(f[present][:TARE_SAMPLES]))
         rel = np.where(present, f - tare, 0.0)
-        _check_direction(tr, units, cd, tare, present)
+        _check_direction(tr, units, cd, tare, rel, present)
         inserting = present & (tr.velocity_mm_s > INSERTING_SPEED_MM_S) & (d > 0.0)
         if np.count_nonzero(inserting) >= INSERTING_MIN_SAMPLES:
             top = float(np.max(np.abs(rel[inserting])))
@@ -432,11 +432,12 @@ def check_units(tr: "Trial", units: Units = Units(), limits: Limits = Limits()) 
                          f"units (--time-unit, --depth-unit, --force-unit) and signs")
 
 
-def _check_direction(tr: "Trial", units: Units, column: str, tare: float,
+def _check_direction(tr: "Trial", units: Units, column: str, tare: float, rel: np.ndarray,
                      present: np.ndarray) -> None:
     """Refuse a depth that runs the other way although its values are positive (a stage that
     counts down towards the tissue; read as it is, its insertion looks like a retraction and
-    the force's sign would be blamed).  ``column``: the depth column's name in the file.
+    the force's sign would be blamed).  ``column``: the depth column's name in the file;
+    ``rel``: the force less its ``tare``, 0 where it is missing (``present`` false).
 
     The needle loads the force as it goes in, so where the force first leaves its ``tare``
     (the first TARE_SAMPLES forces') while the stage moves, the depth must grow.  The first
@@ -450,7 +451,6 @@ def _check_direction(tr: "Trial", units: Units, column: str, tare: float,
       * the largest departure exceeds DEPARTURE_MADS median absolute deviations of the
         tare's samples: a record of the air alone departs by its noise, either way."""
     v = tr.velocity_mm_s
-    rel = np.where(present, tr.force_n - tare, 0.0)
     moving = present & (np.abs(v) > INSERTING_SPEED_MM_S)
     if np.count_nonzero(moving) < INSERTING_MIN_SAMPLES:
         return
