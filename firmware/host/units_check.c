@@ -33,6 +33,14 @@ static int is_inserting(const nte_trial_t* tr, const size_t k)
            (tr->depth_mm[k] > 0.0);
 }
 
+/* A sample taken while the stage moves either way (the direction of the insertion is judged on
+ * those): a force, the speed above the inserting one. */
+static int is_moving(const nte_trial_t* tr, const size_t k)
+{
+    return isfinite(tr->force_n[k]) &&
+           (fabs(tr->velocity_mm_s[k]) > NTE_UNITS_INSERTING_SPEED_MM_S);
+}
+
 /* np.mean of a boolean array: the share of true. */
 static double share(const size_t count, const size_t n) { return (double)count / (double)n; }
 
@@ -149,8 +157,7 @@ static int check_direction(const char* path, const nte_trial_t* tr, const nte_un
     size_t moving = 0U;
     double top = 0.0;
     for (size_t k = 0U; k < tr->n; k++) {
-        if (isfinite(tr->force_n[k]) &&
-            (fabs(tr->velocity_mm_s[k]) > NTE_UNITS_INSERTING_SPEED_MM_S)) {
+        if (is_moving(tr, k)) {
             moving++;
             const double dev = fabs(tr->force_n[k] - tare);
             top = (dev > top) ? dev : top;
@@ -164,9 +171,7 @@ static int check_direction(const char* path, const nte_trial_t* tr, const nte_un
     size_t first = 0U;
     for (size_t k = 0U; (k < tr->n) && (seen < NTE_UNITS_INSERTING_MIN_SAMPLES); k++) {
         const double rel = tr->force_n[k] - tare;
-        if (isfinite(tr->force_n[k]) &&
-            (fabs(tr->velocity_mm_s[k]) > NTE_UNITS_INSERTING_SPEED_MM_S) &&
-            (fabs(rel) > (NTE_UNITS_SIGN_DEPART_SHARE * top))) {
+        if (is_moving(tr, k) && (fabs(rel) > (NTE_UNITS_SIGN_DEPART_SHARE * top))) {
             first = (seen == 0U) ? k : first;
             seen++;
             against += ((tr->velocity_mm_s[k] < 0.0) && (rel > 0.0)) ? 1U : 0U;
