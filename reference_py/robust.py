@@ -51,7 +51,14 @@ class RobustConfig:
     lm_lambda0: float = 1e-2      # initial LM damping
     converged_confidence: float = 0.75
     converged_change: float = 0.05
-    slice_entries: int = 96       # buffer entries the C library simulates per sample (0: all)
+    slice_entries: int = 1        # buffer entries the C library simulates per sample (0: all)
+
+    def slices(self) -> int:
+        """Samples a refinement takes in the C library (nte_robust.c refine_slice), from the
+        one that ends the insertion to the one that adopts the fit: its 2 (fit_iterations + 1)
+        simulations of buffer_len - 1 entries, slice_entries a sample (0: all at once)."""
+        entries = 2 * (self.fit_iterations + 1) * (self.buffer_len - 1)
+        return 1 if self.slice_entries == 0 else -(-entries // self.slice_entries)
 
     def validate(self) -> None:
         """Raise ValueError naming the first invalid field.  The ranges are config.py's
@@ -238,12 +245,8 @@ class RobustEstimator:
         return [getattr(th, name).copy() for name in PARAM_NAMES]
 
     def slices(self) -> int:
-        """Samples a refinement takes in the C library (nte_robust.c refine_slice): its
-        2 (fit_iterations + 1) simulations of buffer_len - 1 entries, slice_entries a sample
-        (0: all at once)."""
-        rc = self.rcfg
-        entries = 2 * (rc.fit_iterations + 1) * (rc.buffer_len - 1)
-        return 1 if rc.slice_entries == 0 else -(-entries // rc.slice_entries)
+        """Samples a refinement takes (RobustConfig.slices)."""
+        return self.rcfg.slices()
 
     def _fit(self, mask: Array) -> None:
         """The refinement of the runs in ``mask`` from their buffers as they are now: the

@@ -83,10 +83,10 @@
  *   The caller owns every instance (static, stack or pool).  sizeof(nte_t) on x86-64 (gcc):
  *   912 bytes (float) / 1704 (double) with NTE_ROBUST_BUFFER_LEN = 0 (the bank and the
  *   contact front end: its state 52 / 88 bytes, its configuration 36 / 64); with the default
- *   96: 3184 (float, +2272) / 6176 (double, +4472), of which the buffer of
+ *   96: 3232 (float, +2320) / 6272 (double, +4568), of which the buffer of
  *   96 x 4 reals is 1536 / 3072, the LM workspace (J^T J and J^T r at the current and the
- *   trial point, both parameter vectors) 384 / 768 and the sliced refinement's state 144 /
- *   248.  The refinement's deepest stack path (nte_step -> nte_robust_step -> a slice -> rk3)
+ *   trial point, both parameter vectors) 384 / 768 and the sliced refinement's state 192 /
+ *   344 (the simulation's model, kept from its start, 48 / 96 of it).  The refinement's deepest stack path (nte_step -> nte_robust_step -> a slice -> rk3)
  *   adds about 0.8 KiB (float) / 1.2 KiB (double) below nte_step's own frame (x86-64 gcc -O2
  *   -fstack-usage; 1.2 / 1.9 KiB while the refinement ran in one call).
  *   The library never allocates, has no global or static mutable state and no recursion; all
@@ -132,10 +132,14 @@
  *   (on a copy of the bank's estimate of that sample and on the buffer as it was), while the
  *   bank goes on publishing, and the sample whose slice finishes it adopts the result:
  *   NTE_STATUS_REFINED there, NTE_STATUS_REFINING on every sample a slice ran,
- *   nte_output_t.confidence the fit's confidence from then on.  Defaults: 18 samples (90 ms at
- *   200 Hz), one of its 18 simulations per sample; slice_entries 0 fits within the step that
- *   ends the insertion.  An insertion that begins before the fit is adopted is neither
- *   recorded nor refined (the buffer still holds the last one: one buffer of RAM); a fit
+ *   nte_output_t.confidence the fit's confidence from then on.  Default: one buffer entry a
+ *   sample, so no nte_step exceeds 20 000 cycles on a Cortex-M4F (18 374 at worst, README:
+ *   the cycle model) and the fit is adopted 1 710 samples after the insertion ends (8.55 s at
+ *   200 Hz, 1.7 s at 1 kHz); 96 entries a sample take 18 samples at up to 0.39 M cycles each;
+ *   slice_entries 0 fits within the step that ends the insertion.  An insertion that begins
+ *   before the fit is adopted is neither recorded nor refined (the buffer still holds the
+ *   last one: one buffer of RAM; a snapshot would need 1 536 B more, which the board's 8 KiB
+ *   do not have); a fit
  *   that ends while the parameters are held (nte_set_frozen) or in predict-only mode is
  *   dropped, so neither ever moves a parameter.  Reference: robust.py fits at once and adopts
  *   at the same sample (RobustEstimator.slices), bit for bit.
@@ -156,8 +160,11 @@
  *     Defaults (96 entries, 2 sub-steps, 8 iterations, Model II, n_p = 5): 18 simulations
  *     x 95 entries x 2 sub-steps = 3420 RK3 sub-steps with 5 sensitivities and 18 x 95 =
  *     1710 output evaluations, spread over the slices (per sample at most slice_entries
- *     entries and the LDL^T solves of the simulations finished on the way); a slice of 96
- *     entries is about 0.4 M cycles on a Cortex-M4 (README, the cycle model).
+ *     entries and the LDL^T solves of the simulations finished on the way); a slice of one
+ *     entry adds about 4 000 cycles to the step on a Cortex-M4 (6 600 at worst: the last
+ *     entry of a simulation, its solve and the next one's start), one of 96 entries about
+ *     0.37 M (README, the cycle model); the simulation's model (the parameters'
+ *     exponentials) is taken once at its start, not at every slice.
  *
  * THE CONTACT FRONT END (cfg.contact.enabled; reference_py/contact.py)
  *   Records as measured start with the needle in the air: the depth column is the STAGE
@@ -533,7 +540,7 @@ typedef struct nte_robust_config_t {
     nte_real_t lm_lambda0;           /**< [0.01] initial LM damping, > 0 */
     nte_real_t converged_confidence; /**< [0.75] CONVERGED needs confidence >= this, > 0 */
     nte_real_t converged_change;     /**< [0.05] and a relative change <= this, > 0 */
-    int32_t slice_entries;           /**< [96] buffer entries the refinement simulates per
+    int32_t slice_entries;           /**< [1] buffer entries the refinement simulates per
                                           nte_step, 0..4096; 0: the whole refinement in the
                                           step that ends the insertion (THE ROBUST
                                           ESTIMATOR above) */
@@ -759,7 +766,8 @@ typedef struct nte_robust_t {
     uint32_t entry;                        /**< next buffer entry of that simulation */
     uint32_t fit_count;                    /**< entries of the insertion being fitted */
     nte_real_t start_a[NTE_PARAM_COUNT];   /**< the bank's values as the insertion ended */
-    nte_real_t z;                          /**< the simulation's z ... */
+    nte_theta_t th;                        /**< the simulation's model (its start) ... */
+    nte_real_t z;                          /**< ... its z ... */
     nte_real_t sz[NTE_MODEL_PARAM_COUNT];  /**< ... its sensitivities dz/dv ... */
     nte_real_t sim_cost;                   /**< ... and its squared error so far, N^2 */
     nte_real_t cost;                       /**< the current point's cost, N^2 */

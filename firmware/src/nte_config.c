@@ -69,7 +69,7 @@ static void set_common(nte_config_t* cfg, const int32_t model, const nte_schedul
     cfg->robust.fit_substeps = 2;
     cfg->robust.fit_iterations = 8;
     cfg->robust.min_entries = 24;
-    cfg->robust.slice_entries = 96;
+    cfg->robust.slice_entries = 1;
     cfg->robust.restart_p0_u = NTE_K_ROB_RESTART_P0_U;
     cfg->robust.lm_lambda0 = NTE_K_ROB_LM_LAMBDA0;
     cfg->robust.converged_confidence = NTE_K_ROB_CONVERGED_CONFIDENCE;

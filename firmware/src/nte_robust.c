@@ -176,6 +176,9 @@ static void sim_begin(nte_t* self)
     const size_t n = nte_bank_identified(self, &ids);
     nte_real_t* g = sim_jtr(rb);
     nte_robust_mat_t* A = sim_jtj(rb);
+    /* the simulation's model, once: a slice may be a single entry, and the parameters'
+     * exponentials would otherwise be taken again at every one */
+    fit_theta(self, rb->start, sim_is_trial(rb) ? rb->v_try : rb->v, &rb->th);
     rb->z = NTE_C(0.0);
     rb->sim_cost = NTE_C(0.0);
     rb->entry = 1U;
@@ -201,11 +204,9 @@ static void sim_run(nte_t* self, const uint32_t count)
     const uint8_t* ids = NULL;
     const size_t n = nte_bank_identified(self, &ids);
     const nte_real_t zero = NTE_C(0.0);
-    const nte_real_t* v = sim_is_trial(rb) ? rb->v_try : rb->v;
     nte_real_t* g = sim_jtr(rb);
     nte_robust_mat_t* A = sim_jtj(rb);
-    nte_theta_t th;
-    fit_theta(self, rb->start, v, &th);
+    const nte_theta_t* th = &rb->th;
     nte_real_t jrow[NTE_MODEL_PARAM_COUNT];
     const uint32_t end = rb->entry + count;
     for (uint32_t i = rb->entry; i < end; i++) {
@@ -216,7 +217,7 @@ static void sim_run(nte_t* self, const uint32_t count)
         const nte_real_t l_b = nte_model_clamp_depth(rb->buf[ROW_L][i]);
         const nte_real_t dt = live ? (t_b - t_a) : NTE_C(0.0);
         nte_rk3_result_t pred;
-        nte_model_rk3(&pred, &th, rb->z, l_a, l_b, dt, self->cfg.robust.fit_substeps, ids, n, NULL);
+        nte_model_rk3(&pred, th, rb->z, l_a, l_b, dt, self->cfg.robust.fit_substeps, ids, n, NULL);
         const bool in_tissue = l_b > zero;
         rb->z = in_tissue ? pred.z : zero;
         /* the step's end is l_b's depth terms when the two depths are the same bits (both
@@ -225,23 +226,23 @@ static void sim_run(nte_t* self, const uint32_t count)
         if (!(pred.end.l < l_b) && !(pred.end.l > l_b)) {
             d = pred.end;
         } else {
-            nte_model_depth_terms(&d, &th, l_b);
+            nte_model_depth_terms(&d, th, l_b);
         }
         const nte_real_t vel = rb->buf[ROW_V][i];
         const nte_real_t s = nte_model_smooth_sign(vel, self->cfg.eps_mm_s);
         nte_output_terms_t o;
-        nte_model_output(&o, &th, &d, rb->z, s);
+        nte_model_output(&o, th, &d, rb->z, s);
         const nte_real_t r = rb->buf[ROW_F][i] - o.h;
         /* samples where the smooth sign may disagree with the true direction carry no weight */
         const bool sure = (nte_abs(s) > NTE_K_ROB_SURE) ||
                           !(nte_abs(vel) >= self->cfg.v_still_mm_s);
         const bool w = live && sure;
         rb->sim_cost = rb->sim_cost + (w ? (r * r) : zero);
-        const nte_real_t hz = nte_model_output_dz(&th, &d, &o);
+        const nte_real_t hz = nte_model_output_dz(th, &d, &o);
         for (size_t a = 0U; a < n; a++) {
             /* total derivative through the whole record: chain the step's partials */
             rb->sz[a] = in_tissue ? ((pred.dz_dz0 * rb->sz[a]) + pred.dz_du[ids[a]]) : zero;
-            jrow[a] = nte_model_output_du(&th, &d, rb->z, &o, ids[a]) + (hz * rb->sz[a]);
+            jrow[a] = nte_model_output_du(th, &d, rb->z, &o, ids[a]) + (hz * rb->sz[a]);
         }
         for (size_t a = 0U; a < n; a++) {
             /* 0 * (inf or NaN) stays NaN here as in the reference: no shortcut for w false */

@@ -10,6 +10,7 @@ stopped by its PID, also on failure.
 """
 from __future__ import annotations
 
+import math
 import os
 import re
 import shutil
@@ -111,21 +112,42 @@ def test_selftest_bit_identical_to_host(board_run, host_lines) -> None:
     assert len(board) == len(host_lines)
     for k, (b, h) in enumerate(zip(board, host_lines)):
         assert b == h, f"line {k + 1} differs:\n  board {b}\n  host  {h}"
-    # five runs over the whole scenario (the last one Model III), every sample printed
-    n_samples = int(re.search(r"#define NTE_SCENARIO_LEN (\d+)",
-                              (PORT / "scenario.h").read_text()).group(1))
-    assert sum(1 for ln in board if ln.startswith("S ")) == 5 * n_samples
+    # five runs over the whole scenario (the last one Model III), every sample printed; the
+    # robust run (2) goes on at the surface until its refinement is adopted
+    n_samples = _scenario_len()
+    for run in range(5):
+        got = sum(1 for ln in board if ln.startswith(f"S {run} "))
+        assert got == n_samples or (run == 2 and n_samples < got), (run, got)
     assert sum(1 for ln in board if ln.startswith("E ")) == 5
 
 
+def _default_slices() -> int:
+    """Samples the default refinement takes: 2 (fit_iterations + 1) simulations of
+    buffer_len - 1 entries, slice_entries a sample (nte.h THE ROBUST ESTIMATOR)."""
+    from reference_py.robust import RobustConfig
+    rc = RobustConfig()
+    return -(-2 * (rc.fit_iterations + 1) * (rc.buffer_len - 1) // rc.slice_entries)
+
+
+def _scenario_len() -> int:
+    return int(re.search(r"#define NTE_SCENARIO_LEN (\d+)",
+                         (PORT / "scenario.h").read_text()).group(1))
+
+
 def test_selftest_exercises_the_refinement(host_lines) -> None:
-    """The robust run refines once (status bit 9, REFINED), in 18 slices (bit 15, REFINING)
-    from the sample that leaves the tissue on (nte.h THE ROBUST ESTIMATOR, the defaults)."""
+    """The robust run refines once (status bit 9, REFINED), in 1 710 slices (bit 15, REFINING:
+    one buffer entry a sample) from the sample that leaves the tissue on (nte.h THE ROBUST
+    ESTIMATOR, the defaults); the run goes on past the scenario, at the surface, until the
+    refinement is adopted and ends there, while the other runs end with the scenario."""
     robust = [int(ln.split()[7], 16) for ln in host_lines if ln.startswith("S 2 ")]
     refined = [k for k, st in enumerate(robust) if st & (1 << 9)]
     slicing = [k for k, st in enumerate(robust) if st & (1 << 15)]
-    assert len(refined) == 1
-    assert slicing == list(range(refined[0] - 17, refined[0] + 1))
+    assert _default_slices() == 1710
+    assert refined == [len(robust) - 1]
+    assert slicing == list(range(refined[0] - 1709, refined[0] + 1))
+    assert len(robust) > _scenario_len()
+    for run in (0, 1, 3, 4):
+        assert sum(ln.startswith(f"S {run} ") for ln in host_lines) == _scenario_len(), run
 
 
 def _figures():
@@ -464,6 +486,17 @@ def test_board_over_python_can_slcan_matches_mirror(built, tmp_path: Path) -> No
                 qemu.wait()
 
 
+def _hold_last_row(csv: Path, samples: int) -> None:
+    """Extends the scenario's CSV to `samples` rows as the self-test does past its end: the
+    last row held, the time going on by the last interval (selftest.c scenario_sample)."""
+    head, *rows = csv.read_text().splitlines()
+    t_us = [math.floor(float(r.split(",")[0]) * 1e6 + 0.5) for r in rows[-2:]]
+    rest = rows[-1].split(",")[1:]
+    for j in range(1, samples - len(rows) + 1):
+        rows.append(",".join([f"{(t_us[1] + j * (t_us[1] - t_us[0])) / 1e6:.6f}", *rest]))
+    csv.write_text("\n".join([head, *rows]) + "\n")
+
+
 @pytest.mark.parametrize("run,args", [
     (0, ["--model", "1"]),
     (1, ["--model", "2", "--schedule", "rotate"]),
@@ -481,11 +514,12 @@ def test_selftest_equals_float32_reference(host_lines, tmp_path: Path, run: int,
                     "--depth", "8", "--dwell", "0.1", "--rate", "200", "--noise", "0.002",
                     "--seed", "1", "--out", str(csv)], cwd=ROOT, check=True,
                    stdout=subprocess.DEVNULL)
+    mine = [ln.split() for ln in host_lines if ln.startswith(f"S {run} ")]
+    _hold_last_row(csv, len(mine))
     subprocess.run([sys.executable, "-m", "reference_py", "estimate", str(csv),
                     "--precision", "float32", *args, "--out", str(est)], cwd=ROOT, check=True,
                    stdout=subprocess.DEVNULL)
     ref_rows = [r.split(",") for r in est.read_text().splitlines()[1:]]
-    mine = [ln.split() for ln in host_lines if ln.startswith(f"S {run} ")]
     assert len(mine) == len(ref_rows)
 
     def bits(x: str) -> str:
@@ -524,8 +558,9 @@ MEASURED_WORST_HI = {
     "Model II bank, all": 9_262,
     "Model II bank, rotate": 8_151,
     "Model II robust, normal sample": 11_727,
-    # the worst of the refinement's 18 slices (one simulation of the buffer each)
-    "Model II robust, refinement": 385_410,
+    # the worst of the refinement's 1 710 slices (one buffer entry each, on a normal step;
+    # 385 410 with slices of 96 entries, one simulation of the buffer each)
+    "Model II robust, refinement": 18_374,
     # Model III (direction memory with its identified turn-over length, two relaxation
     # branches, the step bound): 1.38 x Model II's bank, all
     "Model III bank, all": 12_761,
@@ -549,10 +584,11 @@ def test_cycle_model_covers_every_configuration(cycle_model) -> None:
         assert s["worst_lo"] <= s["worst_hi"] <= 2 * s["worst_lo"], (label, s)
         # at least one cycle per instruction (the IT instruction aside)
         assert s["worst_hi"] >= s["worst_insns"], (label, s)
-    n_samples = int(re.search(r"#define NTE_SCENARIO_LEN (\d+)",
-                              (PORT / "scenario.h").read_text()).group(1))
+    n_samples = _scenario_len()
     robust = [s["steps"] for label, s in cycle_model.items() if "robust" in label]
-    assert sum(robust) == n_samples
+    # the robust run goes on at the surface until its refinement is adopted (selftest.h)
+    assert cycle_model["Model II robust, refinement"]["steps"] == _default_slices()
+    assert n_samples < sum(robust) <= n_samples + _default_slices()
     assert all(s["steps"] == n_samples for label, s in cycle_model.items()
                if "robust" not in label)
 
@@ -577,9 +613,13 @@ def test_model3_bank_within_its_budget_of_model2(cycle_model) -> None:
 
 def test_refinement_within_cpu_budget(cycle_model) -> None:
     """The robust estimator's refinement of one insertion costs at most 50 ms of CPU on a
-    168 MHz Cortex-M4F (upper-bound cycles of every refinement step, summed)."""
+    168 MHz Cortex-M4F: upper-bound cycles of every step that ran a slice, less a normal
+    sample's step each (the normal samples' median: the bank's work, done anyway)."""
     s = cycle_model["Model II robust, refinement"]
-    seconds = s["total_hi"] / _cycles().CPU_HZ
+    normal = cycle_model["Model II robust, normal sample"]["median_hi"]
+    own = s["total_hi"] - s["steps"] * normal
+    assert 0 < own < s["total_hi"]
+    seconds = own / _cycles().CPU_HZ
     assert seconds <= REFINEMENT_BUDGET_S, f"refinement {seconds * 1e3:.1f} ms > " \
                                             f"{REFINEMENT_BUDGET_S * 1e3:.0f} ms"
 
@@ -624,13 +664,10 @@ def test_cycles_by_function_add_up(cycle_model) -> None:
             assert "nte_ekf_joseph_update" in top, (label, top)
 
 
-@pytest.mark.xfail(strict=True, reason="measured: the refinement's slices take up to 0.39 M "
-                   "cycles (one simulation of the buffer each; every bank is below 20 000, "
-                   "Model III's 12 761); a slice of one buffer entry (~3 900 on the robust "
-                   "step's 11 727) would fit, but the fit would take 1 728 samples (issue 24)")
 def test_no_step_above_its_real_time_budget(cycle_model) -> None:
-    """Every configuration's worst step (upper bound) within STEP_CYCLES_MAX: a 200 Hz loop on a
-    168 MHz part misses no deadline for the estimator."""
+    """Every configuration's worst step (upper bound) within STEP_CYCLES_MAX, the refinement's
+    slices included (one buffer entry a sample by default: 18 374 cycles; a slice of 96
+    entries took 0.39 M): a 1 kHz loop on a 168 MHz part keeps 88 % of its period."""
     worst = {label: s["worst_hi"] for label, s in cycle_model.items()}
     assert max(worst.values()) <= STEP_CYCLES_MAX, worst
 

@@ -7,6 +7,9 @@ they are missing).  Inputs (committed under tests/data/c_robust/, made by ``nte-
     p10_c2  preset paper-10mms, 10 mm/s to 50 mm, 1 s dwell, back out, two cycles (noise seed 1)
     p6_c2   preset paper-6mms,   6 mm/s to 30 mm, 1 s dwell, back out, two cycles
 
+each with 8.6 s at the surface before and after every cycle (``--rest 8.6``: the default
+refinement, one buffer entry a sample, is adopted 1 710 samples after the insertion).
+
 Runs (schedule all, default profile, RobustConfig defaults): Model II on p10_c2 from the preset
 (seed 0) and from a factor-5 start (seed 3), Model II on p6_c2 (seed 0), Model I on p10_c2 from
 a factor-5 start (seed 3).  Each insertion ends with a refinement, so every run covers the
@@ -40,6 +43,9 @@ SCENARIOS = {  # name: (preset, depth mm)
     "p6_c2": ("paper-6mms", 30.0),
 }
 PRECISIONS = ("float32", "float64")
+#: rest at the surface before and after each cycle, s: the default refinement is adopted 1 710
+#: samples (8.55 s at 200 Hz) after the insertion, so each cycle's is adopted before the next
+REST_S = 8.6
 
 
 @dataclass(frozen=True)
@@ -187,7 +193,8 @@ def make_inputs() -> None:
     for name, (preset, depth) in SCENARIOS.items():
         subprocess.run([sys.executable, "-m", "reference_py", "simulate", "--preset", preset,
                         "--depth", str(depth), "--dwell", "1", "--seed", "1", "--cycles", "2",
-                        "--out", str(DATA / f"{name}.csv")], check=True, cwd=ROOT)
+                        "--rest", str(REST_S), "--out", str(DATA / f"{name}.csv")],
+                       check=True, cwd=ROOT)
 
 
 if __name__ == "__main__":

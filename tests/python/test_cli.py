@@ -135,9 +135,10 @@ FLAG_CASES = [
     (SIMULATE + ["--noise", "-1"], "argument --noise: must be >= 0 and <= 50 N (got -1)"),
     (SIMULATE + ["--seed", "1.5"], "argument --seed: not an integer: '1.5'"),
     (SIMULATE + ["--cycles", "0"], "argument --cycles: must be >= 1 and <= 1000 (got 0)"),
+    (SIMULATE + ["--rest", "-0.5"], "argument --rest: must be >= 0 and <= 3600 s (got -0.5)"),
     (SIMULATE + ["--dwell", "3600", "--rate", "20000"],
      "nte-ref: error: --rate 20000 Hz over 3601 s is 7.2e+07 samples, more than the "
-     "10,000,000 allowed; lower --rate, --dwell or --cycles"),
+     "10,000,000 allowed; lower --rate, --dwell, --rest or --cycles"),
     (["bench", "--samples", "0"], "nte-ref bench: error: argument --samples: must be >= 1 and "
                                   "<= 10000000 (got 0)"),
     (["evaluate", "--seeds", "0"], "argument --seeds: must be >= 1 and <= 100000 (got 0)"),

@@ -121,7 +121,9 @@ def test_node_health_frames_equal_the_mirror(tmp_path):
     from reference_py.bus.candump import write_candump
     from test_node_port import DB, assert_node_equals_mirror, node_binary, two_insertions
 
-    frames, t_out = two_insertions(tmp_path, seed=3)
+    # 8.6 s at the surface after each insertion: the default refinement (one buffer entry a
+    # sample, 1 710 samples) is adopted before the record ends
+    frames, t_out = two_insertions(tmp_path, seed=3, rest_s=8.6)
     robust = DB.sender().message("Command", {"Reset": 0, "ModelSel": 0, "EstimatorSel": 2,
                                              "AdaptCmd": 0})
     log, rec, stats = tmp_path / "in.log", tmp_path / "out.log", tmp_path / "stats.json"

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from reference_py.bank import STATUS_FROZEN, STATUS_PREDICT_ONLY
-from reference_py.robust import STATUS_REFINED
+from reference_py.robust import STATUS_REFINED, RobustConfig
 from test_node_port import paper_frames  # noqa: F401  (the fixture: a 3.5 s paper insertion)
 from test_predict_only import PARAMS_AT, c_equals_reference, run_reference, scenario, switch_mode
 
@@ -95,11 +95,24 @@ def test_held_parameters_still_track_the_force():
     assert not np.array_equal(_params(out["adapting"])[k0 - 1], _params(out["adapting"])[-1])
 
 
+def _rest_after(t_us, depth, vel, force, samples: int):
+    """The record, then `samples` more at its last row (the needle resting at the surface),
+    the time going on by its last interval: long enough for the default refinement (one
+    buffer entry a sample) to be adopted."""
+    step = int(t_us[-1] - t_us[-2])
+    tail = np.int64(t_us[-1]) + step * np.arange(1, samples + 1, dtype=np.int64)
+
+    def held(a):
+        return np.concatenate([np.asarray(a), np.repeat(np.asarray(a)[-1:], samples)])
+    return (np.concatenate([np.asarray(t_us, dtype=np.int64), tail]), held(depth), held(vel),
+            held(force))
+
+
 def test_a_held_insertion_is_not_refined():
     """The robust estimator: an insertion during which the parameters were held is neither
     recorded nor refined (its refinement would move them); the same record without the freeze
     is refined at its end."""
-    t, d, v, f = scenario("p10_d50")
+    t, d, v, f = _rest_after(*scenario("p10_d50"), RobustConfig().slices() + 10)
     n = len(t)
     status = {}
     for name, spans in (("free", []), ("held", [(0.30, 0.35)])):

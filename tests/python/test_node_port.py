@@ -160,18 +160,22 @@ def test_replay_real_clock_jump_recovers(tmp_path: Path, paper_frames: list,
     assert ev["stale"] <= 10
 
 
-def two_insertions(tmp_path: Path, seed: int) -> tuple[list, float]:
-    """The frames of two paper insertions (20 mm, 0.5 s dwell, `nte-ref simulate --cycles 2`)
-    and a time out of the tissue between them (a depth-0 stretch after the first), s."""
+def two_insertions(tmp_path: Path, seed: int, rest_s: float = 0.1) -> tuple[list, float]:
+    """The frames of two paper insertions (20 mm, 0.5 s dwell, `nte-ref simulate --cycles 2`,
+    `rest_s` at the surface before, between and after them) and a time out of the tissue
+    between them (the first depth-0 frame after the first insertion), s."""
     csv = tmp_path / "paper2.csv"
     subprocess.run([sys.executable, "-m", "reference_py", "simulate", "--preset", "paper-10mms",
                     "--depth", "20", "--dwell", "0.5", "--seed", str(seed), "--cycles", "2",
-                    "--out", str(csv)], check=True, cwd=ROOT, stdout=subprocess.DEVNULL)
+                    "--rest", str(rest_s), "--out", str(csv)], check=True, cwd=ROOT,
+                   stdout=subprocess.DEVNULL)
     frames = scenario_frames(str(csv), DB, 1000.0)
     depth_id = DB.frame_id("Depth")
     t_end = frames[-1][0]
-    t_out = next(t for t, m in frames if m.arbitration_id == depth_id and 1.0 < t < t_end - 1.0
-                 and DB.decode_unchecked("Depth", bytes(m.data))["Depth"] == 0.0)
+    depths = [(t, DB.decode_unchecked("Depth", bytes(m.data))["Depth"]) for t, m in frames
+              if m.arbitration_id == depth_id]
+    t_in = next(t for t, d in depths if d > 0.0)
+    t_out = next(t for t, d in depths if t_in < t < t_end - 1.0 and d == 0.0)
     return frames, t_out
 
 

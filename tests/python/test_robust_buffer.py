@@ -12,8 +12,9 @@ from reference_py.sim.trajectory import TrajectorySpec, lspb_profile
 PRESET = get_preset("paper-10mms")
 
 
-def _scenario(cycles=1, depth=20.0, dwell=0.3):
-    t, l, v, _ = lspb_profile(TrajectorySpec(depth_mm=depth, dwell_s=dwell, cycles=cycles))
+def _scenario(cycles=1, depth=20.0, dwell=0.3, rest=0.1):
+    t, l, v, _ = lspb_profile(TrajectorySpec(depth_mm=depth, dwell_s=dwell, cycles=cycles,
+                                             rest_s=rest))
     f = simulate_force(PRESET.params, t, l, v)[0][0]
     f = f + np.random.default_rng(9).normal(0, 2e-3, len(f))
     return np.floor(t * 1e6 + 0.5).astype(np.int64), l, v, f
@@ -89,8 +90,9 @@ def test_invalid_robust_config_is_refused():
 
 def test_reset_clears_the_record():
     t, l, v, f = _scenario()
+    # slices of 96 entries: the fit is adopted within the scenario's 0.1 s at the surface
     est = rb.RobustEstimator(F64, default_config(), [PRESET.params.as_list()],
-                             rb.RobustConfig(fit_iterations=2))
+                             rb.RobustConfig(fit_iterations=2, slice_entries=96))
     _run(est, t, l, v, f)
     assert est.has_refined[0]
     est.reset()
@@ -113,15 +115,17 @@ def _leaving(l):
 
 
 def test_refinement_is_sliced_and_adopts_the_same_fit():
-    """Default slicing (slice_entries 96, the C library's steps): the refinement runs on the
-    samples from the one that ends the insertion for slices() samples, REFINED on the last,
-    and the bank restarts from exactly the fit that the whole refinement in one step gives."""
-    t, l, v, f = _scenario()
+    """Default slicing (slice_entries 1, the C library's steps: one buffer entry a sample):
+    the refinement runs on the samples from the one that ends the insertion for slices()
+    samples, REFINED on the last, and the bank restarts from exactly the fit that the whole
+    refinement in one step gives.  The scenario rests 8.6 s at the surface after the
+    insertion, 1 720 samples: long enough for the 1 710 slices."""
+    t, l, v, f = _scenario(rest=8.6)
     start = [x * 1.3 for x in PRESET.params.as_list()]
     sliced = rb.RobustEstimator(F64, default_config(), [start], rb.RobustConfig())
     whole = rb.RobustEstimator(F64, default_config(), [start], rb.RobustConfig(slice_entries=0))
     n = sliced.slices()
-    assert n == -(-2 * 9 * 95 // 96) == 18
+    assert n == 2 * 9 * 95 == 1710
     a, b = _run(sliced, t, l, v, f), _run(whole, t, l, v, f)
     k0 = _leaving(l)[0]
     busy = [k for k, o in enumerate(a) if o.status[0] & rb.STATUS_REFINING]
@@ -136,11 +140,12 @@ def test_refinement_is_sliced_and_adopts_the_same_fit():
 
 
 def test_insertion_during_a_refinement_is_not_recorded():
-    """A second insertion that begins before the first one's fit is adopted (22 slices, 0.1 s
-    = 20 samples at the surface) is not recorded or refined; the first is adopted during it."""
+    """A second insertion that begins before the first one's fit is adopted (22 slices of 96
+    entries, 0.1 s = 20 samples at the surface) is not recorded or refined; the first is
+    adopted during it."""
     t, l, v, f = _scenario(cycles=2)
     est = rb.RobustEstimator(F64, default_config(), [PRESET.params.as_list()],
-                             rb.RobustConfig(fit_iterations=10))
+                             rb.RobustConfig(fit_iterations=10, slice_entries=96))
     assert est.slices() == 22
     outs = _run(est, t, l, v, f)
     refined = [k for k, o in enumerate(outs) if o.status[0] & rb.STATUS_REFINED]
@@ -152,9 +157,11 @@ def test_insertion_during_a_refinement_is_not_recorded():
 @pytest.mark.parametrize("hold", ["frozen", "predict_only"])
 def test_result_dropped_when_held_at_adoption(hold):
     """Held parameters or predict-only switched on while the fit runs: at its last slice the
-    result is dropped (no REFINED, the bank not restarted, no confidence)."""
+    result is dropped (no REFINED, the bank not restarted, no confidence).  Slices of 96
+    entries: the fit's 18 samples end within the scenario's 0.1 s at the surface."""
     t, l, v, f = _scenario()
-    est = rb.RobustEstimator(F64, default_config(), [PRESET.params.as_list()], rb.RobustConfig())
+    est = rb.RobustEstimator(F64, default_config(), [PRESET.params.as_list()],
+                             rb.RobustConfig(slice_entries=96))
     k0 = _leaving(l)[0]
     outs = []
     for k in range(len(t)):

@@ -42,7 +42,6 @@ import argparse
 import json
 import pathlib
 import re
-import statistics
 import subprocess
 import sys
 import tempfile
@@ -54,8 +53,8 @@ CPU_HZ = 168e6
 RATE_HZ = 200.0
 #: harness functions inside the marked window that are not part of nte_step's cost
 HARNESS = ("mark", "one_run", "nte_mark_step_begin", "nte_mark_step_end")
-#: a robust step doing more than this many times the run's median work is a refinement step
-REFINE_FACTOR = 3.0
+#: the status bit of a step that ran a slice of the refinement (nte.h NTE_STATUS_REFINING)
+STATUS_REFINING = 1 << 15
 
 CONDS = ("eq", "ne", "cs", "hs", "cc", "lo", "mi", "pl", "vs", "vc", "hi", "ls", "ge", "lt",
          "gt", "le", "al")
@@ -324,20 +323,22 @@ def model(elf: pathlib.Path) -> dict:
                 fn[c] = fn.get(c, 0) + count * v
         per_step.append({"insns": n, "lo": lo, "hi": hi, "by": by, "fn": fn})
     runs = [ln for ln in output.splitlines() if ln.startswith("R ")]
-    per_run = len(per_step) // max(1, len(runs))
-    if per_run * len(runs) != len(per_step):
-        sys.exit(f"cycles: {len(per_step)} steps for {len(runs)} runs")
+    # each step printed one S line: "S <run> <k> <force> <z> <innovation> <nis> <status> ..."
+    lines = [ln.split() for ln in output.splitlines() if ln.startswith("S ")]
+    if len(lines) != len(per_step):
+        sys.exit(f"cycles: {len(per_step)} steps for {len(lines)} output lines")
     res = {}
     for r, header in enumerate(runs):
         f = dict(kv.split("=") for kv in header.split()[2:])
-        sl = per_step[r * per_run:(r + 1) * per_run]
+        mine = [i for i, ln in enumerate(lines) if int(ln[1]) == r]
+        sl = [per_step[i] for i in mine]
         label = (f"Model {'I' * int(f['model'])} "
                  f"{f['estimator']}" + ("" if f["estimator"] == "robust"
                                         else f", {f['schedule']}"))
-        med = statistics.median(s["insns"] for s in sl)
         if f["estimator"] == "robust":
-            normal = [s for s in sl if s["insns"] <= REFINE_FACTOR * med]
-            refine = [s for s in sl if s["insns"] > REFINE_FACTOR * med]
+            slicing = [int(lines[i][7], 16) & STATUS_REFINING != 0 for i in mine]
+            normal = [s for s, sliced in zip(sl, slicing) if not sliced]
+            refine = [s for s, sliced in zip(sl, slicing) if sliced]
             res[label + ", normal sample"] = summary(normal)
             if refine:
                 res[label + ", refinement"] = summary(refine)
