@@ -140,10 +140,26 @@ def phase_mask(phase: Array, which: int, exclude: int = EXCLUDE_FIRST) -> Array:
     return out
 
 
+#: of each rest at the surface the metrics count this much, s (the trajectory's default rest):
+#: the cycles of a multi-cycle run rest until the robust estimator's refinement is adopted,
+#: 8.6 s, and counting those samples of air would dilute the innovation and the replay
+REST_COUNTED_S = 0.1
+
+
+def counted_samples(t_s: Array, phase: Array) -> Array:
+    """The samples the metrics count: all but those of a rest (phase 0) beyond its first
+    REST_COUNTED_S, so a run's figures do not depend on how long it waits at the surface."""
+    rest = phase == 0
+    starts = rest & ~np.concatenate([[False], rest[:-1]])
+    run_start = np.maximum.accumulate(np.where(starts, np.arange(len(t_s)), 0))
+    return ~rest | (t_s - t_s[run_start] <= REST_COUNTED_S + 1e-9)
+
+
 def metrics(sc: Scenario, res: RunResult, cycle: int = -1) -> dict[str, Array]:
     """Metrics of one insertion cycle (default: the last): posterior RMSE over that cycle's
     insertion and retraction, the replay with the parameters at its end; innovation RMS and
-    NIS over the whole run after the first second."""
+    NIS over the whole run after the first second.  The replay, innovation and NIS count
+    the first REST_COUNTED_S of each rest at the surface only (counted_samples)."""
     fh = res.force_hat.astype(np.float64)
     meas = sc.force_n
     cyc = cycle_index(sc.depth_mm)
@@ -151,7 +167,8 @@ def metrics(sc: Scenario, res: RunResult, cycle: int = -1) -> dict[str, Array]:
     in_cycle = cyc == c
     phase = np.where(in_cycle, sc.phase, 0)
     ins, ret = phase_mask(phase, 1), phase_mask(phase, 3)
-    after1 = sc.t_s >= 1.0
+    counted = counted_samples(sc.t_s, sc.phase)
+    after1 = (sc.t_s >= 1.0) & counted
     err = meas - fh
     out = {
         "rmse_ins_n": np.sqrt(np.mean(err[:, ins] ** 2, axis=1)),
@@ -163,7 +180,9 @@ def metrics(sc: Scenario, res: RunResult, cycle: int = -1) -> dict[str, Array]:
     first = cyc == 0
     replay, _ = simulate_force(res.per_cycle[c], sc.t_s[first], sc.depth_mm[first],
                                sc.velocity_mm_s[first])
-    out["replay_mae_n"] = np.mean(np.abs(replay - sc.force_true_n[None, first]), axis=1)
+    scored = counted[first]
+    truth = sc.force_true_n[first][scored]
+    out["replay_mae_n"] = np.mean(np.abs(replay[:, scored] - truth[None, :]), axis=1)
     out["finite"] = np.all(np.isfinite(fh), axis=1) & np.all(np.isfinite(res.params), axis=(0, 1))
     return out
 

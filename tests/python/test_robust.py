@@ -53,3 +53,21 @@ def test_ldlt_solve_flags_indefinite():
     m = [[F64.arr([1.0]), F64.arr([2.0])], [F64.arr([2.0]), F64.arr([1.0])]]
     x, ok = ldlt_solve(F64, m, [F64.arr([1.0]), F64.arr([1.0])])
     assert not ok[0] and x[0][0] == 0.0 and x[1][0] == 0.0
+
+
+def test_metrics_count_the_same_rest_however_long_the_wait():
+    """Multi-cycle quality runs rest at the surface until the refinement is adopted (8.6 s at
+    200 Hz); the metrics count the first 0.1 s of each rest only, as with the trajectory's
+    default rest, so air samples do not dilute the innovation or the replay."""
+    from reference_py.robust import RobustConfig
+    from reference_py.sim.trajectory import TrajectorySpec, lspb_profile
+    from reference_py.tools.evaluation import counted_samples
+    assert RobustConfig().slices() == 1710
+    short = lspb_profile(TrajectorySpec(cycles=3))
+    long = lspb_profile(TrajectorySpec(cycles=3, rest_s=8.6))
+    c_short = counted_samples(short[0], short[3])
+    c_long = counted_samples(long[0], long[3])
+    assert c_short.all()                              # the default rest: every sample counts
+    assert c_long.sum() == len(short[0]) == 6801      # the same number of samples ...
+    np.testing.assert_allclose(long[1][c_long], short[1], rtol=0, atol=1e-9)  # same depths
+    assert not np.any(long[1][~c_long] > 0.0)         # and only air is left out

@@ -49,8 +49,8 @@ def test_refines_once_per_insertion_and_restarts_the_bank():
     p = PRESET.params
     start = p.with_values(sigma0=p.sigma0 * 1.6, sigma1=p.sigma1 / 1.6, sigma2=p.sigma2 * 1.6,
                           f1=p.f1 * 1.6, beta=p.beta / 1.6).as_list()
-    # the whole refinement in the step that ends the insertion (slice_entries 0): 22 slices of
-    # the default size would outlast the 0.1 s at the surface between the two insertions
+    # the whole refinement in the step that ends the insertion (slice_entries 0): 2 090 slices
+    # of the default size would outlast the 0.1 s at the surface between the two insertions
     est = rb.RobustEstimator(F64, default_config(), [start],
                              rb.RobustConfig(fit_iterations=10, slice_entries=0))
     assert est.slices() == 1
