@@ -86,9 +86,10 @@
  *   96: 3232 (float, +2320) / 6272 (double, +4568), of which the buffer of
  *   96 x 4 reals is 1536 / 3072, the LM workspace (J^T J and J^T r at the current and the
  *   trial point, both parameter vectors) 384 / 768 and the sliced refinement's state 192 /
- *   344 (the simulation's model, kept from its start, 48 / 96 of it).  The refinement's deepest stack path (nte_step -> nte_robust_step -> a slice -> rk3)
- *   adds about 0.8 KiB (float) / 1.2 KiB (double) below nte_step's own frame (x86-64 gcc -O2
- *   -fstack-usage; 1.2 / 1.9 KiB while the refinement ran in one call).
+ *   344 (the simulation's model, kept from its start, 48 / 96 of it).  The refinement's
+ *   deepest stack path (nte_step -> nte_robust_step -> a slice -> rk3) adds about 0.8 KiB
+ *   (float) / 1.2 KiB (double) below nte_step's own frame (x86-64 gcc -O2 -fstack-usage;
+ *   1.2 / 1.9 KiB while the refinement ran in one call).
  *   The library never allocates, has no global or static mutable state and no recursion; all
  *   working memory is the instance plus a fixed, small stack frame (measure it with
  *   -fstack-usage).  Several instances may coexist.
@@ -139,10 +140,9 @@
  *   slice_entries 0 fits within the step that ends the insertion.  An insertion that begins
  *   before the fit is adopted is neither recorded nor refined (the buffer still holds the
  *   last one: one buffer of RAM; a snapshot would need 1 536 B more, which the board's 8 KiB
- *   do not have); a fit
- *   that ends while the parameters are held (nte_set_frozen) or in predict-only mode is
- *   dropped, so neither ever moves a parameter.  Reference: robust.py fits at once and adopts
- *   at the same sample (RobustEstimator.slices), bit for bit.
+ *   do not have); a fit that ends while the parameters are held (nte_set_frozen) or in
+ *   predict-only mode is dropped, so neither ever moves a parameter.  Reference: robust.py
+ *   fits at once and adopts at the same sample (RobustConfig.slices), bit for bit.
  *   Model III: refused (nte_init returns nte_err_bad_estimator).  The refinement's batch fit
  *   simulates Models I and II only; Model III would need the direction state and both
  *   relaxation memories in that simulation, their sensitivities to the nine-parameter fit
