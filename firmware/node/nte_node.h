@@ -177,8 +177,8 @@
  *   socket with a timeout of nte_node_next_deadline_us).
  *
  * MEMORY MODEL
- *   The caller owns the instance (sizeof(nte_node_t) is 5304 bytes on x86-64 with the default
- *   sizes: the estimator nte_t 3184, three estimator configurations 3 x 336, the queues):
+ *   The caller owns the instance (sizeof(nte_node_t) is 5352 bytes on x86-64 with the default
+ *   sizes: the estimator nte_t 3232, three estimator configurations 3 x 336, the queues):
  *   no allocation, no global or static mutable state; queues are fixed arrays in the instance
  *   (sizes NTE_NODE_DEPTH_HISTORY and NTE_NODE_FORCE_QUEUE below, compile-time).
  *
