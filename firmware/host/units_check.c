@@ -25,14 +25,6 @@ static double median(double* v, const size_t n)
     return ((n % 2U) != 0U) ? v[h] : ((v[h - 1U] + v[h]) / 2.0);
 }
 
-/* A sample taken while inserting (the force's sign is judged on those): a force, the stage
- * moving in, the depth beyond 0. */
-static int is_inserting(const nte_trial_t* tr, const size_t k)
-{
-    return isfinite(tr->force_n[k]) && (tr->velocity_mm_s[k] > NTE_UNITS_INSERTING_SPEED_MM_S) &&
-           (tr->depth_mm[k] > 0.0);
-}
-
 /* A sample taken while the stage moves either way (the direction of the insertion is judged on
  * those): a force, the speed above the inserting one. */
 static int is_moving(const nte_trial_t* tr, const size_t k)
@@ -43,6 +35,82 @@ static int is_moving(const nte_trial_t* tr, const size_t k)
 
 /* np.mean of a boolean array: the share of true. */
 static double share(const size_t count, const size_t n) { return (double)count / (double)n; }
+
+/* The tare: the median of the first TARE_SAMPLES forces (a record as measured starts in the
+ * air), 0 without any.  v: n scratch values. */
+static double tare_of(const nte_trial_t* tr, double* v)
+{
+    size_t m = 0U;
+    for (size_t k = 0U; (k < tr->n) && (m < NTE_UNITS_TARE_SAMPLES); k++) {
+        if (isfinite(tr->force_n[k])) {
+            v[m++] = tr->force_n[k];
+        }
+    }
+    return (m > 0U) ? median(v, m) : 0.0;
+}
+
+/* csvio._negative_while_inserting: the force less its tare, judged on the samples taken while
+ * inserting (a force, the stage moving in, the depth beyond 0) that depart from the tare by more than SIGN_DEPART_SHARE of the largest departure
+ * there -- their median negative is the sensor's opposite sign.  `way` -1 reads the depth (and
+ * so the velocity) the other way.  Returns 1 and the share of negative forces, or 0 when the
+ * median is not negative or too few samples say.  v: n scratch values. */
+static int negative_while_inserting(const nte_trial_t* tr, const double tare, const double way,
+                                    double* v, double* negative_share)
+{
+    size_t inserting = 0U;
+    double top = 0.0;
+    for (size_t k = 0U; k < tr->n; k++) {
+        if (isfinite(tr->force_n[k]) &&
+            ((way * tr->velocity_mm_s[k]) > NTE_UNITS_INSERTING_SPEED_MM_S) &&
+            ((way * tr->depth_mm[k]) > 0.0)) {
+            inserting++;
+            const double dev = fabs(tr->force_n[k] - tare);
+            top = (dev > top) ? dev : top;
+        }
+    }
+    if (inserting < NTE_UNITS_INSERTING_MIN_SAMPLES) {
+        return 0;
+    }
+    size_t m = 0U;
+    size_t negative = 0U;
+    for (size_t k = 0U; k < tr->n; k++) {
+        const double rel = tr->force_n[k] - tare;
+        if (isfinite(tr->force_n[k]) &&
+            ((way * tr->velocity_mm_s[k]) > NTE_UNITS_INSERTING_SPEED_MM_S) &&
+            ((way * tr->depth_mm[k]) > 0.0) && (fabs(rel) > (NTE_UNITS_SIGN_DEPART_SHARE * top))) {
+            v[m++] = rel;
+            negative += (rel < 0.0) ? 1U : 0U;
+        }
+    }
+    if ((m < NTE_UNITS_INSERTING_MIN_SAMPLES) || (median(v, m) >= 0.0)) {
+        return 0;
+    }
+    *negative_share = share(negative, m);
+    return 1;
+}
+
+/* csvio._sign_advice: the options that turn the depth's and/or the force's sign over from the
+ * reading `u` gives -- a sign not given is added, one given is dropped. */
+static void sign_advice(const nte_units_t* u, const int depth, const int force, char* buf,
+                        size_t cap)
+{
+    char add[64] = "";
+    char drop[64] = "";
+    if (depth) {
+        (void)strncat((u->depth_sign == -1) ? drop : add, "--depth-sign -1", 31U);
+    }
+    if (force) {
+        char* to = (u->force_sign == -1) ? drop : add;
+        (void)strncat(to, (to[0] != '\0') ? " --force-sign -1" : "--force-sign -1", 31U);
+    }
+    if ((add[0] != '\0') && (drop[0] != '\0')) {
+        (void)snprintf(buf, cap, "convert with %s and read it without %s", add, drop);
+    } else if (add[0] != '\0') {
+        (void)snprintf(buf, cap, "convert with %s", add);
+    } else {
+        (void)snprintf(buf, cap, "read it without %s", drop);
+    }
+}
 
 static double force_unit(const char* name)
 {
@@ -98,9 +166,11 @@ static int check_time(const char* path, const nte_trial_t* tr, const nte_units_t
     return 0;
 }
 
-/* Rules 2 and 3: a stroke under a millimetre (metres read as mm), mostly negative depths. */
-static int check_depth(const char* path, const nte_trial_t* tr, const nte_units_t* u, char* err,
-                       size_t es)
+/* Rules 2 and 3: a stroke under a millimetre (metres read as mm), mostly negative depths --
+ * with the force too when, read that way, it would be negative while inserting (one message,
+ * not two in turn).  v: n scratch values. */
+static int check_depth(const char* path, const nte_trial_t* tr, const nte_units_t* u,
+                       const double tare, double* v, char* err, size_t es)
 {
     double lo = tr->depth_mm[0];
     double hi = tr->depth_mm[0];
@@ -124,10 +194,21 @@ static int check_depth(const char* path, const nte_trial_t* tr, const nte_units_
     }
     const double ns = share(neg, tr->n);
     if ((ns > NTE_UNITS_NEGATIVE_DEPTH_SHARE) && (u->depth_sign == 1)) {
+        double both = 0.0;
+        const int force_too = negative_while_inserting(tr, tare, -1.0, v, &both);
+        char also[160] = "";
+        char advice[96];
+        if (force_too) {
+            (void)snprintf(also, sizeof also,
+                           ", and the force with it (read that way, the force less its tare "
+                           "is negative in %.0f %% of the samples taken while inserting)",
+                           100.0 * both);
+        }
+        sign_advice(u, 1, force_too, advice, sizeof advice);
         (void)snprintf(err, es,
                        "%s: column '%s': %.0f %% of the depths are negative (down to "
-                       "%.4g mm): probably measured the other way: convert with --depth-sign -1",
-                       path, u->columns.depth, 100.0 * ns, lo);
+                       "%.4g mm): probably measured the other way%s: %s",
+                       path, u->columns.depth, 100.0 * ns, lo, also, advice);
         return -1;
     }
     if (ns > NTE_UNITS_NEGATIVE_DEPTH_SHARE) {
@@ -177,7 +258,7 @@ static int check_direction(const char* path, const nte_trial_t* tr, const nte_un
             against += ((tr->velocity_mm_s[k] < 0.0) && (rel > 0.0)) ? 1U : 0U;
         }
     }
-    if ((seen < NTE_UNITS_INSERTING_MIN_SAMPLES) || ((2U * against) <= seen)) {
+    if (seen < NTE_UNITS_INSERTING_MIN_SAMPLES) {
         return 0;
     }
     /* the median of the last TARE_SAMPLES forces, and the tare's median absolute deviation */
@@ -196,14 +277,52 @@ static int check_direction(const char* path, const nte_trial_t* tr, const nte_un
     }
     const double mad = median(v, m);
     const int in_air = fabs(end - tare) <= (NTE_UNITS_SIGN_DEPART_SHARE * top);
-    if ((top > (NTE_UNITS_DEPARTURE_MADS * mad)) && in_air) {
+    if (!((top > (NTE_UNITS_DEPARTURE_MADS * mad)) && in_air)) {
+        return 0;
+    }
+    char advice[96];
+    if ((2U * against) > seen) {
+        sign_advice(u, 1, 0, advice, sizeof advice);
         (void)snprintf(err, es,
                        "%s: column '%s': the force first rises from its tare while the depth "
                        "decreases (from %.4g s, at %.4g mm): a needle goes in towards larger "
                        "depths: probably measured the other way: %s",
-                       path, u->columns.depth, tr->t_s[first], tr->depth_mm[first],
-                       (u->depth_sign == 1) ? "convert with --depth-sign -1"
-                                            : "read it without --depth-sign -1");
+                       path, u->columns.depth, tr->t_s[first], tr->depth_mm[first], advice);
+        return -1;
+    }
+    /* The same stage with the sensor inverted too: the force first *falls* while the depth
+     * decreases (of the first INSERTING_MIN_SAMPLES samples that depart, moving or not), and
+     * last departs while the depth grows (the needle leaving).  A correct record read from its
+     * reversal on also first falls while the depth decreases, but it leaves the tissue the same
+     * way: its last departures are still taken while the depth decreases. */
+    size_t early = 0U;
+    size_t falling = 0U;
+    size_t k0 = 0U;
+    for (size_t k = 0U; (k < tr->n) && (early < NTE_UNITS_INSERTING_MIN_SAMPLES); k++) {
+        const double rel = tr->force_n[k] - tare;
+        if (isfinite(tr->force_n[k]) && (fabs(rel) > (NTE_UNITS_SIGN_DEPART_SHARE * top))) {
+            k0 = (early == 0U) ? k : k0;
+            early++;
+            falling += ((tr->velocity_mm_s[k] < 0.0) && (rel < 0.0)) ? 1U : 0U;
+        }
+    }
+    size_t late = 0U;
+    size_t leaving = 0U;
+    for (size_t k = tr->n; (k > 0U) && (late < NTE_UNITS_INSERTING_MIN_SAMPLES); k--) {
+        const double rel = tr->force_n[k - 1U] - tare;
+        if (isfinite(tr->force_n[k - 1U]) && (fabs(rel) > (NTE_UNITS_SIGN_DEPART_SHARE * top))) {
+            late++;
+            leaving += (tr->velocity_mm_s[k - 1U] > 0.0) ? 1U : 0U;
+        }
+    }
+    if (((2U * falling) > early) && ((2U * leaving) > late)) {
+        sign_advice(u, 1, 1, advice, sizeof advice);
+        (void)snprintf(err, es,
+                       "%s: column '%s': the force first falls from its tare while the depth "
+                       "decreases (from %.4g s, at %.4g mm): a needle goes in towards larger "
+                       "depths and pushes the force up: probably both the depth and the force "
+                       "measured the other way: %s",
+                       path, u->columns.depth, tr->t_s[k0], tr->depth_mm[k0], advice);
         return -1;
     }
     return 0;
@@ -214,7 +333,7 @@ static int check_direction(const char* path, const nte_trial_t* tr, const nte_un
  * Between the last two, rule 5b (check_direction): the depth running the other way.
  * v: n scratch values. */
 static int check_force(const char* path, const nte_trial_t* tr, const nte_units_t* u,
-                       const nte_limits_t* lim, double* v, char* err, size_t es)
+                       const nte_limits_t* lim, const double tare, double* v, char* err, size_t es)
 {
     const double fmax = lim->force_max_n;
     size_t present = 0U;
@@ -253,46 +372,20 @@ static int check_force(const char* path, const nte_trial_t* tr, const nte_units_
                        path, tr->line[kpeak], u->columns.force, tr->force_n[kpeak], fmax);
         return -1;
     }
-    /* judged on the force less its tare (the median of the first forces), where it departs
-     * from the tare: a record starts in the air, and a negative tare over a long air gap is no
-     * sign */
-    size_t m = 0U;
-    for (size_t k = 0U; (k < tr->n) && (m < NTE_UNITS_TARE_SAMPLES); k++) {
-        if (isfinite(tr->force_n[k])) {
-            v[m++] = tr->force_n[k];
-        }
-    }
-    const double tare = (m > 0U) ? median(v, m) : 0.0;
+    /* judged on the force less its tare, where it departs from the tare: a record starts in
+     * the air, and a negative tare over a long air gap is no sign */
     if (check_direction(path, tr, u, tare, v, err, es) != 0) {
         return -1;
     }
-    size_t inserting = 0U;
-    double top = 0.0;
-    for (size_t k = 0U; k < tr->n; k++) {
-        if (is_inserting(tr, k)) {
-            inserting++;
-            const double dev = fabs(tr->force_n[k] - tare);
-            top = (dev > top) ? dev : top;
-        }
-    }
-    if (inserting < NTE_UNITS_INSERTING_MIN_SAMPLES) {
-        return 0;
-    }
-    m = 0U;
-    size_t negative = 0U;
-    for (size_t k = 0U; k < tr->n; k++) {
-        const double rel = tr->force_n[k] - tare;
-        if (is_inserting(tr, k) && (fabs(rel) > (NTE_UNITS_SIGN_DEPART_SHARE * top))) {
-            v[m++] = rel;
-            negative += (rel < 0.0) ? 1U : 0U;
-        }
-    }
-    if ((m >= NTE_UNITS_INSERTING_MIN_SAMPLES) && (median(v, m) < 0.0)) {
+    double negative = 0.0;
+    if (negative_while_inserting(tr, tare, 1.0, v, &negative)) {
+        char advice[96];
+        sign_advice(u, 0, 1, advice, sizeof advice);
         (void)snprintf(err, es,
                        "%s: column '%s': the force less its tare (%.4g N) is negative "
                        "in %.0f %% of the samples taken while inserting: probably the sensor's "
-                       "opposite sign: convert with --force-sign -1",
-                       path, u->columns.force, tare, 100.0 * share(negative, m));
+                       "opposite sign: %s",
+                       path, u->columns.force, tare, 100.0 * negative, advice);
         return -1;
     }
     return 0;
@@ -333,9 +426,10 @@ int nte_units_check(const char* path, const nte_trial_t* tr, const nte_units_t* 
         (void)snprintf(err, es, "%s: out of memory", path);
         return -1;
     }
+    const double tare = tare_of(tr, scratch);
     const int rc = ((check_time(path, tr, u, lim, scratch, err, es) != 0) ||
-                    (check_depth(path, tr, u, err, es) != 0) ||
-                    (check_force(path, tr, u, lim, scratch, err, es) != 0) ||
+                    (check_depth(path, tr, u, tare, scratch, err, es) != 0) ||
+                    (check_force(path, tr, u, lim, tare, scratch, err, es) != 0) ||
                     (check_ranges(path, tr, lim, err, es) != 0))
                        ? -1
                        : 0;

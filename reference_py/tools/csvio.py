@@ -376,19 +376,29 @@ def check_units(tr: "Trial", units: Units = Units(), limits: Limits = Limits()) 
                 else "no insertion")
         raise UnitsError(f"{name}: column '{cd}': the depth spans only {stroke:.4g} mm "
                          f"(less than {MIN_STROKE_MM:g} mm): {hint}")
+    f = tr.force_n
+    present = np.isfinite(f)
+    # the force is judged less its tare, where it departs from the tare: a record starts
+    # in the air, and a negative tare over a long air gap is no sign
+    tare = float(np.median(f[present][:TARE_SAMPLES])) if np.any(present) else 0.0
+    rel = np.where(present, f - tare, 0.0)
     neg = float(np.mean(d < 0.0))
     if neg > NEGATIVE_DEPTH_SHARE:
         if units.depth_sign == 1:
+            # read the other way, would the force still be pulled while inserting?  Then
+            # both columns are: one message, not two in turn
+            both = _negative_while_inserting(rel, present, -tr.velocity_mm_s, -d)
+            also = "" if both is None else (
+                f", and the force with it (read that way, the force less its tare is negative "
+                f"in {_pct(both)} of the samples taken while inserting)")
             raise UnitsError(f"{name}: column '{cd}': {_pct(neg)} of the depths are negative "
                              f"(down to {float(np.min(d)):.4g} mm): probably measured the "
-                             f"other way: convert with --depth-sign -1")
+                             f"other way{also}: {_sign_advice(units, True, both is not None)}")
         # the sign was given: a stage that counts down to the tissue from a positive origin
         raise UnitsError(f"{name}: column '{cd}': {_pct(neg)} of the depths are negative with "
                          f"--depth-sign -1 (down to {float(np.min(d)):.4g} mm): the stage "
                          f"counts from an origin beyond the tissue: subtract its start so the "
                          f"needle starts at 0 mm or above")
-    f = tr.force_n
-    present = np.isfinite(f)
     fa = np.abs(f[present])
     if len(fa):
         out = float(np.mean(fa > fmax))
@@ -405,21 +415,13 @@ def check_units(tr: "Trial", units: Units = Units(), limits: Limits = Limits()) 
             line = f":{tr.lines[k]}" if tr.lines else ""
             raise UnitsError(f"{name}{line}: column '{cf}': {float(f[k]):.4g} N is not a "
                              f"plausible force (the configured range is ±{fmax:g} N)")
-        # the force is judged less its tare, where it departs from the tare: a record starts
-        # in the air, and a negative tare over a long air gap is no sign
-        tare = float(np.median(f[present][:TARE_SAMPLES]))
-        rel = np.where(present, f - tare, 0.0)
         _check_direction(tr, units, cd, tare, rel, present)
-        inserting = present & (tr.velocity_mm_s > INSERTING_SPEED_MM_S) & (d > 0.0)
-        if np.count_nonzero(inserting) >= INSERTING_MIN_SAMPLES:
-            top = float(np.max(np.abs(rel[inserting])))
-            judged = inserting & (np.abs(rel) > SIGN_DEPART_SHARE * top)
-            fi = rel[judged]
-            if len(fi) >= INSERTING_MIN_SAMPLES and float(np.median(fi)) < 0.0:
-                raise UnitsError(f"{name}: column '{cf}': the force less its tare ({tare:.4g} "
-                                 f"N) is negative in {_pct(float(np.mean(fi < 0.0)))} of the "
-                                 f"samples taken while inserting: probably the sensor's "
-                                 f"opposite sign: convert with --force-sign -1")
+        share = _negative_while_inserting(rel, present, tr.velocity_mm_s, d)
+        if share is not None:
+            raise UnitsError(f"{name}: column '{cf}': the force less its tare ({tare:.4g} "
+                             f"N) is negative in {_pct(share)} of the samples taken while "
+                             f"inserting: probably the sensor's opposite sign: "
+                             f"{_sign_advice(units, False, True)}")
     bad = ((d < limits.depth_min_mm) | (d > limits.depth_max_mm)
            | (np.abs(tr.velocity_mm_s) > limits.speed_max_mm_s)
            | (present & (np.abs(np.where(present, f, 0.0)) > fmax)))
@@ -430,6 +432,35 @@ def check_units(tr: "Trial", units: Units = Units(), limits: Limits = Limits()) 
                          f"{limits.depth_min_mm:g}..{limits.depth_max_mm:g} mm, speed "
                          f"±{limits.speed_max_mm_s:g} mm/s, force ±{fmax:g} N): check the "
                          f"units (--time-unit, --depth-unit, --force-unit) and signs")
+
+
+def _negative_while_inserting(rel: np.ndarray, present: np.ndarray, v: np.ndarray,
+                              d: np.ndarray) -> float | None:
+    """The share of negative forces (``rel``: less the tare) among the samples taken while
+    inserting (velocity ``v`` above INSERTING_SPEED_MM_S at depth ``d`` > 0) that depart from
+    the tare by more than SIGN_DEPART_SHARE of the largest departure there, if their median is
+    negative (the sensor's opposite sign); None if it is not, or too few samples say."""
+    inserting = present & (v > INSERTING_SPEED_MM_S) & (d > 0.0)
+    if np.count_nonzero(inserting) < INSERTING_MIN_SAMPLES:
+        return None
+    top = float(np.max(np.abs(rel[inserting])))
+    fi = rel[inserting & (np.abs(rel) > SIGN_DEPART_SHARE * top)]
+    if len(fi) < INSERTING_MIN_SAMPLES or float(np.median(fi)) >= 0.0:
+        return None
+    return float(np.mean(fi < 0.0))
+
+
+def _sign_advice(units: Units, depth: bool, force: bool) -> str:
+    """The options that turn the depth's and/or the force's sign over from ``units``' reading:
+    a sign not given is added, one given is dropped."""
+    add, drop = [], []
+    for turn, option, given in ((depth, "--depth-sign -1", units.depth_sign == -1),
+                                (force, "--force-sign -1", units.force_sign == -1)):
+        if turn:
+            (drop if given else add).append(option)
+    said = ([f"convert with {' '.join(add)}"] if add else []) + \
+        ([f"read it without {' '.join(drop)}"] if drop else [])
+    return " and ".join(said)
 
 
 def _check_direction(tr: "Trial", units: Units, column: str, tare: float, rel: np.ndarray,
@@ -469,13 +500,28 @@ def _check_direction(tr: "Trial", units: Units, column: str, tare: float, rel: n
     in_air = abs(end - tare) <= SIGN_DEPART_SHARE * top
     if top > DEPARTURE_MADS * mad and in_air and 2 * against > len(first):
         k = int(first[0])
-        hint = ("convert with --depth-sign -1" if units.depth_sign == 1 else
-                "read it without --depth-sign -1")
         raise UnitsError(f"{tr.path}: column '{column}': the force "
                          f"first rises from its tare while the depth decreases (from "
                          f"{float(tr.t_s[k]):.4g} s, at {float(tr.depth_mm[k]):.4g} mm): a "
                          f"needle goes in towards larger depths: probably measured the other "
-                         f"way: {hint}")
+                         f"way: {_sign_advice(units, True, False)}")
+    # The same stage with the sensor inverted too: the force first *falls* while the depth
+    # decreases, and last departs from its tare while the depth grows (the needle leaving).
+    # A correct record read from its reversal on (a node restarted there) also first falls
+    # while the depth decreases, but it leaves the tissue the same way: its last departures
+    # are still taken while the depth decreases.
+    departing = np.flatnonzero(present & (np.abs(rel) > SIGN_DEPART_SHARE * top))
+    early, late = departing[:INSERTING_MIN_SAMPLES], departing[-INSERTING_MIN_SAMPLES:]
+    falling = int(np.count_nonzero((v[early] < 0.0) & (rel[early] < 0.0)))
+    leaving = int(np.count_nonzero(v[late] > 0.0))
+    if (len(early) == INSERTING_MIN_SAMPLES and top > DEPARTURE_MADS * mad and in_air
+            and 2 * falling > len(early) and 2 * leaving > len(late)):
+        k = int(early[0])
+        raise UnitsError(f"{tr.path}: column '{column}': the force first falls from its tare "
+                         f"while the depth decreases (from {float(tr.t_s[k]):.4g} s, at "
+                         f"{float(tr.depth_mm[k]):.4g} mm): a needle goes in towards larger "
+                         f"depths and pushes the force up: probably both the depth and the "
+                         f"force measured the other way: {_sign_advice(units, True, True)}")
 
 
 def read_trial(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,

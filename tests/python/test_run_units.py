@@ -357,3 +357,74 @@ def test_a_stage_counting_down_is_named_alike(tmp_path, seed):
         assert reference(cut, out, "--model", "2").returncode == 0, frac
         for prog in PROGS:
             assert c_run(prog, cut, out, "--model", "2").returncode == 0, (prog, frac)
+
+
+@pytest.mark.parametrize("seed", [26, 29])
+def test_both_columns_the_other_way_are_named_at_once(tmp_path, seed):
+    """A measured-like record with the sensor inverted as well as the depth: the stage counting
+    down from 120 mm (the force first *falls* while the depth decreases) or the depth negative.
+    Both signs are named in one message, the advice follows the options given (a sign given is
+    dropped, not added twice), and with both options the record reads as the correct one: the
+    same estimates, byte for byte.  All three programs alike."""
+    from config_loop_figures import write_record
+    from discrepancy_measured_like import make_trial
+    tr = make_trial(seed)[0]
+    good, down, negative = (tmp_path / f"{n}.csv" for n in ("good", "down", "negative"))
+    write_record(good, tr.t_s, tr.depth_mm, tr.force_n)
+    write_record(down, tr.t_s, 120.0 - tr.depth_mm, -tr.force_n)
+    write_record(negative, tr.t_s, -tr.depth_mm, -tr.force_n)
+    out = tmp_path / "est.csv"
+    both = "probably both the depth and the force measured the other way: "
+    cases = [
+        (down, [], "the force first falls from its tare while the depth decreases",
+         both + "convert with --depth-sign -1 --force-sign -1"),
+        (down, ["--force-sign", "-1"], "the force first rises from its tare",
+         "measured the other way: convert with --depth-sign -1"),
+        (down, ["--depth-sign", "-1", "--force-sign", "-1"], "with --depth-sign -1 (down to "
+         "-120 mm): the stage counts from an origin beyond the tissue",
+         "subtract its start so the needle starts at 0 mm or above"),
+        (negative, [], "and the force with it (read that way, the force less its tare is "
+         "negative in", "convert with --depth-sign -1 --force-sign -1"),
+        (negative, ["--force-sign", "-1"], "of the depths are negative (down to -",
+         "probably measured the other way: convert with --depth-sign -1"),
+        (good, ["--force-sign", "-1"], "probably the sensor's opposite sign",
+         "read it without --force-sign -1"),
+    ]
+    for path, flags, says, ends in cases:
+        r = reference(path, out, "--model", "2", *flags)
+        assert r.returncode == 2 and says in r.stderr, (path.name, flags, r.stderr)
+        want = body(r.stderr, "nte-ref")
+        assert want.endswith(ends), (path.name, flags, want)
+        for prog in PROGS:
+            c = c_run(prog, path, out, "--model", "2", *flags)
+            assert c.returncode == 2 and body(c.stderr, prog) == want, (prog, c.stderr)
+    expected = tmp_path / "good_est.csv"
+    assert reference(good, expected, "--model", "2").returncode == 0
+    r = reference(negative, out, "--model", "2", "--depth-sign", "-1", "--force-sign", "-1")
+    assert r.returncode == 0, r.stderr
+    assert out.read_bytes() == expected.read_bytes()
+
+
+def test_correct_records_that_first_fall_while_retracting_are_read(tmp_path):
+    """What the inverted-stage rule must not take: a `lab` phantom record read from its
+    reversal on (the force first falls while the depth decreases, and it leaves the tissue the
+    same way), and a blind case inserted slower than the readers' moving speed whose largest
+    departure is the retraction's pull.  Accepted by all three programs."""
+    import discrepancy_generator as dg
+    from config_loop_figures import write_record
+    from discrepancy_measured_like import phantom_trial
+    lab = phantom_trial("lab", 2102)[0]
+    k = int(0.6 * len(lab.t_s))
+    slow = dg.make_case("dwell_relaxation/maxwell_total", 1).trials[0]
+    out = tmp_path / "est.csv"
+    for name, t, x, f in (("lab-from-reversal", lab.t_s[k:], lab.depth_mm[k:], lab.force_n[k:]),
+                          ("slow", slow.t_s, slow.depth_mm, slow.force_n)):
+        path = tmp_path / f"{name}.csv"
+        write_record(path, t, x, f)
+        rel = f - np.median(f[:20])
+        first = np.flatnonzero(np.abs(rel) > 0.1 * np.max(np.abs(rel)))[0]
+        assert rel[first] < 0.0 and x[first + 1] < x[first], name   # it does first fall so
+        r = reference(path, out, "--model", "2")
+        assert r.returncode == 0, (name, r.stderr)
+        for prog in PROGS:
+            assert c_run(prog, path, out, "--model", "2").returncode == 0, (prog, name)

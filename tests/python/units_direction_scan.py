@@ -7,8 +7,8 @@ two cycles and 30 s holds, the measured-like generator's forms (seeds 1-59: as g
 stage that backs off, stick-slip, 50 and 200 Hz, 50 mN of noise, a tear over 1 mm, weak
 membranes, no membrane) and the blind generator's cases (every kind, three each); so must
 the same records cut to start at 20-80 % of their samples (inside the tissue, mid-retraction,
-or in the air after the exit).  Records whose stage counts down from 120 mm must be named.
-Prints the three counts (about 2 min on one core)."""
+or in the air after the exit).  Records whose stage counts down from 120 mm must be named,
+with the sensor inverted too.  Prints the four counts (about 2 min on one core)."""
 from __future__ import annotations
 
 import sys
@@ -28,7 +28,7 @@ PRESETS = ("skin-incision", "skin-on-muscle", "muscle", "skin", "artery-filled")
 FORMS = [{}, {"unload_mm": 0.5}, {"stick_slip": True}, {"rate_hz": 50.0}, {"rate_hz": 200.0},
          {"noise": 0.05}, {"release_mm": 1.0}, {"rupture_scale": 0.3}, {"n_layers": 0}]
 CUTS = (0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8)
-#: the words of the direction rule's refusal
+#: the words of the direction rules' refusals (the force rising or falling first)
 NAMED = "while the depth decreases"
 
 
@@ -93,10 +93,12 @@ def main() -> int:
     down = [(f"measured-like-{s}", make_trial(s)[0]) for s in range(1, 40)]
     down += [(f"{p}-{s}", phantom_trial(p, s)[0]) for p in PRESETS for s in range(1, 6)]
     named = sum(_named(f, tr.t_s, 120.0 - tr.depth_mm, tr.force_n) for _, tr in down)
+    both = sum(_named(f, tr.t_s, 120.0 - tr.depth_mm, -tr.force_n) for _, tr in down)
     print(f"correct records refused: {len(refused)} of {n_correct} {refused or ''}")
     print(f"correct records cut to start at 20-80 %, refused: {len(cut)} of {n_cut} {cut or ''}")
     print(f"stages counting down from 120 mm, named: {named} of {len(down)}")
-    return 0 if not refused and not cut and named == len(down) else 1
+    print(f"... with the sensor inverted too, named: {both} of {len(down)}")
+    return 0 if not refused and not cut and named == both == len(down) else 1
 
 
 if __name__ == "__main__":
