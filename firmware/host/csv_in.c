@@ -600,9 +600,14 @@ void nte_trial_convert(nte_trial_t* tr, const nte_units_t* u)
     const double kd = u->depth_factor * (double)u->depth_sign;
     const double kf = u->force_factor * (double)u->force_sign;
     const double kv = kd / kt;
+    /* the reference adds no offset of 0 (a depth of -0.0 stays -0.0) */
+    const int offset = (u->depth_offset_mm < 0.0) || (u->depth_offset_mm > 0.0);
     for (size_t k = 0U; k < tr->n; k++) {
         tr->t_s[k] *= kt;
         tr->depth_mm[k] *= kd;
+        if (offset) {
+            tr->depth_mm[k] += u->depth_offset_mm;
+        }
         tr->force_n[k] *= kf;
         if (tr->velocity_given != 0) {
             tr->velocity_mm_s[k] *= kv;

@@ -50,8 +50,9 @@ typedef struct nte_units_t {
     double depth_factor; /**< to mm */
     int force_sign;      /**< +1 or -1 */
     int depth_sign;
-    int check;             /**< 0: --no-units-check */
-    nte_columns_t columns; /**< which columns are read (the messages name them so) */
+    double depth_offset_mm; /**< added to the depth after its factor and sign, mm */
+    int check;              /**< 0: --no-units-check */
+    nte_columns_t columns;  /**< which columns are read (the messages name them so) */
 } nte_units_t;
 
 /** Read `path`'s standard columns.  On error returns -1 and writes "FILE:LINE: ..." (no

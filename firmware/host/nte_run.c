@@ -11,7 +11,7 @@
  *           [--contact on|off] [--surface MM] [--config FILE.json] [--predict-only]
  *           [--start NAME=VALUE,...] [--noise N] [--export-config FILE.json]
  *           [--force-unit N|mN] [--time-unit s|ms|us] [--depth-unit mm|m]
- *           [--force-sign +1|-1] [--depth-sign +1|-1] [--no-units-check]
+ *           [--force-sign +1|-1] [--depth-sign +1|-1] [--depth-offset MM] [--no-units-check]
  *           [--columns t=NAME,depth=NAME,force=NAME[,velocity=NAME]] --out EST.csv
  *
  * The input is converted from its units and signs to N, s and mm and, unless
@@ -143,7 +143,7 @@ static void help(void)
            "       [--start NAME=VALUE,...] [--noise N]\n"
            "       [--export-config FILE.json] [--force-unit %s] [--time-unit %s]\n"
            "       [--depth-unit %s] [--force-sign +1|-1] [--depth-sign +1|-1]\n"
-           "       [--no-units-check] [--columns MAP] --out EST.csv\n"
+           "       [--depth-offset MM] [--no-units-check] [--columns MAP] --out EST.csv\n"
            "\n"
            "Run the estimator (C library, " PRECISION ") over a CSV of t_s, depth_mm, force_n\n"
            "(velocity_mm_s optional, else central differences of depth) and write one row per\n"
@@ -211,6 +211,10 @@ static void help(void)
            "  --force-sign +1|-1     -1: the sensor reads the insertion force as negative\n"
            "                         (default: 1)\n"
            "  --depth-sign +1|-1     -1: the depth column grows out of the tissue (default: 1)\n"
+           "  --depth-offset MM      added to the depth after --depth-unit and --depth-sign: a\n"
+           "                         stage that counts from an origin beyond the tissue (e.g.\n"
+           "                         down from 120 mm: --depth-sign -1 --depth-offset 120)\n"
+           "                         reads from 0 (default: 0)\n"
            "  --no-units-check       do not refuse implausible units or signs (default: check)\n"
            "  --columns MAP          the file's own column names, as t=NAME,depth=NAME,\n"
            "                         force=NAME[,velocity=NAME]: a logger's CSV read as it is\n"
@@ -229,7 +233,7 @@ static void help(void)
            fu, tu, du);
 }
 
-/* --force-unit, --time-unit, --depth-unit, --force-sign, --depth-sign (tools/arguments.py
+/* --force-unit, --time-unit, --depth-unit, --force-sign, --depth-sign, --depth-offset (tools/arguments.py
  * add_unit_arguments).  Returns 0 when `name` is none of them; else 1, with msg empty when
  * the value was taken, the refusal (argparse's words) when not. */
 static int unit_flag(const char* name, const char* val, nte_units_t* u, char* msg, size_t cap)
@@ -259,6 +263,20 @@ static int unit_flag(const char* name, const char* val, nte_units_t* u, char* ms
         sign = &u->force_sign;
     } else if (strcmp(name, "--depth-sign") == 0) {
         sign = &u->depth_sign;
+    } else if (strcmp(name, "--depth-offset") == 0) {
+        /* bounded(-DEPTH_OFFSET_MAX_MM, DEPTH_OFFSET_MAX_MM, " mm") of the reference's CLI */
+        const double omax = NTE_UNITS_DEPTH_OFFSET_MAX_MM;
+        char* end = NULL;
+        const double x = strtod(val, &end);
+        if ((end == val) || (*end != '\0')) {
+            (void)snprintf(msg, cap, "argument %s: not a number: '%s'", name, val);
+        } else if (!((x >= -omax) && (x <= omax))) { /* also NaN and infinities */
+            (void)snprintf(msg, cap, "argument %s: must be >= %g and <= %g mm (got %s)", name,
+                           -omax, omax, val);
+        } else {
+            u->depth_offset_mm = x;
+        }
+        return 1;
     } else {
         return 0;
     }
@@ -327,6 +345,7 @@ static int parse_args(int argc, char** argv, args_t* a)
     a->units.depth_factor = 1.0;
     a->units.force_sign = 1;
     a->units.depth_sign = 1;
+    a->units.depth_offset_mm = 0.0;
     a->units.check = 1;
     nte_columns_standard(&a->units.columns);
     a->columns = NULL;

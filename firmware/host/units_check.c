@@ -143,6 +143,60 @@ static void time_hint(double dt, const char* unit, double dt_max, char* buf, siz
     (void)snprintf(buf, cap, "too coarse for the estimator");
 }
 
+/* csvio._first_departures: the first INSERTING_MIN_SAMPLES samples taken while the stage moves
+ * (either way) where the force departs from its tare by more than SIGN_DEPART_SHARE of its
+ * largest departure while moving.  Writes their indices to first[] (room for
+ * INSERTING_MIN_SAMPLES) and that departure to *top; returns how many (fewer when too few
+ * samples move or depart). */
+static size_t first_departures(const nte_trial_t* tr, const double tare, size_t* first, double* top)
+{
+    size_t moving = 0U;
+    *top = 0.0;
+    for (size_t k = 0U; k < tr->n; k++) {
+        if (is_moving(tr, k)) {
+            moving++;
+            const double dev = fabs(tr->force_n[k] - tare);
+            *top = (dev > *top) ? dev : *top;
+        }
+    }
+    if (moving < NTE_UNITS_INSERTING_MIN_SAMPLES) {
+        return 0U;
+    }
+    size_t seen = 0U;
+    for (size_t k = 0U; (k < tr->n) && (seen < NTE_UNITS_INSERTING_MIN_SAMPLES); k++) {
+        if (is_moving(tr, k) &&
+            (fabs(tr->force_n[k] - tare) > (NTE_UNITS_SIGN_DEPART_SHARE * *top))) {
+            first[seen++] = k;
+        }
+    }
+    return seen;
+}
+
+/* csvio._offset_advice: the --depth-offset that makes the needle start at 0 mm (d0: its first
+ * depth as read with the offset given), or, beyond its range, what to do instead; with
+ * `force`, the force's sign turned over too. */
+static void offset_advice(const nte_units_t* u, const double d0, const int force, char* buf,
+                          size_t cap)
+{
+    const double offset = u->depth_offset_mm - d0;
+    if (fabs(offset) > NTE_UNITS_DEPTH_OFFSET_MAX_MM) {
+        char also[96] = "";
+        if (force) {
+            char advice[80];
+            sign_advice(u, 0, 1, advice, sizeof advice);
+            (void)snprintf(also, sizeof also, " and %s", advice);
+        }
+        (void)snprintf(buf, cap, "subtract its start so the needle starts at 0 mm or above%s",
+                       also);
+        return;
+    }
+    const int drop = force && (u->force_sign == -1);
+    (void)snprintf(buf, cap,
+                   "convert with --depth-offset %.6g%s%s (the needle then starts at 0 mm)", offset,
+                   (force && !drop) ? " --force-sign -1" : "",
+                   drop ? " and read it without --force-sign -1" : "");
+}
+
 /* Rule 1: time steps of seconds (ms or us read as s).  v: n - 1 scratch values. */
 static int check_time(const char* path, const nte_trial_t* tr, const nte_units_t* u,
                       const nte_limits_t* lim, double* v, char* err, size_t es)
@@ -193,11 +247,37 @@ static int check_depth(const char* path, const nte_trial_t* tr, const nte_units_
         return -1;
     }
     const double ns = share(neg, tr->n);
+    char advice[160];
+    if ((ns > NTE_UNITS_NEGATIVE_DEPTH_SHARE) && (u->depth_sign == 1)) {
+        /* the force first departs while the depth grows: the direction is right, the origin
+         * is not (a stage counting up from before the needle's start) -- and the force's sign
+         * too if it first falls */
+        size_t first[NTE_UNITS_INSERTING_MIN_SAMPLES];
+        double top = 0.0;
+        const size_t seen = first_departures(tr, tare, first, &top);
+        size_t grows = 0U;
+        size_t falls = 0U;
+        for (size_t i = 0U; i < seen; i++) {
+            const size_t k = first[i];
+            grows += (tr->velocity_mm_s[k] > 0.0) ? 1U : 0U;
+            falls += ((tr->velocity_mm_s[k] > 0.0) && ((tr->force_n[k] - tare) < 0.0)) ? 1U : 0U;
+        }
+        if ((seen == NTE_UNITS_INSERTING_MIN_SAMPLES) && ((2U * grows) > seen)) {
+            const int force_too = (2U * falls) > seen;
+            offset_advice(u, tr->depth_mm[0], force_too, advice, sizeof advice);
+            (void)snprintf(err, es,
+                           "%s: column '%s': %.0f %% of the depths are negative (down to "
+                           "%.4g mm) although the depth grows where the force first %s from its "
+                           "tare: the stage counts from an origin before the needle's start%s: %s",
+                           path, u->columns.depth, 100.0 * ns, lo, force_too ? "falls" : "rises",
+                           force_too ? ", and the force is measured the other way" : "", advice);
+            return -1;
+        }
+    }
     if ((ns > NTE_UNITS_NEGATIVE_DEPTH_SHARE) && (u->depth_sign == 1)) {
         double both = 0.0;
         const int force_too = negative_while_inserting(tr, tare, -1.0, v, &both);
         char also[160] = "";
-        char advice[96];
         if (force_too) {
             (void)snprintf(also, sizeof also,
                            ", and the force with it (read that way, the force less its tare "
@@ -213,11 +293,11 @@ static int check_depth(const char* path, const nte_trial_t* tr, const nte_units_
     }
     if (ns > NTE_UNITS_NEGATIVE_DEPTH_SHARE) {
         /* the sign was given: a stage that counts down to the tissue from a positive origin */
+        offset_advice(u, tr->depth_mm[0], 0, advice, sizeof advice);
         (void)snprintf(err, es,
                        "%s: column '%s': %.0f %% of the depths are negative with --depth-sign -1 "
-                       "(down to %.4g mm): the stage counts from an origin beyond the tissue: "
-                       "subtract its start so the needle starts at 0 mm or above",
-                       path, u->columns.depth, 100.0 * ns, lo);
+                       "(down to %.4g mm): the stage counts from an origin beyond the tissue: %s",
+                       path, u->columns.depth, 100.0 * ns, lo, advice);
         return -1;
     }
     return 0;
@@ -235,31 +315,17 @@ static int check_depth(const char* path, const nte_trial_t* tr, const nte_units_
 static int check_direction(const char* path, const nte_trial_t* tr, const nte_units_t* u,
                            const double tare, double* v, char* err, size_t es)
 {
-    size_t moving = 0U;
+    size_t firsts[NTE_UNITS_INSERTING_MIN_SAMPLES];
     double top = 0.0;
-    for (size_t k = 0U; k < tr->n; k++) {
-        if (is_moving(tr, k)) {
-            moving++;
-            const double dev = fabs(tr->force_n[k] - tare);
-            top = (dev > top) ? dev : top;
-        }
-    }
-    if (moving < NTE_UNITS_INSERTING_MIN_SAMPLES) {
-        return 0;
-    }
-    size_t seen = 0U;
-    size_t against = 0U;
-    size_t first = 0U;
-    for (size_t k = 0U; (k < tr->n) && (seen < NTE_UNITS_INSERTING_MIN_SAMPLES); k++) {
-        const double rel = tr->force_n[k] - tare;
-        if (is_moving(tr, k) && (fabs(rel) > (NTE_UNITS_SIGN_DEPART_SHARE * top))) {
-            first = (seen == 0U) ? k : first;
-            seen++;
-            against += ((tr->velocity_mm_s[k] < 0.0) && (rel > 0.0)) ? 1U : 0U;
-        }
-    }
+    const size_t seen = first_departures(tr, tare, firsts, &top);
     if (seen < NTE_UNITS_INSERTING_MIN_SAMPLES) {
         return 0;
+    }
+    const size_t first = firsts[0];
+    size_t against = 0U;
+    for (size_t i = 0U; i < seen; i++) {
+        const size_t k = firsts[i];
+        against += ((tr->velocity_mm_s[k] < 0.0) && ((tr->force_n[k] - tare) > 0.0)) ? 1U : 0U;
     }
     /* the median of the last TARE_SAMPLES forces, and the tare's median absolute deviation */
     size_t m = 0U;

@@ -264,7 +264,7 @@ def units_header() -> str:
     out.append(f"#define NTE_COLUMN_KEYS_REQUIRED {{ {cells} }}")
     out.append("")
     for name in ("MIN_STROKE_MM", "MAX_REJECTED_SHARE", "MAX_FORCE_OUT_SHARE",
-                 "SIGN_DEPART_SHARE"):
+                 "SIGN_DEPART_SHARE", "DEPTH_OFFSET_MAX_MM"):
         out.append(f"#define NTE_UNITS_{name} ({hex64(getattr(csvio, name))})")
     out.append(f"#define NTE_UNITS_TARE_SAMPLES {int(csvio.TARE_SAMPLES)}U")
     for name, v in CHECK_INLINE.items():

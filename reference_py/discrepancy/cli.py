@@ -3,7 +3,8 @@ physical effect, add it and show the gap shrink.
 
 usage: nte-discrepancy FILE [FILE ...] --out DIR [--no-figures] [--each] [--jobs N]
                        [--force-unit U] [--time-unit U] [--depth-unit U]
-                       [--force-sign +1|-1] [--depth-sign +1|-1] [--no-units-check]
+                       [--force-sign +1|-1] [--depth-sign +1|-1] [--depth-offset MM]
+                       [--no-units-check]
                        [--columns t=NAME,depth=NAME,force=NAME[,velocity=NAME]]
 
 FILE    measured trials: CSV with t_s, depth_mm, force_n (optional velocity_mm_s; a spreadsheet
@@ -17,7 +18,8 @@ FILE    measured trials: CSV with t_s, depth_mm, force_n (optional velocity_mm_s
         by side; for one condition, its fits that do not depend on each other (the base
         model's starts, a round's screens and refines) and its figures.  The report is the
         same for every N.
---force-unit, --time-unit, --depth-unit, --force-sign, --depth-sign, --no-units-check
+--force-unit, --time-unit, --depth-unit, --force-sign, --depth-sign, --depth-offset,
+--no-units-check
         how the CSV was recorded (converted by the tools' CSV reader, which refuses implausible
         units or signs naming the likely option).  A record that still reads negative on
         insertion (a candump log, or --no-units-check) is detected per trial, flipped, and the

@@ -76,7 +76,7 @@ def _sign(text: str) -> int:
 
 def add_unit_arguments(p: argparse.ArgumentParser) -> None:
     """The input conversion flags of every tool that reads an insertion CSV (csvio.Units)."""
-    from .csvio import DEPTH_UNITS, FORCE_UNITS, TIME_UNITS
+    from .csvio import DEPTH_OFFSET_MAX_MM, DEPTH_UNITS, FORCE_UNITS, TIME_UNITS
     g = p.add_argument_group("units and signs of the input CSV (converted by the reader; "
                              "implausible values are refused naming the likely option)")
     g.add_argument("--force-unit", choices=tuple(FORCE_UNITS), default="N",
@@ -91,6 +91,11 @@ def add_unit_arguments(p: argparse.ArgumentParser) -> None:
                    help="-1: the sensor reads the insertion force as negative")
     g.add_argument("--depth-sign", type=_sign, default=1, metavar="+1|-1",
                    help="-1: the depth column grows out of the tissue")
+    g.add_argument("--depth-offset", type=bounded(-DEPTH_OFFSET_MAX_MM, DEPTH_OFFSET_MAX_MM,
+                                                  " mm"), default=0.0, metavar="MM",
+                   help="added to the depth after --depth-unit and --depth-sign: a stage that "
+                        "counts from an origin beyond the tissue (e.g. down from 120 mm: "
+                        "--depth-sign -1 --depth-offset 120) reads from 0")
     g.add_argument("--no-units-check", action="store_true",
                    help="do not refuse implausible units or signs (default: check)")
     g.add_argument("--columns", metavar="MAP",
@@ -107,4 +112,4 @@ def units_from(a: argparse.Namespace) -> "Units":
     from .csvio import ColumnMap, Units
     columns = ColumnMap() if a.columns is None else ColumnMap.parse(a.columns)
     return Units(a.force_unit, a.time_unit, a.depth_unit, a.force_sign, a.depth_sign,
-                 not a.no_units_check, columns)
+                 not a.no_units_check, columns, a.depth_offset)

@@ -44,7 +44,7 @@ C_EXE = {"float32": "nte-run", "float64": "nte-run-double"}
 OWN_DESTS = ("engine", "c_bin", "help")
 #: the input flags nte-ref's reader can apply for the program (csvio.Units)
 INPUT_FLAGS = ("--columns", "--force-unit", "--time-unit", "--depth-unit", "--force-sign",
-               "--depth-sign", "--no-units-check")
+               "--depth-sign", "--depth-offset", "--no-units-check")
 
 
 def program(a: argparse.Namespace) -> Path:

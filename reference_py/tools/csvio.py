@@ -288,6 +288,11 @@ class Units:
     depth_sign: int = 1
     check: bool = True
     columns: ColumnMap = ColumnMap()
+    depth_offset_mm: float = 0.0    # added to the depth after its unit and sign, mm
+
+
+#: --depth-offset's range, mm: a stage's origin within a metre of the tissue
+DEPTH_OFFSET_MAX_MM = 1000.0
 
 
 @dataclass(frozen=True)
@@ -384,6 +389,20 @@ def check_units(tr: "Trial", units: Units = Units(), limits: Limits = Limits()) 
     rel = np.where(present, f - tare, 0.0)
     neg = float(np.mean(d < 0.0))
     if neg > NEGATIVE_DEPTH_SHARE:
+        first, _ = _first_departures(tr.velocity_mm_s, rel, present)
+        grows = tr.velocity_mm_s[first] > 0.0
+        if (units.depth_sign == 1 and len(first) == INSERTING_MIN_SAMPLES
+                and 2 * int(np.count_nonzero(grows)) > len(first)):
+            # the force first departs while the depth grows: the direction is right, the
+            # origin is not (a stage counting up from before the needle's start) - and the
+            # force's sign too if it first falls
+            falls = 2 * int(np.count_nonzero(grows & (rel[first] < 0.0))) > len(first)
+            raise UnitsError(f"{name}: column '{cd}': {_pct(neg)} of the depths are negative "
+                             f"(down to {float(np.min(d)):.4g} mm) although the depth grows "
+                             f"where the force first {'falls' if falls else 'rises'} from its "
+                             f"tare: the stage counts from an origin before the needle's start"
+                             f"{', and the force is measured the other way' if falls else ''}: "
+                             f"{_offset_advice(units, d, falls)}")
         if units.depth_sign == 1:
             # read the other way, would the force still be pulled while inserting?  Then
             # both columns are: one message, not two in turn
@@ -397,8 +416,7 @@ def check_units(tr: "Trial", units: Units = Units(), limits: Limits = Limits()) 
         # the sign was given: a stage that counts down to the tissue from a positive origin
         raise UnitsError(f"{name}: column '{cd}': {_pct(neg)} of the depths are negative with "
                          f"--depth-sign -1 (down to {float(np.min(d)):.4g} mm): the stage "
-                         f"counts from an origin beyond the tissue: subtract its start so the "
-                         f"needle starts at 0 mm or above")
+                         f"counts from an origin beyond the tissue: {_offset_advice(units, d)}")
     fa = np.abs(f[present])
     if len(fa):
         out = float(np.mean(fa > fmax))
@@ -450,6 +468,36 @@ def _negative_while_inserting(rel: np.ndarray, present: np.ndarray, v: np.ndarra
     return float(np.mean(fi < 0.0))
 
 
+def _first_departures(v: np.ndarray, rel: np.ndarray, present: np.ndarray
+                      ) -> tuple[np.ndarray, float]:
+    """The first INSERTING_MIN_SAMPLES samples taken while the stage moves (speed ``v`` above
+    INSERTING_SPEED_MM_S either way) where the force (``rel``: less its tare) departs from the
+    tare by more than SIGN_DEPART_SHARE of its largest departure while moving, and that
+    departure; fewer (none) when too few samples move or depart."""
+    moving = present & (np.abs(v) > INSERTING_SPEED_MM_S)
+    if np.count_nonzero(moving) < INSERTING_MIN_SAMPLES:
+        return np.zeros(0, dtype=np.int64), 0.0
+    top = float(np.max(np.abs(rel[moving])))
+    first = np.flatnonzero(moving & (np.abs(rel) > SIGN_DEPART_SHARE * top))
+    return first[:INSERTING_MIN_SAMPLES], top
+
+
+def _offset_advice(units: Units, d: np.ndarray, force: bool = False) -> str:
+    """The --depth-offset that makes the needle start at 0 mm (its first depth, ``d`` as read
+    with ``units``' offset), or, beyond its range, what to do instead; with ``force``, the
+    force's sign turned over too."""
+    offset = units.depth_offset_mm - float(d[0])
+    if abs(offset) > DEPTH_OFFSET_MAX_MM:
+        also = f" and {_sign_advice(units, False, True)}" if force else ""
+        return f"subtract its start so the needle starts at 0 mm or above{also}"
+    add, drop = [f"--depth-offset {offset:.6g}"], []
+    if force:
+        (drop if units.force_sign == -1 else add).append("--force-sign -1")
+    return (f"convert with {' '.join(add)}" +
+            (f" and read it without {' '.join(drop)}" if drop else "") +
+            " (the needle then starts at 0 mm)")
+
+
 def _sign_advice(units: Units, depth: bool, force: bool) -> str:
     """The options that turn the depth's and/or the force's sign over from ``units``' reading:
     a sign not given is added, one given is dropped."""
@@ -482,12 +530,7 @@ def _check_direction(tr: "Trial", units: Units, column: str, tare: float, rel: n
       * the largest departure exceeds DEPARTURE_MADS median absolute deviations of the
         tare's samples: a record of the air alone departs by its noise, either way."""
     v = tr.velocity_mm_s
-    moving = present & (np.abs(v) > INSERTING_SPEED_MM_S)
-    if np.count_nonzero(moving) < INSERTING_MIN_SAMPLES:
-        return
-    top = float(np.max(np.abs(rel[moving])))
-    first = np.flatnonzero(moving & (np.abs(rel) > SIGN_DEPART_SHARE * top))
-    first = first[:INSERTING_MIN_SAMPLES]
+    first, top = _first_departures(v, rel, present)
     if len(first) < INSERTING_MIN_SAMPLES:
         return
     against = int(np.count_nonzero((v[first] < 0.0) & (rel[first] > 0.0)))
@@ -558,6 +601,8 @@ def read_trial(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
             depth = depth * kd
         if kf != 1.0:
             force = force * kf
+        if units.depth_offset_mm != 0.0:
+            depth = depth + units.depth_offset_mm
         if vel is not None and kd / kt != 1.0:
             vel = vel * (kd / kt)
     if vel is None:

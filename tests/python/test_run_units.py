@@ -175,7 +175,8 @@ def test_converted_nothing_without_flags(records, tmp_path):
 @pytest.mark.parametrize("flags", [
     ["--force-unit", "kN"], ["--time-unit", "min"], ["--depth-unit", "cm"],
     ["--force-sign", "2"], ["--depth-sign", "+2"], ["--force-sign", "-"],
-    ["--depth-unit"],
+    ["--depth-unit"], ["--depth-offset", "x"], ["--depth-offset", "1000.5"],
+    ["--depth-offset", "inf"], ["--depth-offset", "nan"], ["--depth-offset"],
 ])
 def test_unit_flag_refusals_alike(records, tmp_path, flags):
     out = tmp_path / "est.csv"
@@ -195,7 +196,8 @@ def test_help_names_the_unit_flags():
         assert r.returncode == 0
         units = "|".join(_time_units())
         for text in ("--force-unit N|mN", f"--time-unit {units}", "--depth-unit mm|m",
-                     "--force-sign +1|-1", "--depth-sign +1|-1", "--no-units-check"):
+                     "--force-sign +1|-1", "--depth-sign +1|-1", "--depth-offset MM",
+                     "--no-units-check"):
             assert text in r.stdout, (prog, text)
     source = (ROOT / "firmware" / "host" / "nte_run.c").read_text().split("*/", 1)[0]
     assert "[--time-unit s|ms|us]" in source and "[--no-units-check]" in source
@@ -382,7 +384,7 @@ def test_both_columns_the_other_way_are_named_at_once(tmp_path, seed):
          "measured the other way: convert with --depth-sign -1"),
         (down, ["--depth-sign", "-1", "--force-sign", "-1"], "with --depth-sign -1 (down to "
          "-120 mm): the stage counts from an origin beyond the tissue",
-         "subtract its start so the needle starts at 0 mm or above"),
+         "convert with --depth-offset 120 (the needle then starts at 0 mm)"),
         (negative, [], "and the force with it (read that way, the force less its tare is "
          "negative in", "convert with --depth-sign -1 --force-sign -1"),
         (negative, ["--force-sign", "-1"], "of the depths are negative (down to -",
@@ -428,3 +430,48 @@ def test_correct_records_that_first_fall_while_retracting_are_read(tmp_path):
         assert r.returncode == 0, (name, r.stderr)
         for prog in PROGS:
             assert c_run(prog, path, out, "--model", "2").returncode == 0, (prog, name)
+
+
+def test_a_stage_counting_from_another_origin_is_read_with_depth_offset(tmp_path):
+    """A measured-like record in a stage's own coordinates: counting up from 37.25 mm before
+    the needle's start (negative depths growing into the tissue), with the sensor inverted too,
+    and counting down from 120 mm.  The messages name --depth-offset (and the force's sign
+    where it is inverted) rather than the depth's sign, alike in the three programs; with the
+    options they give, the record is read, nte-run-double writes the reference's bytes, and
+    its estimates are those of the record starting at 0 to within rounding of the depth."""
+    from config_loop_figures import write_record
+    from discrepancy_measured_like import make_trial
+    tr = make_trial(31)[0]
+    good = tmp_path / "good.csv"
+    write_record(good, tr.t_s, tr.depth_mm, tr.force_n)
+    cases = {"up": (tr.depth_mm - 37.25, tr.force_n, "rises", "--depth-offset 37.25",
+                    ["--depth-offset", "37.25"]),
+             "up-inverted": (tr.depth_mm - 37.25, -tr.force_n, "falls",
+                             "--depth-offset 37.25 --force-sign -1",
+                             ["--depth-offset", "37.25", "--force-sign", "-1"])}
+    out = tmp_path / "est.csv"
+    expected = tmp_path / "good_est.csv"
+    assert reference(good, expected, "--model", "3", "--precision", "float64").returncode == 0
+    want_est = np.loadtxt(expected, delimiter=",", skiprows=1)
+    for name, (x, f, first, advice, flags) in cases.items():
+        path = tmp_path / f"{name}.csv"
+        write_record(path, tr.t_s, x, f)
+        r = reference(path, out, "--model", "3")
+        assert r.returncode == 2, r.stderr
+        want = body(r.stderr, "nte-ref")
+        assert f"although the depth grows where the force first {first} from its tare" in want
+        assert want.endswith(f"convert with {advice} (the needle then starts at 0 mm)"), want
+        for prog in PROGS:
+            c = c_run(prog, path, out, "--model", "3")
+            assert c.returncode == 2 and body(c.stderr, prog) == want, (prog, c.stderr)
+        py, c = tmp_path / f"{name}_py.csv", tmp_path / f"{name}_c.csv"
+        r = reference(path, py, "--model", "3", "--precision", "float64", *flags)
+        assert r.returncode == 0, r.stderr
+        d = c_run("nte-run-double", path, c, "--model", "3", *flags)
+        assert d.returncode == 0, d.stderr
+        assert py.read_bytes() == c.read_bytes(), name
+        got = np.loadtxt(py, delimiter=",", skiprows=1)
+        assert got.shape == want_est.shape
+        # the force estimate follows the record read from 0 (the depth differs by rounding)
+        scale = float(np.max(np.abs(want_est[:, 1])))
+        assert float(np.max(np.abs(got[:, 1] - want_est[:, 1]))) <= 1e-3 * scale, name
