@@ -49,6 +49,35 @@ static double tare_of(const nte_trial_t* tr, double* v)
     return (m > 0U) ? median(v, m) : 0.0;
 }
 
+/* csvio._air_tare: the force in the air, which the force's sign is judged from -- the tare of
+ * the first forces, unless the record ends more than MIN_STROKE_MM shallower than it starts
+ * (the medians of the first and last TARE_SAMPLES depths): a logger started, or a node
+ * restarted, with the needle in the tissue, whose last forces' median is the air's.
+ * v: n scratch values. */
+static double air_tare(const nte_trial_t* tr, const double tare, double* v)
+{
+    size_t m = 0U;
+    for (size_t k = 0U; (k < tr->n) && (m < NTE_UNITS_TARE_SAMPLES); k++) {
+        v[m++] = tr->depth_mm[k];
+    }
+    const double start = median(v, m);
+    m = 0U;
+    for (size_t k = tr->n; (k > 0U) && (m < NTE_UNITS_TARE_SAMPLES); k--) {
+        v[m++] = tr->depth_mm[k - 1U];
+    }
+    const double end = median(v, m);
+    if (!(end < (start - NTE_UNITS_MIN_STROKE_MM))) {
+        return tare;
+    }
+    m = 0U;
+    for (size_t k = tr->n; (k > 0U) && (m < NTE_UNITS_TARE_SAMPLES); k--) {
+        if (isfinite(tr->force_n[k - 1U])) {
+            v[m++] = tr->force_n[k - 1U];
+        }
+    }
+    return median(v, m);
+}
+
 /* csvio._negative_while_inserting: the force less its tare, judged on the samples taken while
  * inserting (a force, the stage moving in, the depth beyond 0) that depart from the tare by more than SIGN_DEPART_SHARE of the largest departure
  * there -- their median negative is the sensor's opposite sign.  `way` -1 reads the depth (and
@@ -443,15 +472,16 @@ static int check_force(const char* path, const nte_trial_t* tr, const nte_units_
     if (check_direction(path, tr, u, tare, v, err, es) != 0) {
         return -1;
     }
+    const double air = air_tare(tr, tare, v);
     double negative = 0.0;
-    if (negative_while_inserting(tr, tare, 1.0, v, &negative)) {
+    if (negative_while_inserting(tr, air, 1.0, v, &negative)) {
         char advice[96];
         sign_advice(u, 0, 1, advice, sizeof advice);
         (void)snprintf(err, es,
                        "%s: column '%s': the force less its tare (%.4g N) is negative "
                        "in %.0f %% of the samples taken while inserting: probably the sensor's "
                        "opposite sign: %s",
-                       path, u->columns.force, tare, 100.0 * negative, advice);
+                       path, u->columns.force, air, 100.0 * negative, advice);
         return -1;
     }
     return 0;

@@ -434,9 +434,11 @@ def check_units(tr: "Trial", units: Units = Units(), limits: Limits = Limits()) 
             raise UnitsError(f"{name}{line}: column '{cf}': {float(f[k]):.4g} N is not a "
                              f"plausible force (the configured range is ±{fmax:g} N)")
         _check_direction(tr, units, cd, tare, rel, present)
-        share = _negative_while_inserting(rel, present, tr.velocity_mm_s, d)
+        air = _air_tare(tr, present, tare)
+        share = _negative_while_inserting(np.where(present, f - air, 0.0), present,
+                                          tr.velocity_mm_s, d)
         if share is not None:
-            raise UnitsError(f"{name}: column '{cf}': the force less its tare ({tare:.4g} "
+            raise UnitsError(f"{name}: column '{cf}': the force less its tare ({air:.4g} "
                              f"N) is negative in {_pct(share)} of the samples taken while "
                              f"inserting: probably the sensor's opposite sign: "
                              f"{_sign_advice(units, False, True)}")
@@ -450,6 +452,18 @@ def check_units(tr: "Trial", units: Units = Units(), limits: Limits = Limits()) 
                          f"{limits.depth_min_mm:g}..{limits.depth_max_mm:g} mm, speed "
                          f"±{limits.speed_max_mm_s:g} mm/s, force ±{fmax:g} N): check the "
                          f"units (--time-unit, --depth-unit, --force-unit) and signs")
+
+
+def _air_tare(tr: "Trial", present: np.ndarray, tare: float) -> float:
+    """The force in the air, which the force's sign is judged from: the ``tare`` of the first
+    forces, unless the record ends more than MIN_STROKE_MM shallower than it starts (the
+    medians of the first and last TARE_SAMPLES depths) - a logger started, or a node restarted,
+    with the needle in the tissue: its first forces are the tissue's, and the median of its
+    last forces is the air's."""
+    d = tr.depth_mm
+    if float(np.median(d[-TARE_SAMPLES:])) < float(np.median(d[:TARE_SAMPLES])) - MIN_STROKE_MM:
+        return float(np.median(tr.force_n[present][-TARE_SAMPLES:]))
+    return tare
 
 
 def _negative_while_inserting(rel: np.ndarray, present: np.ndarray, v: np.ndarray,

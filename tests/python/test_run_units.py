@@ -475,3 +475,35 @@ def test_a_stage_counting_from_another_origin_is_read_with_depth_offset(tmp_path
         # the force estimate follows the record read from 0 (the depth differs by rounding)
         scale = float(np.max(np.abs(want_est[:, 1])))
         assert float(np.max(np.abs(got[:, 1] - want_est[:, 1]))) <= 1e-3 * scale, name
+
+
+@pytest.mark.parametrize("seed", [4, 9])
+def test_a_record_that_starts_in_the_tissue_is_judged_from_the_air(tmp_path, seed):
+    """A measured-like record cut to start at 30 % of its samples, mid-insertion (a logger
+    started late): its first forces are the tissue's, and judged from them the force later
+    reads "negative while inserting" (the tears drop it below its start).  It ends shallower
+    than it starts, so its sign is judged from the force of its end, in the air: read by all
+    three programs; with the sensor inverted it is still refused, alike, with the air's tare."""
+    from config_loop_figures import write_record
+    from discrepancy_measured_like import make_trial
+    from reference_py.tools.csvio import TARE_SAMPLES
+    tr = make_trial(seed)[0]
+    k = int(0.3 * len(tr.t_s))
+    t, x, f = tr.t_s[k:], tr.depth_mm[k:], tr.force_n[k:]
+    assert x[0] > 1.0 and np.gradient(x, t)[0] > 0.5          # inside, going in
+    start, air = float(np.median(f[:TARE_SAMPLES])), float(np.median(f[-TARE_SAMPLES:]))
+    assert start - air > 0.5                                    # its first forces: tissue's
+    good, bad = tmp_path / "late.csv", tmp_path / "late-inverted.csv"
+    write_record(good, t, x, f)
+    write_record(bad, t, x, -f)
+    out = tmp_path / "est.csv"
+    r = reference(good, out, "--model", "2")
+    assert r.returncode == 0, r.stderr
+    r = reference(bad, out, "--model", "2")
+    assert r.returncode == 2, r.stderr
+    want = body(r.stderr, "nte-ref")
+    assert f"the force less its tare ({-air:.4g} N) is negative" in want, want
+    for prog in PROGS:
+        assert c_run(prog, good, out, "--model", "2").returncode == 0, prog
+        c = c_run(prog, bad, out, "--model", "2")
+        assert c.returncode == 2 and body(c.stderr, prog) == want, (prog, c.stderr)
