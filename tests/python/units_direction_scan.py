@@ -1,6 +1,6 @@
 """The reader's direction and sign rules (csvio.check_units) over the repository's generators:
 
-    .venv/bin/python tests/python/units_direction_scan.py
+    .venv/bin/python tests/python/units_direction_scan.py [--held]
 
 Every correct record must pass: the phantom's five presets (seeds 1-8) and `lab` (2100-2129),
 two cycles and 30 s holds, the measured-like generator's forms (seeds 1-59: as generated, a
@@ -8,7 +8,8 @@ stage that backs off, stick-slip, 50 and 200 Hz, 50 mN of noise, a tear over 1 m
 membranes, no membrane) and the blind generator's cases (every kind, three each); so must
 the same records cut to start at 20-80 % of their samples (inside the tissue, mid-retraction,
 or in the air after the exit), by any rule.  Records whose stage counts down from 120 mm must be named,
-with the sensor inverted too.  Prints the five counts (about 1 min on one core)."""
+with the sensor inverted too.  Prints the five counts (about 1 min on one core).  ``--held``:
+the same on records no rule was drawn on (:func:`held`)."""
 from __future__ import annotations
 
 import sys
@@ -112,5 +113,38 @@ def main() -> int:
     return 0 if not refused and not cut and not cut_any and named == both == len(down) else 1
 
 
+#: ``--held``: records no rule was drawn on (README "Files in other units")
+HELD_CUTS = (0.25, 0.45, 0.55, 0.65, 0.75)
+
+
+def held() -> int:
+    """The rules on records they were not drawn on: measured-like seeds 490-504 in every form,
+    `lab` 2152-2159, the phantom's presets at seeds 401-402 and the blind cases 5-6 - as they
+    are, cut at HELD_CUTS, and (the generator's forms as generated, every other record) their
+    stage counted down from 120 mm with the sensor inverted too.  Prints the counts and the
+    records refused or missed (about 1 min)."""
+    f = Path(tempfile.mkdtemp()) / "record.csv"
+    recs = [(f"measured-like-{s}-{kw}", make_trial(s, **kw)[0])  # type: ignore[arg-type]
+            for s in range(490, 505) for kw in FORMS]
+    recs += [(f"lab-{s}", phantom_trial("lab", s)[0]) for s in range(2152, 2160)]
+    recs += [(f"{p}-{s}", phantom_trial(p, s)[0]) for p in PRESETS for s in (401, 402)]
+    recs += [(f"{kind}-{k}-{i}", tr) for kind in dg.kinds() for k in (5, 6)
+             for i, tr in enumerate(dg.make_case(kind, k).trials)]
+    refused = [n for n, tr in recs if _refusal(f, tr.t_s, tr.depth_mm, tr.force_n) is not None]
+    cut = [f"{n} from {c:g}" for n, tr in recs for c in HELD_CUTS
+           if _refusal(f, tr.t_s[int(c * len(tr.t_s)):], tr.depth_mm[int(c * len(tr.t_s)):],
+                       tr.force_n[int(c * len(tr.t_s)):]) is not None]
+    inverted = [(n, tr) for n, tr in recs if not n.startswith("measured-like") or n.endswith("{}")]
+    missed = [n for n, tr in inverted
+              if "both the depth and the force" not in
+              (_refusal(f, tr.t_s, 120.0 - tr.depth_mm, -tr.force_n) or "")]
+    print(f"held-out correct records refused: {len(refused)} of {len(recs)} {refused or ''}")
+    print(f"... cut to start at {', '.join(f'{100 * c:g}' for c in HELD_CUTS)} %, refused: "
+          f"{len(cut)} of {len(recs) * len(HELD_CUTS)} {cut or ''}")
+    print(f"... counted down from 120 mm with the sensor inverted, both named: "
+          f"{len(inverted) - len(missed)} of {len(inverted)} (missed: {missed or 'none'})")
+    return 0 if not refused else 1
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(held() if sys.argv[1:] == ["--held"] else main())
