@@ -358,10 +358,13 @@ def _time_hint(dt: float, unit: str, dt_max: float) -> str:
 def check_units(tr: "Trial", units: Units = Units(), limits: Limits = Limits()) -> None:
     """Refuse (UnitsError) a trial whose values, in N, s and mm, are implausible: time steps of
     seconds (ms or us read as s), a depth stroke under a millimetre (m read as mm), depth mostly
-    negative or falling where the force first rises (_check_direction) or force mostly
-    negative while inserting (the opposite sign), force mostly beyond
-    the configured range (mN read as N), a force beyond a thousand times the range, or most
-    samples outside the estimator's accepted ranges.  The message names the column, the probable
+    negative (the other way, the force's sign with it when read so it is negative while
+    inserting; or an origin before the needle's start when the depth grows where the force
+    first departs: --depth-offset), falling where the force first rises or first falls
+    (_check_direction: a stage counting down, the sensor inverted too) or force mostly
+    negative while inserting (the opposite sign; judged from the air's tare, _air_tare),
+    force mostly beyond the configured range (mN read as N), a force beyond a thousand times
+    the range, or most samples outside the estimator's accepted ranges.  The message names the column, the probable
     unit or convention and the option that converts it."""
     n = len(tr.t_s)
     name = tr.path
