@@ -79,8 +79,9 @@ static double air_tare(const nte_trial_t* tr, const double tare, double* v)
 }
 
 /* csvio._negative_while_inserting: the force less its tare, judged on the samples taken while
- * inserting (a force, the stage moving in, the depth beyond 0) that depart from the tare by more than SIGN_DEPART_SHARE of the largest departure
- * there -- their median negative is the sensor's opposite sign.  `way` -1 reads the depth (and
+ * inserting (a force, the stage moving in, the depth beyond 0) that depart from the tare by
+ * more than SIGN_DEPART_SHARE of the largest departure there -- their median negative is the
+ * sensor's opposite sign.  `way` -1 reads the depth (and
  * so the velocity) the other way.  Returns 1 and the share of negative forces, or 0 when the
  * median is not negative or too few samples say.  v: n scratch values. */
 static int negative_while_inserting(const nte_trial_t* tr, const double tare, const double way,

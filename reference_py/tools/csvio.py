@@ -364,8 +364,8 @@ def check_units(tr: "Trial", units: Units = Units(), limits: Limits = Limits()) 
     (_check_direction: a stage counting down, the sensor inverted too) or force mostly
     negative while inserting (the opposite sign; judged from the air's tare, _air_tare),
     force mostly beyond the configured range (mN read as N), a force beyond a thousand times
-    the range, or most samples outside the estimator's accepted ranges.  The message names the column, the probable
-    unit or convention and the option that converts it."""
+    the range, or most samples outside the estimator's accepted ranges.  The message names
+    the column, the probable unit or convention and the option that converts it."""
     n = len(tr.t_s)
     name = tr.path
     # the file's names of the time, depth and force columns (--columns)

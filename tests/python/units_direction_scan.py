@@ -7,9 +7,9 @@ two cycles and 30 s holds, the measured-like generator's forms (seeds 1-59: as g
 stage that backs off, stick-slip, 50 and 200 Hz, 50 mN of noise, a tear over 1 mm, weak
 membranes, no membrane) and the blind generator's cases (every kind, three each); so must
 the same records cut to start at 20-80 % of their samples (inside the tissue, mid-retraction,
-or in the air after the exit), by any rule.  Records whose stage counts down from 120 mm must be named,
-with the sensor inverted too.  Prints the five counts (about 1 min on one core).  ``--held``:
-the same on records no rule was drawn on (:func:`held`)."""
+or in the air after the exit), by any rule.  Records whose stage counts down from 120 mm
+must be named, with the sensor inverted too.  Prints the five counts (about 1 min on one
+core).  ``--held``: the same on records no rule was drawn on (:func:`held`)."""
 from __future__ import annotations
 
 import sys
