@@ -234,8 +234,8 @@ static void help(void)
 }
 
 /* --force-unit, --time-unit, --depth-unit, --force-sign, --depth-sign, --depth-offset
- * (tools/arguments.py add_unit_arguments).  Returns 0 when `name` is none of them; else 1, with msg empty when
- * the value was taken, the refusal (argparse's words) when not. */
+ * (tools/arguments.py add_unit_arguments).  Returns 0 when `name` is none of them; else 1,
+ * with msg empty when the value was taken, the refusal (argparse's words) when not. */
 static int unit_flag(const char* name, const char* val, nte_units_t* u, char* msg, size_t cap)
 {
     const nte_unit_t* table = NULL;

@@ -78,6 +78,15 @@ static double air_tare(const nte_trial_t* tr, const double tare, double* v)
     return median(v, m);
 }
 
+/* A sample taken while inserting, the depth read `way` (+1 as it is, -1 the other way): a
+ * force, the stage moving in, the depth beyond 0. */
+static int is_inserting(const nte_trial_t* tr, const size_t k, const double way)
+{
+    return isfinite(tr->force_n[k]) &&
+           ((way * tr->velocity_mm_s[k]) > NTE_UNITS_INSERTING_SPEED_MM_S) &&
+           ((way * tr->depth_mm[k]) > 0.0);
+}
+
 /* csvio._negative_while_inserting: the force less its tare, judged on the samples taken while
  * inserting (a force, the stage moving in, the depth beyond 0) that depart from the tare by
  * more than SIGN_DEPART_SHARE of the largest departure there -- their median negative is the
@@ -90,9 +99,7 @@ static int negative_while_inserting(const nte_trial_t* tr, const double tare, co
     size_t inserting = 0U;
     double top = 0.0;
     for (size_t k = 0U; k < tr->n; k++) {
-        if (isfinite(tr->force_n[k]) &&
-            ((way * tr->velocity_mm_s[k]) > NTE_UNITS_INSERTING_SPEED_MM_S) &&
-            ((way * tr->depth_mm[k]) > 0.0)) {
+        if (is_inserting(tr, k, way)) {
             inserting++;
             const double dev = fabs(tr->force_n[k] - tare);
             top = (dev > top) ? dev : top;
@@ -105,9 +112,7 @@ static int negative_while_inserting(const nte_trial_t* tr, const double tare, co
     size_t negative = 0U;
     for (size_t k = 0U; k < tr->n; k++) {
         const double rel = tr->force_n[k] - tare;
-        if (isfinite(tr->force_n[k]) &&
-            ((way * tr->velocity_mm_s[k]) > NTE_UNITS_INSERTING_SPEED_MM_S) &&
-            ((way * tr->depth_mm[k]) > 0.0) && (fabs(rel) > (NTE_UNITS_SIGN_DEPART_SHARE * top))) {
+        if (is_inserting(tr, k, way) && (fabs(rel) > (NTE_UNITS_SIGN_DEPART_SHARE * top))) {
             v[m++] = rel;
             negative += (rel < 0.0) ? 1U : 0U;
         }
