@@ -24,7 +24,7 @@ static void fail(char* err, size_t size, const char* fmt, ...)
     va_end(ap);
 }
 
-/* ---- the csv module's reader (excel dialect: ',' between cells, '"' around one) ---------- */
+/* ---- the csv module's reader (excel dialect: a delimiter between cells, '"' around one) --- */
 
 enum { start_record, start_field, in_field, in_quoted, quote_in_quoted, eat_crnl };
 #define EOL 256 /* the end of a line, after its last character */
@@ -43,6 +43,7 @@ typedef struct record_t {
     size_t field; /* where the cell being read begins in text */
     size_t chars; /* its characters so far (the module's field_len) */
     int state;
+    char delimiter; /* between cells: ',', ';' or '\t' (delimiter_of) */
 } record_t;
 
 static int grow(void** p, size_t* cap, const size_t need, const size_t size)
@@ -127,7 +128,7 @@ static int feed(record_t* r, const int c)
             r->state = (c == EOL) ? start_record : eat_crnl;
         } else if (c == '"') {
             r->state = in_quoted;
-        } else if (c == ',') {
+        } else if (c == r->delimiter) {
             rc = save_field(r);
         } else {
             rc = add_char(r, c);
@@ -138,7 +139,7 @@ static int feed(record_t* r, const int c)
         if (newline) {
             rc = save_field(r);
             r->state = (c == EOL) ? start_record : eat_crnl;
-        } else if (c == ',') {
+        } else if (c == r->delimiter) {
             rc = save_field(r);
             r->state = start_field;
         } else {
@@ -158,7 +159,7 @@ static int feed(record_t* r, const int c)
         if (c == '"') {
             rc = add_char(r, c); /* "" inside quotes is one " */
             r->state = in_quoted;
-        } else if (c == ',') {
+        } else if (c == r->delimiter) {
             rc = save_field(r);
             r->state = start_field;
         } else if (newline) {
@@ -184,7 +185,34 @@ static int feed(record_t* r, const int c)
 
 /* ---- csvio.read_table: the header, then one sample a record ------------------------------ */
 
-/* csvio._NUMBER, [+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?, over the whole text. */
+/* csvio.delimiter_of: the first of ',', ';', '\t' (csvio.DELIMITERS) outside double quotes in
+ * the header's first line, ',' when none is. */
+static char delimiter_of(const char* line, const size_t n)
+{
+    static const char order[3] = {',', ';', '\t'};
+    int seen[3] = {0, 0, 0};
+    int quoted = 0;
+    for (size_t i = 0U; i < n; i++) {
+        if (line[i] == '"') {
+            quoted = !quoted;
+        } else if (!quoted) {
+            for (size_t d = 0U; d < 3U; d++) {
+                seen[d] |= (line[i] == order[d]);
+            }
+        } else {
+            /* a separator inside quotes is a name's */
+        }
+    }
+    for (size_t d = 0U; d < 3U; d++) {
+        if (seen[d] != 0) {
+            return order[d];
+        }
+    }
+    return ',';
+}
+
+/* csvio._NUMBER, [+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?, over the whole text; with
+ * decimal_comma (a file not separated by commas) _NUMBER_DECIMAL_COMMA: the mark '.' or ','. */
 static size_t digits_at(const char* s, const size_t n, size_t* i)
 {
     const size_t from = *i;
@@ -194,11 +222,11 @@ static size_t digits_at(const char* s, const size_t n, size_t* i)
     return *i - from;
 }
 
-static int is_number(const char* s, const size_t n)
+static int is_number(const char* s, const size_t n, const int decimal_comma)
 {
     size_t i = ((n > 0U) && ((s[0] == '+') || (s[0] == '-'))) ? 1U : 0U;
     size_t d = digits_at(s, n, &i);
-    if ((i < n) && (s[i] == '.')) {
+    if ((i < n) && ((s[i] == '.') || ((decimal_comma != 0) && (s[i] == ',')))) {
         i++;
         d += digits_at(s, n, &i);
     }
@@ -417,8 +445,9 @@ static int take_header(table_t* tb, const record_t* r, const size_t lineno)
     return 0;
 }
 
-/* A sample: as many cells as the header, each a finite decimal number, the time increasing. */
-static int take_row(table_t* tb, const record_t* r, const size_t lineno)
+/* A sample: as many cells as the header, each a finite decimal number, the time increasing.
+ * A decimal comma is made a point in place (the cell is read once). */
+static int take_row(table_t* tb, record_t* r, const size_t lineno)
 {
     if (r->n != tb->ncols) {
         fail(tb->err, tb->es, "%s:%zu: expected %zu cells, found %zu", tb->path, lineno, tb->ncols,
@@ -426,10 +455,18 @@ static int take_row(table_t* tb, const record_t* r, const size_t lineno)
         return -1;
     }
     for (size_t c = 0U; c < r->n; c++) {
-        const char* cell = r->text + r->start[c];
+        char* text = r->text + r->start[c];
+        const char* cell = text;
         const size_t full = ((c + 1U < r->n) ? r->start[c + 1U] : r->len) - r->start[c] - 1U;
         const size_t n = nte_py_strip(&cell, full);
-        const int number = is_number(cell, n);
+        const int decimal_comma = (r->delimiter != ',');
+        const int number = is_number(cell, n, decimal_comma);
+        if (number && decimal_comma) {
+            char* mark = memchr(text + (cell - text), ',', n);
+            if (mark != NULL) {
+                *mark = '.';
+            }
+        }
         tb->row[c] = number ? strtod(cell, NULL) : 0.0;
         if (!number || !isfinite(tb->row[c])) {
             char shown[512];
@@ -459,13 +496,12 @@ static int take_row(table_t* tb, const record_t* r, const size_t lineno)
     return 0;
 }
 
-/* One record: an empty line (no cell, or one blank cell), the header, or a sample. */
-static int take(table_t* tb, const record_t* r, const size_t lineno)
+/* One record: a blank line (no cell, or one blank cell: skipped), the header, or a sample. */
+static int take(table_t* tb, record_t* r, const size_t lineno)
 {
     const char* first = r->text;
     if ((r->n == 0U) || ((r->n == 1U) && (nte_py_strip(&first, r->len - 1U) == 0U))) {
-        fail(tb->err, tb->es, "%s:%zu: empty line", tb->path, lineno);
-        return -1;
+        return 0;
     }
     return (tb->ncols == 0U) ? take_header(tb, r, lineno) : take_row(tb, r, lineno);
 }
@@ -503,6 +539,8 @@ int nte_trial_read_columns(const char* path, const nte_columns_t* cols, nte_tria
     record_t r;
     (void)memset(&r, 0, sizeof r);
     record_reset(&r);
+    r.delimiter = ',';
+    int decided = 0; /* the delimiter, from the first line that is not blank */
     int rc = 0;
     size_t lineno = 0U;
     /* csvio's lines: split after every '\n', decoded (the first without its BOM), a comment
@@ -524,6 +562,11 @@ int nte_trial_read_columns(const char* path, const nte_columns_t* cols, nte_tria
         }
         if ((n > 0U) && (line[0] == NTE_CSV_COMMENT)) {
             continue;
+        }
+        const char* visible = line;
+        if ((decided == 0) && (nte_py_strip(&visible, n) > 0U)) {
+            r.delimiter = delimiter_of(line, n);
+            decided = 1;
         }
         int e = 0;
         for (size_t i = 0U; (i < n) && (e == 0); i++) {

@@ -2,9 +2,13 @@
 
 Reading (:func:`read_table`, :func:`read_trial`)
     Parsed with the standard ``csv`` module; the file is decoded as UTF-8 with an optional BOM
-    (``utf-8-sig``).  Lines starting with ``#`` are comments.  The first other line is the
-    header (column names, surrounding spaces ignored, no duplicates); every later line is one
-    sample with exactly as many cells as the header.  Cells may be quoted.  Required columns
+    (``utf-8-sig``).  Lines starting with ``#`` are comments; blank lines (white space only, or
+    one empty quoted cell) are skipped wherever they stand.  The first other line is the header
+    (column names, surrounding spaces ignored, no duplicates); every later line is one sample
+    with exactly as many cells as the header.  Cells are separated by commas, or -- as loggers
+    and spreadsheets set to a decimal comma write -- by semicolons or tabs: the header's first
+    line decides (:func:`delimiter_of`).  Where the separator is not a comma, a number may
+    write its decimal mark as a comma (``2,5`` is 2.5).  Cells may be quoted.  Required columns
     for an insertion: ``t_s``, ``depth_mm``, ``force_n``; ``velocity_mm_s`` is optional (when it
     is absent it is computed by central differences of depth); other columns are kept in
     ``Trial.columns`` and otherwise ignored.  Every cell must be a decimal number (``1``,
@@ -12,8 +16,7 @@ Reading (:func:`read_table`, :func:`read_trial`)
     refused), and ``t_s`` must increase strictly.  A column named in ``sparse`` may have empty
     cells (no sample on that line; stored as NaN, see ``Trial.present``); one named in
     ``nan_ok`` may hold ``nan`` (the estimate file's ``surface_mm`` before a surface is found;
-    stored as NaN).  A blank line is an
-    error.  Every refusal is a :class:`CsvError` whose message has one form::
+    stored as NaN).  Every refusal is a :class:`CsvError` whose message has one form::
 
         FILE:LINE: column 'NAME': reason        (or FILE:LINE: reason, or FILE: reason)
 
@@ -33,6 +36,7 @@ round-trip, and the same text the C host program prints.
 from __future__ import annotations
 
 import csv
+import itertools
 import math
 import os
 import re
@@ -57,6 +61,11 @@ COLUMN_KEYS_REQUIRED = ("t", "depth", "force")
 COMMENT = "#"
 #: a cell's number, ASCII only (the C reader, firmware/host/csv_in.c, reads the same grammar)
 _NUMBER = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?", re.ASCII)
+#: ... where the cells are not separated by commas: the decimal mark may be a comma
+_NUMBER_DECIMAL_COMMA = re.compile(r"[+-]?(\d+[.,]?\d*|[.,]\d+)([eE][+-]?\d+)?", re.ASCII)
+#: the cell separators the reader knows, in the order the header's first line is searched
+#: for them (C twin: csv_in.c delimiter_of)
+DELIMITERS = (",", ";", "\t")
 _NOT_FINITE = re.compile(r"[+-]?(nan|inf|infinity)", re.IGNORECASE | re.ASCII)
 _NAN = re.compile(r"[+-]?nan", re.IGNORECASE | re.ASCII)
 
@@ -90,11 +99,26 @@ class Trial:
         return Path(self.path).stem
 
 
-def parse_cell(name: str, lineno: int, col: str, text: str) -> float:
-    """One cell as a finite float, or CsvError with the file, line and column."""
+def delimiter_of(line: str) -> str:
+    """The cell separator of a file whose header starts with ``line``: the first of DELIMITERS
+    found outside double quotes, a comma when there is none (a one-column header)."""
+    outside, quoted = [], False
+    for ch in line:
+        if ch == '"':
+            quoted = not quoted
+        elif not quoted:
+            outside.append(ch)
+    return next((d for d in DELIMITERS if d in outside), ",")
+
+
+def parse_cell(name: str, lineno: int, col: str, text: str, decimal_comma: bool = False
+               ) -> float:
+    """One cell as a finite float, or CsvError with the file, line and column.
+    ``decimal_comma``: the file's cells are not separated by commas, so ``2,5`` is 2.5."""
     cell = text.strip()
-    if _NUMBER.fullmatch(cell):
-        value = float(cell)
+    number = _NUMBER_DECIMAL_COMMA if decimal_comma else _NUMBER
+    if number.fullmatch(cell):
+        value = float(cell.replace(",", ".", 1))
         if math.isfinite(value):
             return value
         raise CsvError(f"{name}:{lineno}: column '{col}': not finite: {cell!r}")
@@ -129,6 +153,19 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
                 continue
             yield text
 
+    def records() -> Iterator[list[str]]:
+        """The csv module's records, split at the separator the header's first line shows
+        (the blank lines before it are read with any: they hold no separator)."""
+        lines = numbered()
+        ahead: list[str] = []
+        for text in lines:
+            ahead.append(text)
+            if text.strip():
+                break
+        nonlocal delimiter
+        delimiter = delimiter_of(ahead[-1]) if ahead else ","
+        yield from csv.reader(itertools.chain(ahead, lines), delimiter=delimiter)
+
     header: list[str] | None = None
     header_line = 0
     rows: list[list[float]] = []
@@ -137,11 +174,12 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
     t_index = -1
     sparse_idx: set[int] = set()
     nan_idx: set[int] = set()
+    delimiter = ","
     try:
         with fh:
-            for cells in csv.reader(numbered()):
+            for cells in records():
                 if not cells or (len(cells) == 1 and cells[0].strip() == ""):
-                    raise CsvError(f"{name}:{lineno}: empty line")
+                    continue                    # a blank line
                 if header is None:
                     header = [c.strip() for c in cells]
                     header_line = lineno
@@ -164,7 +202,7 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
                                    f"{len(cells)}")
                 row = [math.nan if ((i in sparse_idx and cell.strip() == "")
                                     or (i in nan_idx and _NAN.fullmatch(cell.strip())))
-                       else parse_cell(name, lineno, col, cell)
+                       else parse_cell(name, lineno, col, cell, delimiter != ",")
                        for i, (col, cell) in enumerate(zip(header, cells))]
                 if t_index >= 0:
                     t = row[t_index]

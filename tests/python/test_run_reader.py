@@ -5,7 +5,8 @@ specification; firmware/host/csv_in.c is its twin (README: "It reads the input a
 estimate does").  Every case of the Python reader's own tables (test_safe_writer.READER_CASES,
 test_cli.BAD_CASES) and of the table below -- a BOM, quoted cells and "" inside quotes, a
 quoted cell across lines and to the end of the file, CRLF and a lone CR, comments, blank and
-white-space lines, text that is not UTF-8, a NUL, Unicode spaces around a number, the number
+white-space lines (skipped), semicolons and tabs between cells with a decimal comma, text
+that is not UTF-8, a NUL, Unicode spaces around a number, the number
 grammar's edges, more columns than the C reader once held, the csv module's cell limit -- goes
 through the reference and through nte-run and nte-run-double (--no-units-check: the reader
 alone; test_run_units.py holds the units check): both refuse with the same message (one line
@@ -95,6 +96,19 @@ EXTRA: list[tuple[str, bytes]] = [
     ("unit in a name", b"t_ms,depth_m,force_mN\n0,0,0\n"),
     ("only comments", b"# a\n# b\n"),
     ("blank first line", b"\n" + H),
+    ("blank lines between samples", H + b"\n0,0,0\n \n\r\n0.01,0.1,0\n\n"),
+    ("semicolons, decimal commas", b"t_s;depth_mm;force_n\n0;0,5;-0,01\n0,01;,75;1,e-3\n"),
+    ("tabs, decimal points", b"t_s\tdepth_mm\tforce_n\r\n0\t0.5\t0\r\n0.01\t1\t2\r\n"),
+    ("tabs after blank lines", b"\n \n# c\nt_s\tdepth_mm\tforce_n\n0\t1,5\t0\n"),
+    ("semicolon inside a quoted name", b'"t;s",t_s,depth_mm,force_n\n1,0,0,0\n'),
+    ("comma inside a quoted name", b'"a,b";t_s;depth_mm;force_n\n1;0;0;0\n'),
+    ("comma and semicolon: the comma", b"t_s,depth_mm,force_n;x\n0,0;5,0\n"),
+    ("quoted empty first line", b'""\nt_s;depth_mm;force_n\n0;0;0\n'),
+    ("decimal comma in a comma file", H + b'0,"0,5",0\n'),
+    ("two decimal commas", b"t_s;depth_mm;force_n\n0;0,5,5;0\n"),
+    ("decimal comma without digits", b"t_s;depth_mm;force_n\n0;,;0\n"),
+    ("decimal comma in the exponent", b"t_s;depth_mm;force_n\n0;1e1,5;0\n"),
+    ("rows of the other separator", b"t_s\tdepth_mm\tforce_n\n0,0,0\n"),
 ]
 
 
@@ -155,9 +169,9 @@ def test_missing_file_and_directory(tmp_path):
 ATOMS = [b"0", b"1", b"2", b"5", b"9", b".", b"e", b"-", b"+", b",", b",", b",", b'"', b'"',
          b"\n", b"\n", b"\n", b"\r\n", b"\r", b" ", b"\t", b"#", b"nan", b"inf", b"1e999",
          b"\xc2\xa0", b"\xef\xbb\xbf", b"\xff", b"'", b"\\", b"x", b"\xe2\x80\x83", b"\xc3\xa9",
-         b"\x1c"]
+         b"\x1c", b";", b";"]
 HEADS = [H, b'"t_s",depth_mm, force_n\r\n', b"\xef\xbb\xbf# c\nt_s,depth_mm,velocity_mm_s,force_n\n",
-         b"t_s,depth_mm\n", b""]
+         b"t_s,depth_mm\n", b"", b"t_s;depth_mm;force_n\n", b'\n"t_s"\tdepth_mm\t"force_n"\n']
 
 
 @pytest.mark.parametrize("seed", [1, 2])
@@ -170,8 +184,10 @@ def test_random_files_read_alike(tmp_path, capsys, seed):
         for _ in range(rng.randint(0, 4)):
             if rng.random() < 0.6:
                 t += rng.choice([1, 1, 0, -1])
-                data += b"%d,%s,%s\n" % (t, rng.choice([b"1", b"2.5", b" 3 ", b'"4"', b"1e2"]),
-                                         rng.choice([b"0", b"-1", b".5"]))
+                sep = rng.choice([b",", b",", b";", b"\t"])
+                data += sep.join([b"%d" % t, rng.choice([b"1", b"2.5", b" 3 ", b'"4"', b"1e2",
+                                                          b"2,5", b'"0,5"']),
+                                  rng.choice([b"0", b"-1", b".5", b",5"])]) + b"\n"
             else:
                 data += b"".join(rng.choice(ATOMS) for _ in range(rng.randint(1, 12)))
         path = tmp_path / "in.csv"

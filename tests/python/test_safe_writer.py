@@ -13,7 +13,7 @@ import pytest
 
 from reference_py.tools import safe_write
 from reference_py.tools.cli import main
-from reference_py.tools.csvio import CsvError, read_table, read_trial
+from reference_py.tools.csvio import CsvError, Units, read_table, read_trial
 from reference_py.tools.safe_write import OutputError, Outputs
 
 SIM = ["simulate", "--preset", "paper-10mms", "--depth", "5", "--dwell", "0", "--rate", "50"]
@@ -199,14 +199,45 @@ READER_CASES = [
     ("underscore", "t_s,depth_mm,force_n\n0,1_0,0\n",
      ":2: column 'depth_mm': not a number: '1_0'"),
     ("empty cell", "t_s,depth_mm,force_n\n0,,0\n", ":2: column 'depth_mm': not a number: ''"),
-    ("blank line", "t_s,depth_mm,force_n\n0,0,0\n\n0.1,0,0\n", ":3: empty line"),
     ("duplicate", "t_s,depth_mm,force_n,t_s\n", ":1: column 't_s': duplicate column name in the header"),
     ("not increasing", "t_s,depth_mm,force_n\n0,0,0\n0,0,0\n",
      ":3: column 't_s': time 0.0 does not increase (previous 0.0)"),
     ("no samples", "# only\nt_s,depth_mm,force_n\n", ":3: no samples after the header"),
     ("quoted text", 't_s,depth_mm,force_n\n0,"a,b",0\n', ":2: column 'depth_mm': not a number: 'a,b'"),
     ("NUL", "t_s,depth_mm,force_n\n0,0\x00,0\n", ":2: column 'depth_mm': not a number: '0\\x00'"),
+    ("decimal comma between commas", "t_s,depth_mm,force_n\n0,\"2,5\",0\n",
+     ":2: column 'depth_mm': not a number: '2,5'"),
+    ("two decimal marks", "t_s;depth_mm;force_n\n0;2,5.1;0\n",
+     ":2: column 'depth_mm': not a number: '2,5.1'"),
+    ("separators mixed", "t_s;depth_mm;force_n\n0,0,0\n", ":2: expected 3 cells, found 1"),
 ]
+
+
+def test_blank_lines_are_skipped_wherever_they_stand(tmp_path):
+    """A logger's or an editor's trailing newline, a blank line between header and samples:
+    the file is read, every sample keeps its physical line."""
+    p = write(tmp_path, "\n  \nt_s,depth_mm,force_n\n\n0,0,0\n \t\n0.1,0.5,0.25\n\n\n")
+    tr = read_trial(p, units=Units(check=False))
+    assert list(tr.t_s) == [0.0, 0.1] and list(tr.depth_mm) == [0.0, 0.5]
+    assert tr.lines == [5, 7]
+
+
+@pytest.mark.parametrize("separated", [";", "\t"])
+def test_semicolon_and_tab_separated_files_read_with_either_decimal_mark(tmp_path, separated):
+    """What a spreadsheet set to a decimal comma exports (';' and '2,5'), and tab-separated
+    logs: the header's first line gives the separator; the numbers are the comma file's."""
+    rows = [("0", "0", "0.01"), ("0,01", "0,1", "-2,5e-3"), ("0.02", ",25", "+1,")]
+    text = "# rig 3\n" + separated.join(('"t_s"', "depth_mm", "force_n")) + "\r\n" + "".join(
+        separated.join(r) + "\r\n" for r in rows)
+    tr = read_trial(write(tmp_path, text), units=Units(check=False))
+    assert list(tr.t_s) == [0.0, 0.01, 0.02]
+    assert list(tr.depth_mm) == [0.0, 0.1, 0.25] and list(tr.force_n) == [0.01, -2.5e-3, 1.0]
+
+
+def test_a_separator_inside_a_quoted_name_does_not_decide(tmp_path):
+    p = write(tmp_path, '"t_s";"depth_mm";"force_n";"note, raw"\n0;1,5;0;2\n')
+    tr = read_trial(p, units=Units(check=False))
+    assert list(tr.depth_mm) == [1.5] and list(tr.columns["note, raw"]) == [2.0]
 
 
 @pytest.mark.parametrize("label,text,message", READER_CASES, ids=[c[0] for c in READER_CASES])
