@@ -2,8 +2,9 @@
 
 A trial is one insertion recording: times (s), stage/insertion depth (mm), axial force (N) and,
 when the recorder logged it, the stage velocity (mm/s).  Readers are chosen by file suffix from
-:data:`READERS`: CSV (the tools' one reader: a spreadsheet export with a byte-order mark and
-quoted cells is fine) and candump logs (``.log``, ``candump -l``/``-L``) decoded with the
+:data:`READERS`: CSV (the tools' one reader: a spreadsheet export with a byte-order mark,
+quoted cells, semicolons and a decimal comma is fine; also as ``.tsv`` and ``.txt``, the names
+loggers give their tab-separated exports) and candump logs (``.log``, ``candump -l``/``-L``) decoded with the
 project's DBC (firmware/can/nte.dbc through reference_py.bus.dbc, end-to-end checks included).
 """
 from __future__ import annotations
@@ -119,7 +120,8 @@ def read_candump(path: Path) -> Trial:
     return Trial(path.stem, tf - t0, np.interp(tf, td, d), f, np.interp(tf, td, v))
 
 
-READERS: dict[str, Callable[[Path], Trial]] = {".csv": read_csv, ".log": read_candump}
+READERS: dict[str, Callable[[Path], Trial]] = {".csv": read_csv, ".tsv": read_csv,
+                                               ".txt": read_csv, ".log": read_candump}
 
 
 def read_trial(path: str | Path, units: Units | None = None) -> Trial:

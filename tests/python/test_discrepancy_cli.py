@@ -59,7 +59,10 @@ def test_bad_input_names_file_line_column(tmp_path: Path, capsys: pytest.Capture
 
 def test_unknown_and_missing_files_exit_2(tmp_path: Path) -> None:
     assert main([str(tmp_path / "nope.csv"), "--out", str(tmp_path / "o")]) == 2
-    f = tmp_path / "x.txt"
+    f = tmp_path / "x.xlsx"
+    f.write_text("t_s,depth_mm,force_n\n0,0,0\n")
+    assert main([str(f), "--out", str(tmp_path / "o")]) == 2
+    f = tmp_path / "x.txt"                    # read as CSV: refused for what it holds
     f.write_text("")
     assert main([str(f), "--out", str(tmp_path / "o")]) == 2
 
@@ -105,6 +108,24 @@ def test_spreadsheet_csv_with_bom_and_quoted_cells(tmp_path: Path) -> None:
             fh.write(f'"{float(a)!r}","{float(b)!r}","{float(c)!r}"\r\n')
     assert sheet.read_bytes()[:3] == b"\xef\xbb\xbf"
     got, ref = read_trial(sheet), read_trial(plain)
+    for name in ("t_s", "depth_mm", "force_n"):
+        assert np.array_equal(getattr(got, name), getattr(ref, name))
+
+
+@pytest.mark.parametrize("suffix,separator", [(".csv", ";"), (".tsv", "\t"), (".txt", "\t")])
+def test_exports_with_a_decimal_comma_or_tabs(tmp_path: Path, suffix: str, separator: str
+                                              ) -> None:
+    """A spreadsheet set to a decimal comma (';' between cells, '2,5') and a logger's
+    tab-separated export (.tsv, .txt) read exactly as the plain file."""
+    from reference_py.discrepancy.io import read_trial
+    tr = make_case(("dwell_relaxation",), 5).trials[0]
+    plain, other = tmp_path / "plain.csv", tmp_path / f"other{suffix}"
+    write_csv(plain, tr)
+    rows = zip(tr.t_s, tr.depth_mm, tr.force_n)
+    other.write_text(separator.join(("t_s", "depth_mm", "force_n")) + "\n" + "".join(
+        separator.join(repr(float(x)).replace(".", ",") for x in row) + "\n" for row in rows)
+        + "\n")
+    got, ref = read_trial(other), read_trial(plain)
     for name in ("t_s", "depth_mm", "force_n"):
         assert np.array_equal(getattr(got, name), getattr(ref, name))
 
