@@ -320,16 +320,75 @@ static int same_ignoring_case(const char* a, const char* b)
 static const nte_unit_t force_units[NTE_FORCE_UNIT_COUNT] = NTE_FORCE_UNITS;
 static const nte_unit_t time_units[NTE_TIME_UNIT_COUNT] = NTE_TIME_UNITS;
 static const nte_unit_t depth_units[NTE_DEPTH_UNIT_COUNT] = NTE_DEPTH_UNITS;
+static const char* const force_unit_words[NTE_FORCE_UNIT_NAME_WORD_COUNT] =
+    NTE_FORCE_UNIT_NAME_WORDS;
+static const char* const time_unit_words[NTE_TIME_UNIT_NAME_WORD_COUNT] = NTE_TIME_UNIT_NAME_WORDS;
+static const char* const depth_unit_words[NTE_DEPTH_UNIT_NAME_WORD_COUNT] =
+    NTE_DEPTH_UNIT_NAME_WORDS;
+
+/* csvio._named_with_unit: the column is one of the words and the unit in one of the forms
+ * (WORD between UNIT after), case aside. */
+static int named_with_unit(const char* column, const char* const* words, const size_t n_words,
+                           const char* unit)
+{
+    static const struct {
+        const char* between;
+        const char* after;
+    } forms[NTE_UNIT_NAME_FORM_COUNT] = NTE_UNIT_NAME_FORMS;
+    for (size_t w = 0U; w < n_words; w++) {
+        for (size_t f = 0U; f < NTE_UNIT_NAME_FORM_COUNT; f++) {
+            char name[64];
+            (void)snprintf(name, sizeof name, "%s%s%s%s", words[w], forms[f].between, unit,
+                           forms[f].after);
+            if (same_ignoring_case(column, name) != 0) {
+                return 1;
+            }
+        }
+    }
+    return 0;
+}
+
+/* csvio.shell_quoted (shlex.quote): the text as it is when every character is a letter, a
+ * digit or one of _@%+=:,./- ; else inside single quotes, a ' written '"'"'. */
+static void shell_quoted(const char* text, char* out, const size_t cap)
+{
+    static const char safe[] = "_@%+=:,./-";
+    int plain = (text[0] != '\0');
+    for (const char* c = text; *c != '\0'; c++) {
+        const int alnum = ((*c >= 'a') && (*c <= 'z')) || ((*c >= 'A') && (*c <= 'Z')) ||
+                          ((*c >= '0') && (*c <= '9'));
+        plain &= alnum || (strchr(safe, *c) != NULL);
+    }
+    if (plain != 0) {
+        (void)snprintf(out, cap, "%s", text);
+        return;
+    }
+    size_t o = 0U;
+    out[o++] = '\'';
+    for (const char* c = text; (*c != '\0') && (o + 6U < cap); c++) {
+        if (*c == '\'') {
+            (void)memcpy(out + o, "'\"'\"'", 5U);
+            o += 5U;
+        } else {
+            out[o++] = *c;
+        }
+    }
+    out[o++] = '\'';
+    out[o] = '\0';
+}
 
 /* Twin of csvio.unit_suffix_hint: "read it with --columns t=..,depth=..,force=.. [--KIND-unit
- * U]..." when each of the time, depth and force has exactly one column named QUANTITY_UNIT
- * (case aside: t_ms, depth_m, force_mN), "" otherwise.  The reader does not guess from a name
- * (a column so named may hold anything); the refusal says how to read the file. */
+ * U]..." (the map quoted for the shell where a name needs it) when each of the time, depth and
+ * force has exactly one column named with its unit (t_ms, depth_m, "Force [mN]": csvio's
+ * UNIT_SUFFIX_QUANTITIES and UNIT_NAME_FORMS), "" otherwise.  The reader does not guess from a
+ * name (a column so named may hold anything); the refusal says how to read the file. */
 static void unit_suffix_hint(char* const* header, const size_t nc, char* out, const size_t cap)
 {
     const struct {
-        const char* key;  /* the --columns key, also the name's first part */
+        const char* key;  /* the --columns key */
         const char* kind; /* --KIND-unit */
+        const char* const* words;
+        size_t n_words;
         const nte_unit_t* units;
         size_t n_units;
     } quantities[NTE_UNIT_QUANTITY_COUNT] = NTE_UNIT_QUANTITIES;
@@ -343,10 +402,8 @@ static void unit_suffix_hint(char* const* header, const size_t nc, char* out, co
         size_t unit_index = 0U;
         for (size_t c = 0U; c < nc; c++) {
             for (size_t u = 0U; u < quantities[q].n_units; u++) {
-                char name[64];
-                (void)snprintf(name, sizeof name, "%s_%s", quantities[q].key,
-                               quantities[q].units[u].name);
-                if (same_ignoring_case(header[c], name) != 0) {
+                if (named_with_unit(header[c], quantities[q].words, quantities[q].n_words,
+                                    quantities[q].units[u].name) != 0) {
                     found++;
                     column = header[c];
                     unit = &quantities[q].units[u];
@@ -366,7 +423,9 @@ static void unit_suffix_hint(char* const* header, const size_t nc, char* out, co
                            unit->name);
         }
     }
-    (void)snprintf(out, cap, "; read it with --columns %s%s", mapped, options);
+    char quoted[1100];
+    shell_quoted(mapped, quoted, sizeof quoted);
+    (void)snprintf(out, cap, "; read it with --columns %s%s", quoted, options);
 }
 
 /* What the reader knows between records. */

@@ -26,11 +26,21 @@ typedef struct nte_unit_t {
 #define NTE_DEPTH_UNIT_COUNT 2
 #define NTE_DEPTH_UNITS { { "mm", 0x1.0000000000000p+0 }, { "m", 0x1.f400000000000p+9 } }
 #define NTE_TIME_UNIT_WORDS { "", "milliseconds", "microseconds" } /* a time step's hint */
-/* csvio.UNIT_SUFFIX_QUANTITIES: a column named KEY_UNIT holds a quantity in UNIT,
- * read with --KIND-unit (key, kind, its table: the arrays force_units, time_units
- * and depth_units that the including file initialises from NTE_*_UNITS) */
+/* csvio.UNIT_SUFFIX_QUANTITIES: a column named WORD, a form's between, UNIT and its
+ * after (csvio.UNIT_NAME_FORMS) holds a quantity in UNIT, read with --KIND-unit (key,
+ * kind, its words, its table: the arrays force_units, time_units and depth_units that
+ * the including file initialises from NTE_*_UNITS, and *_unit_words from
+ * NTE_*_UNIT_NAME_WORDS) */
+#define NTE_TIME_UNIT_NAME_WORD_COUNT 2
+#define NTE_TIME_UNIT_NAME_WORDS { "t", "time" }
+#define NTE_DEPTH_UNIT_NAME_WORD_COUNT 7
+#define NTE_DEPTH_UNIT_NAME_WORDS { "depth", "position", "pos", "displacement", "insertion", "insertion depth", "z" }
+#define NTE_FORCE_UNIT_NAME_WORD_COUNT 5
+#define NTE_FORCE_UNIT_NAME_WORDS { "force", "f", "fz", "load", "axial force" }
+#define NTE_UNIT_NAME_FORM_COUNT 8
+#define NTE_UNIT_NAME_FORMS { { "_", "" }, { " [", "]" }, { "[", "]" }, { " (", ")" }, { "(", ")" }, { " / ", "" }, { "/", "" }, { " in ", "" } }
 #define NTE_UNIT_QUANTITY_COUNT 3
-#define NTE_UNIT_QUANTITIES { { "t", "time", time_units, NTE_TIME_UNIT_COUNT }, { "depth", "depth", depth_units, NTE_DEPTH_UNIT_COUNT }, { "force", "force", force_units, NTE_FORCE_UNIT_COUNT } }
+#define NTE_UNIT_QUANTITIES { { "t", "time", time_unit_words, NTE_TIME_UNIT_NAME_WORD_COUNT, time_units, NTE_TIME_UNIT_COUNT }, { "depth", "depth", depth_unit_words, NTE_DEPTH_UNIT_NAME_WORD_COUNT, depth_units, NTE_DEPTH_UNIT_COUNT }, { "force", "force", force_unit_words, NTE_FORCE_UNIT_NAME_WORD_COUNT, force_units, NTE_FORCE_UNIT_COUNT } }
 
 /* --columns KEY=NAME: each key and the standard column it stands for */
 #define NTE_COLUMN_KEY_COUNT 4

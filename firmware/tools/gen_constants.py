@@ -246,13 +246,23 @@ def units_header() -> str:
         out.append(f"#define NTE_{kind}_UNITS {{ {cells} }}")
     words = ", ".join(f'"{csvio.TIME_UNIT_WORDS.get(n, "")}"' for n in csvio.TIME_UNITS)
     out.append(f"#define NTE_TIME_UNIT_WORDS {{ {words} }} /* a time step's hint */")
-    out.append("/* csvio.UNIT_SUFFIX_QUANTITIES: a column named KEY_UNIT holds a quantity in UNIT,")
-    out.append(" * read with --KIND-unit (key, kind, its table: the arrays force_units, time_units")
-    out.append(" * and depth_units that the including file initialises from NTE_*_UNITS) */")
+    out.append("/* csvio.UNIT_SUFFIX_QUANTITIES: a column named WORD, a form's between, UNIT and its")
+    out.append(" * after (csvio.UNIT_NAME_FORMS) holds a quantity in UNIT, read with --KIND-unit (key,")
+    out.append(" * kind, its words, its table: the arrays force_units, time_units and depth_units that")
+    out.append(" * the including file initialises from NTE_*_UNITS, and *_unit_words from")
+    out.append(" * NTE_*_UNIT_NAME_WORDS) */")
+    for key, kind, words, t in csvio.UNIT_SUFFIX_QUANTITIES:
+        cells = ", ".join(f'"{w}"' for w in words)
+        out.append(f"#define NTE_{kinds[id(t)]}_UNIT_NAME_WORD_COUNT {len(words)}")
+        out.append(f"#define NTE_{kinds[id(t)]}_UNIT_NAME_WORDS {{ {cells} }}")
+    out.append(f"#define NTE_UNIT_NAME_FORM_COUNT {len(csvio.UNIT_NAME_FORMS)}")
+    cells = ", ".join(f'{{ "{b}", "{a}" }}' for b, a in csvio.UNIT_NAME_FORMS)
+    out.append(f"#define NTE_UNIT_NAME_FORMS {{ {cells} }}")
     out.append(f"#define NTE_UNIT_QUANTITY_COUNT {len(csvio.UNIT_SUFFIX_QUANTITIES)}")
-    cells = ", ".join(f'{{ "{key}", "{kind}", {kinds[id(t)].lower()}_units, '
+    cells = ", ".join(f'{{ "{key}", "{kind}", {kinds[id(t)].lower()}_unit_words, '
+                      f'NTE_{kinds[id(t)]}_UNIT_NAME_WORD_COUNT, {kinds[id(t)].lower()}_units, '
                       f'NTE_{kinds[id(t)]}_UNIT_COUNT }}'
-                      for key, kind, t in csvio.UNIT_SUFFIX_QUANTITIES)
+                      for key, kind, _, t in csvio.UNIT_SUFFIX_QUANTITIES)
     out.append(f"#define NTE_UNIT_QUANTITIES {{ {cells} }}")
     out.append("")
     out.append("/* --columns KEY=NAME: each key and the standard column it stands for */")

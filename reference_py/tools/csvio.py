@@ -237,30 +237,55 @@ class UnitsError(CsvError):
     unit or convention and the option that converts it."""
 
 
-#: what a header may name its insertion columns when their unit is not the tools' one: the
-#: quantity, "_", then one of its units (case aside: force_mN, t_ms, depth_m, force_N).  The
-#: reader does not guess (a column named so may hold anything); it says how to read them.
+#: what a header may name its insertion columns with their unit: one of the quantity's words,
+#: then one of its units in one of UNIT_NAME_FORMS (case aside: force_mN, t_ms, "Time [s]",
+#: "Position (mm)", "Fz / N").  The reader does not guess (a column named so may hold
+#: anything); it says how to read them.  Per quantity: the --columns key, the --KIND-unit
+#: kind, the words, the units.
 #: C twin: unit_suffix_hint in firmware/host/csv_in.c (test_run_columns: word for word).
-UNIT_SUFFIX_QUANTITIES = (("t", "time", TIME_UNITS), ("depth", "depth", DEPTH_UNITS),
-                          ("force", "force", FORCE_UNITS))
+UNIT_SUFFIX_QUANTITIES = (
+    ("t", "time", ("t", "time"), TIME_UNITS),
+    ("depth", "depth", ("depth", "position", "pos", "displacement", "insertion",
+                        "insertion depth", "z"), DEPTH_UNITS),
+    ("force", "force", ("force", "f", "fz", "load", "axial force"), FORCE_UNITS))
+#: a word and a unit joined as loggers and spreadsheets write them: WORD + between + UNIT +
+#: after, for each (between, after)
+UNIT_NAME_FORMS = (("_", ""), (" [", "]"), ("[", "]"), (" (", ")"), ("(", ")"), (" / ", ""),
+                   ("/", ""), (" in ", ""))
+#: what a shell takes without quotes (shlex.quote's set; the C twin quotes alike)
+_SHELL_SAFE = re.compile(r"[\w@%+=:,./-]+", re.ASCII)
+
+
+def shell_quoted(text: str) -> str:
+    """``text`` as one shell word, as shlex.quote writes it (C twin: csv_in.c shell_quoted)."""
+    if _SHELL_SAFE.fullmatch(text):
+        return text
+    return "'" + text.replace("'", "'\"'\"'") + "'"
+
+
+def _named_with_unit(column: str, words: Sequence[str], unit: str) -> bool:
+    name = column.lower()
+    return any(name == f"{word}{between}{unit}{after}".lower()
+               for word in words for between, after in UNIT_NAME_FORMS)
 
 
 def unit_suffix_hint(header: list[str]) -> str:
     """The options that read a header whose time, depth and force columns carry their unit in
-    their names (t_ms, depth_m, force_mN...): ``--columns t=..,depth=..,force=..`` and a
-    ``--KIND-unit U`` for every unit that is not the tools' own; "" when a quantity has no such
-    column or more than one (then nothing is sure enough to advise)."""
+    their names (t_ms, depth_m, "Force [mN]"...): ``--columns t=..,depth=..,force=..`` (quoted
+    for the shell where a name needs it) and a ``--KIND-unit U`` for every unit that is not the
+    tools' own; "" when a quantity has no such column or more than one (then nothing is sure
+    enough to advise)."""
     mapped, options = [], []
-    for key, kind, units in UNIT_SUFFIX_QUANTITIES:
+    for key, kind, words, units in UNIT_SUFFIX_QUANTITIES:
         found = [(col, unit) for col in header for unit in units
-                 if col.lower() == f"{key}_{unit}".lower()]
+                 if _named_with_unit(col, words, unit)]
         if len(found) != 1:
             return ""
         col, unit = found[0]
         mapped.append(f"{key}={col}")
         if unit != next(iter(units)):     # the first unit of each table is the tools' own
             options.append(f"--{kind}-unit {unit}")
-    return "read it with --columns " + " ".join([",".join(mapped)] + options)
+    return "read it with --columns " + " ".join([shell_quoted(",".join(mapped))] + options)
 
 
 @dataclass(frozen=True)

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import csv
 import json
+import shlex
 from pathlib import Path
 
 import numpy as np
@@ -133,9 +134,22 @@ UNIT_HEADERS = [
      "--depth-unit m", (1.0, 1e-3, 1.0)),
     ("T_US,Depth_mm,Force_mN", "read it with --columns t=T_US,depth=Depth_mm,force=Force_mN "
      "--time-unit us --force-unit mN", (1e6, 1.0, 1e3)),
+    # a spreadsheet's and a logger's names: the map quoted for the shell
+    ("Time [s],Position [mm],Force [N]",
+     "read it with --columns 't=Time [s],depth=Position [mm],force=Force [N]'", (1.0, 1.0, 1.0)),
+    ("time (ms),displacement (m),Load (mN)", "read it with --columns "
+     "'t=time (ms),depth=displacement (m),force=Load (mN)' --time-unit ms --depth-unit m "
+     "--force-unit mN", (1e3, 1e-3, 1e3)),
+    ("T/us,z/mm,Fz [N],Fx [N]", "read it with --columns 't=T/us,depth=z/mm,force=Fz [N]' "
+     "--time-unit us", (1e6, 1.0, 1.0, 1.0)),
+    ("Time in s,Insertion Depth [mm],Axial Force [mN]", "read it with --columns "
+     "'t=Time in s,depth=Insertion Depth [mm],force=Axial Force [mN]' --force-unit mN",
+     (1.0, 1.0, 1e3)),
     # two force columns, or a quantity named otherwise: nothing sure enough to advise
     ("t_s,depth_mm,force_N,force_mN", "", (1.0, 1.0, 1.0, 1e3)),
     ("time,depth_mm,force_mN", "", (1.0, 1.0, 1e3)),
+    ("Time [s],Position [mm],Force [N],Force [mN]", "", (1.0, 1.0, 1.0, 1e3)),
+    ("Time [s],Position [mm],Fx [N]", "", (1.0, 1.0, 1.0)),
 ]
 
 
@@ -160,7 +174,7 @@ def test_a_unit_in_a_column_name_is_refused_with_the_options_that_read_it(
     if not advice:
         return
     std = write_standard(tmp_path / "std.csv", rows)
-    options = advice.removeprefix("read it with ").split()
+    options = shlex.split(advice.removeprefix("read it with "))
     assert run_estimate(capsys, std, tmp_path / "std_e.csv", "--model", "2")[0] == 0
     assert run_estimate(capsys, src, tmp_path / "u_e.csv", "--model", "2", *options)[0] == 0
     a = np.loadtxt(tmp_path / "std_e.csv", delimiter=",", skiprows=1)
