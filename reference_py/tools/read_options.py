@@ -1,0 +1,163 @@
+"""What the CSV reader is told about a file, and how it says what to tell it.
+
+Column map (:class:`ColumnMap`, ``--columns t=NAME,depth=NAME,force=NAME[,velocity=NAME]``)
+    A logger's file is read as it is: the map names the file's columns that hold the time,
+    the depth and the force (and the velocity; without ``velocity=`` it is computed from the
+    depth, whatever other columns the file has).  Every rule of the reader (csvio) then
+    applies to the mapped columns, and every message names them as the file does.  With
+    ``--time-unit us`` (and the other unit options) a time in microseconds, a depth in
+    metres... are converted.
+
+Units (:class:`Units`: ``--force-unit``, ``--time-unit``, ``--depth-unit``, the signs,
+``--depth-offset``)
+    How the mapped columns are converted to N, s and mm before anything else reads them
+    (reference_py.tools.arguments parses the flags into one).
+
+A header that names its units (:func:`unit_suffix_hint`)
+    Not guessed at; the refusal of a missing standard column gives the options that read it.
+
+Every refusal is a :class:`CsvError` (``--OPTION VALUE: reason`` for an option).  The reader,
+:mod:`reference_py.tools.csvio`, re-exports these names.  C twins: column_map.c (the map),
+csv_in.c unit_suffix_hint (the advice), nte_units.h (the tables, generated from here).
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from typing import Sequence
+
+
+class CsvError(ValueError):
+    """Bad input: the message says which file, line and column, and why."""
+
+
+#: the keys of --columns and the standard column each one stands for
+COLUMN_KEYS = {"t": "t_s", "depth": "depth_mm", "force": "force_n", "velocity": "velocity_mm_s"}
+#: the keys --columns must give (velocity is optional)
+COLUMN_KEYS_REQUIRED = ("t", "depth", "force")
+
+#: Units the reader converts from (factor to the tools' unit: N, s, mm).
+FORCE_UNITS = {"N": 1.0, "mN": 1.0e-3}
+TIME_UNITS = {"s": 1.0, "ms": 1.0e-3, "us": 1.0e-6}
+DEPTH_UNITS = {"mm": 1.0, "m": 1.0e3}
+
+
+#: what a header may name its insertion columns with their unit: one of the quantity's words,
+#: then one of its units in one of UNIT_NAME_FORMS (case aside: force_mN, t_ms, "Time [s]",
+#: "Position (mm)", "Fz / N").  The reader does not guess (a column named so may hold
+#: anything); it says how to read them.  Per quantity: the --columns key, the --KIND-unit
+#: kind, the words, the units.
+#: C twin: unit_suffix_hint in firmware/host/csv_in.c (test_run_columns: word for word).
+UNIT_SUFFIX_QUANTITIES = (
+    ("t", "time", ("t", "time"), TIME_UNITS),
+    ("depth", "depth", ("depth", "position", "pos", "displacement", "insertion",
+                        "insertion depth", "z"), DEPTH_UNITS),
+    ("force", "force", ("force", "f", "fz", "load", "axial force"), FORCE_UNITS))
+#: a word and a unit joined as loggers and spreadsheets write them: WORD + between + UNIT +
+#: after, for each (between, after)
+UNIT_NAME_FORMS = (("_", ""), (" [", "]"), ("[", "]"), (" (", ")"), ("(", ")"), (" / ", ""),
+                   ("/", ""), (" in ", ""))
+#: what a shell takes without quotes (shlex.quote's set; the C twin quotes alike)
+_SHELL_SAFE = re.compile(r"[\w@%+=:,./-]+", re.ASCII)
+
+
+def shell_quoted(text: str) -> str:
+    """``text`` as one shell word, as shlex.quote writes it (C twin: csv_in.c shell_quoted)."""
+    if _SHELL_SAFE.fullmatch(text):
+        return text
+    return "'" + text.replace("'", "'\"'\"'") + "'"
+
+
+def _named_with_unit(column: str, words: Sequence[str], unit: str) -> bool:
+    name = column.lower()
+    return any(name == f"{word}{between}{unit}{after}".lower()
+               for word in words for between, after in UNIT_NAME_FORMS)
+
+
+def unit_suffix_hint(header: list[str]) -> str:
+    """The options that read a header whose time, depth and force columns carry their unit in
+    their names (t_ms, depth_m, "Force [mN]"...): ``--columns t=..,depth=..,force=..`` (quoted
+    for the shell where a name needs it) and a ``--KIND-unit U`` for every unit that is not the
+    tools' own; "" when a quantity has no such column or more than one (then nothing is sure
+    enough to advise)."""
+    mapped, options = [], []
+    for key, kind, words, units in UNIT_SUFFIX_QUANTITIES:
+        found = [(col, unit) for col in header for unit in units
+                 if _named_with_unit(col, words, unit)]
+        if len(found) != 1:
+            return ""
+        col, unit = found[0]
+        mapped.append(f"{key}={col}")
+        if unit != next(iter(units)):     # the first unit of each table is the tools' own
+            options.append(f"--{kind}-unit {unit}")
+    return "read it with --columns " + " ".join([shell_quoted(",".join(mapped))] + options)
+
+
+@dataclass(frozen=True)
+class ColumnMap:
+    """Which of the file's columns hold the time, depth, force and velocity (the module's
+    docstring, "Column map").  The default is the standard names, the velocity read when the
+    file has it; a parsed map (``text`` not empty) reads the velocity only when it names it."""
+    t: str = "t_s"
+    depth: str = "depth_mm"
+    force: str = "force_n"
+    velocity: str | None = "velocity_mm_s"
+    text: str = ""              # the --columns value it was parsed from ("": the standard names)
+
+    @classmethod
+    def parse(cls, text: str) -> "ColumnMap":
+        """``t=NAME,depth=NAME,force=NAME[,velocity=NAME]``, or CsvError naming what is wrong:
+        an item that is not KEY=NAME, an unknown or repeated key, a key missing, one column
+        given two meanings."""
+        def refuse(why: str) -> CsvError:
+            return CsvError(f"--columns {text}: {why}")
+
+        keys = ", ".join(COLUMN_KEYS)
+        given: dict[str, str] = {}
+        for item in text.split(","):
+            key, eq, name = (part.strip() for part in item.partition("="))
+            if not eq or not key:
+                raise refuse(f"{item.strip()!r} is not KEY=NAME (expected "
+                             f"t=NAME,depth=NAME,force=NAME[,velocity=NAME])")
+            if key not in COLUMN_KEYS:
+                raise refuse(f"unknown key {key!r} (keys: {keys})")
+            if key in given:
+                raise refuse(f"key {key!r} given twice")
+            if not name:
+                raise refuse(f"key {key!r} names no column")
+            twin = next((k for k, v in given.items() if v == name), None)
+            if twin is not None:
+                raise refuse(f"column {name!r} given for both {twin!r} and {key!r}")
+            given[key] = name
+        missing = [k for k in COLUMN_KEYS_REQUIRED if k not in given]
+        if missing:
+            raise refuse(f"key {missing[0]!r} missing ({', '.join(COLUMN_KEYS_REQUIRED)} are "
+                         f"required, velocity is optional)")
+        return cls(given["t"], given["depth"], given["force"], given.get("velocity"), text)
+
+    def name(self, standard: str) -> str:
+        """The file's name of the column that stands for the standard column ``standard``
+        (a column that is not an insertion's keeps its name)."""
+        for key, std in COLUMN_KEYS.items():
+            if std == standard:
+                return getattr(self, key) or standard
+        return standard
+
+
+@dataclass(frozen=True)
+class Units:
+    """How a file's columns are converted to N, s, mm (and the sign conventions: depth grows
+    into the tissue, force is positive while inserting), whether to check plausibility, and
+    which columns hold what (``columns``)."""
+    force: str = "N"
+    time: str = "s"
+    depth: str = "mm"
+    force_sign: int = 1
+    depth_sign: int = 1
+    check: bool = True
+    columns: ColumnMap = ColumnMap()
+    depth_offset_mm: float = 0.0    # added to the depth after its unit and sign, mm
+
+
+#: --depth-offset's range, mm: a stage's origin within a metre of the tissue
+DEPTH_OFFSET_MAX_MM = 1000.0
