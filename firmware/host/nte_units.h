@@ -19,12 +19,12 @@ typedef struct nte_unit_t {
     double factor; /* to the tools' unit: N, s or mm */
 } nte_unit_t;
 
-#define NTE_FORCE_UNIT_COUNT 2
-#define NTE_FORCE_UNITS { { "N", 0x1.0000000000000p+0 }, { "mN", 0x1.0624dd2f1a9fcp-10 } }
+#define NTE_FORCE_UNIT_COUNT 3
+#define NTE_FORCE_UNITS { { "N", 0x1.0000000000000p+0 }, { "mN", 0x1.0624dd2f1a9fcp-10 }, { "gf", 0x1.4158248443c70p-7 } }
 #define NTE_TIME_UNIT_COUNT 3
 #define NTE_TIME_UNITS { { "s", 0x1.0000000000000p+0 }, { "ms", 0x1.0624dd2f1a9fcp-10 }, { "us", 0x1.0c6f7a0b5ed8dp-20 } }
-#define NTE_DEPTH_UNIT_COUNT 2
-#define NTE_DEPTH_UNITS { { "mm", 0x1.0000000000000p+0 }, { "m", 0x1.f400000000000p+9 } }
+#define NTE_DEPTH_UNIT_COUNT 3
+#define NTE_DEPTH_UNITS { { "mm", 0x1.0000000000000p+0 }, { "m", 0x1.f400000000000p+9 }, { "um", 0x1.0624dd2f1a9fcp-10 } }
 #define NTE_TIME_UNIT_WORDS { "", "milliseconds", "microseconds" } /* a time step's hint */
 /* csvio.UNIT_SUFFIX_QUANTITIES: a column named WORD, a form's between, UNIT and its
  * after (csvio.UNIT_NAME_FORMS) holds a quantity in UNIT, read with --KIND-unit (key,

@@ -147,15 +147,26 @@ static void sign_advice(const nte_units_t* u, const int depth, const int force, 
     }
 }
 
-static double force_unit(const char* name)
+static double unit_factor(const nte_unit_t* units, const size_t n, const char* name)
 {
-    static const nte_unit_t units[NTE_FORCE_UNIT_COUNT] = NTE_FORCE_UNITS;
-    for (size_t i = 0U; i < NTE_FORCE_UNIT_COUNT; i++) {
+    for (size_t i = 0U; i < n; i++) {
         if (strcmp(units[i].name, name) == 0) {
             return units[i].factor;
         }
     }
     return (double)NAN;
+}
+
+static double force_unit(const char* name)
+{
+    static const nte_unit_t units[NTE_FORCE_UNIT_COUNT] = NTE_FORCE_UNITS;
+    return unit_factor(units, NTE_FORCE_UNIT_COUNT, name);
+}
+
+static double depth_unit(const char* name)
+{
+    static const nte_unit_t units[NTE_DEPTH_UNIT_COUNT] = NTE_DEPTH_UNITS;
+    return unit_factor(units, NTE_DEPTH_UNIT_COUNT, name);
 }
 
 /* Why a median time step of dt s, read in `unit`, is too long (csvio._time_hint): the first
@@ -255,11 +266,29 @@ static int check_time(const char* path, const nte_trial_t* tr, const nte_units_t
     return 0;
 }
 
-/* Rules 2 and 3: a stroke under a millimetre (metres read as mm), mostly negative depths --
- * with the force too when, read that way, it would be negative while inserting (one message,
- * not two in turn).  v: n scratch values. */
+/* Micrometres read as mm: most depths outside the accepted range, every one inside it and the
+ * stroke still a millimetre at a thousandth of the value. */
+static int in_micrometres(const nte_trial_t* tr, const nte_units_t* u, const nte_limits_t* lim,
+                          const double stroke, double* far)
+{
+    const double um = depth_unit("um");
+    size_t out = 0U;
+    int inside = 1;
+    for (size_t k = 0U; k < tr->n; k++) {
+        const double d = tr->depth_mm[k];
+        out += ((d < lim->depth_min_mm) || (d > lim->depth_max_mm)) ? 1U : 0U;
+        inside &= ((d * um) >= lim->depth_min_mm) && ((d * um) <= lim->depth_max_mm);
+    }
+    *far = share(out, tr->n);
+    return (*far > NTE_UNITS_MAX_REJECTED_SHARE) && (strcmp(u->depth, "mm") == 0) &&
+           ((stroke * um) >= NTE_UNITS_MIN_STROKE_MM) && inside;
+}
+
+/* Rules 2 and 3: a stroke under a millimetre (metres read as mm), depths in micrometres,
+ * mostly negative depths -- with the force too when, read that way, it would be negative
+ * while inserting (one message, not two in turn).  v: n scratch values. */
 static int check_depth(const char* path, const nte_trial_t* tr, const nte_units_t* u,
-                       const double tare, double* v, char* err, size_t es)
+                       const nte_limits_t* lim, const double tare, double* v, char* err, size_t es)
 {
     double lo = tr->depth_mm[0];
     double hi = tr->depth_mm[0];
@@ -279,6 +308,16 @@ static int check_depth(const char* path, const nte_trial_t* tr, const nte_units_
                        (strcmp(u->depth, "mm") == 0)
                            ? "probably metres: convert with --depth-unit m"
                            : "no insertion");
+        return -1;
+    }
+    double far = 0.0;
+    if (in_micrometres(tr, u, lim, stroke, &far)) {
+        (void)snprintf(err, es,
+                       "%s: column '%s': %.0f %% of the depths are outside the accepted range "
+                       "%g..%g mm (from %.4g to %.4g): probably micrometres: convert with "
+                       "--depth-unit um",
+                       path, u->columns.depth, 100.0 * far, lim->depth_min_mm, lim->depth_max_mm,
+                       lo, hi);
         return -1;
     }
     const double ns = share(neg, tr->n);
@@ -457,13 +496,21 @@ static int check_force(const char* path, const nte_trial_t* tr, const nte_units_
     }
     const double os = share(out, present);
     if (os > NTE_UNITS_MAX_FORCE_OUT_SHARE) {
-        const int mn = (strcmp(u->force, "N") == 0) && ((peak * force_unit("mN")) <= fmax);
+        const int in_n = strcmp(u->force, "N") == 0;
+        const char* hint = "not a force in N";
+        if (in_n && ((peak * force_unit("gf")) <= fmax)) {
+            /* a factor 9.8 apart: the values cannot tell them, the rig's manual can */
+            hint = "probably millinewtons, or grams-force (a load cell read in grams): convert "
+                   "with --force-unit mN or --force-unit gf";
+        } else if (in_n && ((peak * force_unit("mN")) <= fmax)) {
+            hint = "probably millinewtons: convert with --force-unit mN";
+        } else {
+            /* not a unit the reader knows */
+        }
         (void)snprintf(err, es,
                        "%s: column '%s': %.0f %% of the forces exceed the configured "
                        "range \xc2\xb1%g N (up to %.4g): %s",
-                       path, u->columns.force, 100.0 * os, fmax, peak,
-                       mn ? "probably millinewtons: convert with --force-unit mN"
-                          : "not a force in N");
+                       path, u->columns.force, 100.0 * os, fmax, peak, hint);
         return -1;
     }
     if (peak > (NTE_UNITS_FORCE_IMPLAUSIBLE_FACTOR * fmax)) {
@@ -530,7 +577,7 @@ int nte_units_check(const char* path, const nte_trial_t* tr, const nte_units_t* 
     }
     const double tare = tare_of(tr, scratch);
     const int rc = ((check_time(path, tr, u, lim, scratch, err, es) != 0) ||
-                    (check_depth(path, tr, u, tare, scratch, err, es) != 0) ||
+                    (check_depth(path, tr, u, lim, tare, scratch, err, es) != 0) ||
                     (check_force(path, tr, u, lim, tare, scratch, err, es) != 0) ||
                     (check_ranges(path, tr, lim, err, es) != 0))
                        ? -1

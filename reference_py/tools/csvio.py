@@ -285,15 +285,16 @@ def _time_hint(dt: float, unit: str, dt_max: float) -> str:
 
 def check_units(tr: "Trial", units: Units = Units(), limits: Limits = Limits()) -> None:
     """Refuse (UnitsError) a trial whose values, in N, s and mm, are implausible: time steps of
-    seconds (ms or us read as s), a depth stroke under a millimetre (m read as mm), depth mostly
-    negative (the other way, the force's sign with it when read so it is negative while
+    seconds (ms or us read as s), a depth stroke under a millimetre (m read as mm), depths
+    mostly outside the accepted range that a thousandth would bring in (um read as mm), depth
+    mostly negative (the other way, the force's sign with it when read so it is negative while
     inserting; or an origin before the needle's start when the depth grows where the force
     first departs: --depth-offset), falling where the force first rises or first falls
     (_check_direction: a stage counting down, the sensor inverted too) or force mostly
     negative while inserting (the opposite sign; judged from the air's tare, _air_tare),
-    force mostly beyond the configured range (mN read as N), a force beyond a thousand times
-    the range, or most samples outside the estimator's accepted ranges.  The message names
-    the column, the probable unit or convention and the option that converts it."""
+    force mostly beyond the configured range (mN or gf read as N), a force beyond a thousand
+    times the range, or most samples outside the estimator's accepted ranges.  The message
+    names the column, the probable unit or convention and the option that converts it."""
     n = len(tr.t_s)
     name = tr.path
     # the file's names of the time, depth and force columns (--columns)
@@ -312,6 +313,14 @@ def check_units(tr: "Trial", units: Units = Units(), limits: Limits = Limits()) 
                 else "no insertion")
         raise UnitsError(f"{name}: column '{cd}': the depth spans only {stroke:.4g} mm "
                          f"(less than {MIN_STROKE_MM:g} mm): {hint}")
+    far = float(np.mean((d < limits.depth_min_mm) | (d > limits.depth_max_mm)))
+    um = DEPTH_UNITS["um"]
+    if (far > MAX_REJECTED_SHARE and units.depth == "mm" and stroke * um >= MIN_STROKE_MM
+            and np.all((d * um >= limits.depth_min_mm) & (d * um <= limits.depth_max_mm))):
+        raise UnitsError(f"{name}: column '{cd}': {_pct(far)} of the depths are outside the "
+                         f"accepted range {limits.depth_min_mm:g}..{limits.depth_max_mm:g} mm "
+                         f"(from {float(np.min(d)):.4g} to {float(np.max(d)):.4g}): probably "
+                         f"micrometres: convert with --depth-unit um")
     f = tr.force_n
     present = np.isfinite(f)
     # the force is judged less its tare, where it departs from the tare: a record starts
@@ -353,7 +362,11 @@ def check_units(tr: "Trial", units: Units = Units(), limits: Limits = Limits()) 
         out = float(np.mean(fa > fmax))
         if out > MAX_FORCE_OUT_SHARE:
             peak = float(np.max(fa))
-            if units.force == "N" and peak * FORCE_UNITS["mN"] <= fmax:
+            if units.force == "N" and peak * FORCE_UNITS["gf"] <= fmax:
+                # a factor 9.8 apart: the values cannot tell them, the rig's manual can
+                hint = ("probably millinewtons, or grams-force (a load cell read in grams): "
+                        "convert with --force-unit mN or --force-unit gf")
+            elif units.force == "N" and peak * FORCE_UNITS["mN"] <= fmax:
                 hint = "probably millinewtons: convert with --force-unit mN"
             else:
                 hint = "not a force in N"

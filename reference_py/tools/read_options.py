@@ -36,10 +36,12 @@ COLUMN_KEYS = {"t": "t_s", "depth": "depth_mm", "force": "force_n", "velocity": 
 #: the keys --columns must give (velocity is optional)
 COLUMN_KEYS_REQUIRED = ("t", "depth", "force")
 
-#: Units the reader converts from (factor to the tools' unit: N, s, mm).
-FORCE_UNITS = {"N": 1.0, "mN": 1.0e-3}
+#: Units the reader converts from (factor to the tools' unit: N, s, mm; the first of each is
+#: the tools' own).  gf: a gram-force (standard gravity, 9.80665 mN), what a load cell read in
+#: grams gives; um: micrometres, a stage's encoder counts.
+FORCE_UNITS = {"N": 1.0, "mN": 1.0e-3, "gf": 9.80665e-3}
 TIME_UNITS = {"s": 1.0, "ms": 1.0e-3, "us": 1.0e-6}
-DEPTH_UNITS = {"mm": 1.0, "m": 1.0e3}
+DEPTH_UNITS = {"mm": 1.0, "m": 1.0e3, "um": 1.0e-3}
 
 
 #: what a header may name its insertion columns with their unit: one of the quantity's words,

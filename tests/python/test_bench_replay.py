@@ -360,7 +360,8 @@ def test_bench_refuses_implausible_units_naming_the_option(tmp_path, capsys):
     rc, line = _bench(["replay", p, "--out", out], capsys)
     assert rc == 2 and line == (f"nte-bench: error: {p}: column 'force_n': 100 % of the forces "
                                 f"exceed the configured range ±50 N (up to 400): probably "
-                                f"millinewtons: convert with --force-unit mN")
+                                f"millinewtons, or grams-force (a load cell read in grams): "
+                                f"convert with --force-unit mN or --force-unit gf")
     assert not out.exists()
     from host_bench.replay import scenario_frames
     from reference_py.tools.csvio import Units

@@ -69,11 +69,14 @@ SPOILED: dict[str, tuple[Spoil, list[str]]] = {
     "ms-read-as-s": (_scale(("t_s", 1e3), ("velocity_mm_s", 1e-3)), ["--time-unit", "ms"]),
     "m-read-as-mm": (_scale(("depth_mm", 1e-3), ("velocity_mm_s", 1e-3)), ["--depth-unit", "m"]),
     "mN-read-as-N": (_scale(("force_n", 1e3)), ["--force-unit", "mN"]),
+    "gf-read-as-N": (_scale(("force_n", 1.0 / 9.80665e-3)), ["--force-unit", "gf"]),
+    "um-read-as-mm": (_scale(("depth_mm", 1e3), ("velocity_mm_s", 1e3)), ["--depth-unit", "um"]),
     "negated-depth": (_scale(("depth_mm", -1.0), ("velocity_mm_s", -1.0)),
                       ["--depth-sign", "-1"]),
     "negated-force": (_scale(("force_n", -1.0)), ["--force-sign", "-1"]),
     "one-force-x1e6": (_one_force_times(1e6), ["--no-units-check"]),
-    "most-out-of-range": (_scale(("depth_mm", 1e3), ("velocity_mm_s", 1e3)),
+    # beyond what micrometres would explain: the rule of the estimator's ranges
+    "most-out-of-range": (_scale(("depth_mm", 1e6), ("velocity_mm_s", 1e6)),
                           ["--no-units-check"]),
 }
 
@@ -90,6 +93,7 @@ if "us" in _time_units():   # microseconds: csvio.TIME_UNITS and nte_units.h hol
 #: the spoiled files whose converted run is compared byte for byte (one record each: the
 #: reference's run takes seconds); the others' converted runs are checked in C only
 COMPARED = {"ms-read-as-s": "ml", "m-read-as-mm": "ph", "mN-read-as-N": "ml",
+            "gf-read-as-N": "ph", "um-read-as-mm": "ml",
             "negated-depth": "ml", "negated-force": "ph", "one-force-x1e6": "ml",
             "most-out-of-range": "ph", "us-read-as-s": "ph"}
 
@@ -506,4 +510,21 @@ def test_a_record_that_starts_in_the_tissue_is_judged_from_the_air(tmp_path, see
     for prog in PROGS:
         assert c_run(prog, good, out, "--model", "2").returncode == 0, prog
         c = c_run(prog, bad, out, "--model", "2")
+        assert c.returncode == 2 and body(c.stderr, prog) == want, (prog, c.stderr)
+
+
+@pytest.mark.parametrize("peak,unit", [(5000.0, "gf"), (5100.0, "mN"), (60000.0, "none")])
+def test_forces_over_the_range_name_the_same_units(tmp_path, peak, unit):
+    """Grams-force and millinewtons (a factor 9.8 apart) named together while both bring the
+    forces in, millinewtons alone above 50 N in gf, neither beyond: the same words in C."""
+    src = tmp_path / "over.csv"
+    src.write_text("t_s,depth_mm,force_n\n" + "".join(
+        f"{k * 0.01!r},{k * 0.1!r},{peak * min(k, 20) / 20!r}\n" for k in range(60)))
+    r = reference(src, tmp_path / "e.csv", "--model", "2")
+    assert r.returncode == 2, r.stderr
+    want = body(r.stderr, "nte-ref")
+    assert ("--force-unit gf" in want) == (unit == "gf")
+    assert ("--force-unit mN" in want) == (unit != "none")
+    for prog in PROGS:
+        c = c_run(prog, src, tmp_path / "e.csv", "--model", "2")
         assert c.returncode == 2 and body(c.stderr, prog) == want, (prog, c.stderr)

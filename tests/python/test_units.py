@@ -38,7 +38,12 @@ def write(path: Path, rows, f) -> Path:
 CASES = [
     ("mN", lambda t, d, f: (t, d, f * 1000.0), ["--force-unit", "mN"],
      "column 'force_n': 29 % of the forces exceed the configured range ±50 N (up to 82.29): "
-     "probably millinewtons: convert with --force-unit mN"),
+     "probably millinewtons, or grams-force (a load cell read in grams): convert with "
+     "--force-unit mN or --force-unit gf"),
+    # (grams-force read as N: the same rule, test_run_units; this record's 82 mN is 8.4 gf)
+    ("um", lambda t, d, f: (t, d * 1000.0, f), ["--depth-unit", "um"],
+     "column 'depth_mm': 91 % of the depths are outside the accepted range -1..500 mm "
+     "(from 0 to 2e+04): probably micrometres: convert with --depth-unit um"),
     ("ms", lambda t, d, f: (t * 1000.0, d, f), ["--time-unit", "ms"],
      "column 't_s': median time step 20 s (longer than the 0.5 s gap limit): probably "
      "milliseconds: convert with --time-unit ms"),
@@ -152,3 +157,15 @@ def test_discrepancy_flags_refused_in_one_line(tmp_path, capsys):
     assert capsys.readouterr().err.strip().splitlines() == [
         "nte-discrepancy: error: argument --time-unit: invalid choice: 'min' (choose from 's', "
         "'ms', 'us') (see nte-discrepancy --help)"]
+
+
+@pytest.mark.parametrize("peak,advice", [
+    (5000.0, "probably millinewtons, or grams-force (a load cell read in grams): convert with "
+             "--force-unit mN or --force-unit gf"),
+    (5100.0, "probably millinewtons: convert with --force-unit mN"),   # 50 N over 9.80665 mN
+    (60000.0, "not a force in N")])
+def test_forces_over_the_range_name_the_units_that_bring_them_in(tmp_path, peak, advice):
+    rows = "".join(f"{k * 0.01!r},{k * 0.1!r},{peak * min(k, 20) / 20!r}\n" for k in range(60))
+    with pytest.raises(UnitsError) as e:
+        check_units(_trial(tmp_path, "t_s,depth_mm,force_n\n" + rows))
+    assert str(e.value).endswith(f"(up to {peak:.4g}): {advice}"), str(e.value)
