@@ -521,7 +521,7 @@ static int take_row(table_t* tb, record_t* r, const size_t lineno)
         const int decimal_comma = (r->delimiter != ',');
         const int number = is_number(cell, n, decimal_comma);
         if (number && decimal_comma) {
-            char* mark = memchr(text + (cell - text), ',', n);
+            char* mark = memchr(text + (cell - text), ',', n); /* the cell, writable */
             if (mark != NULL) {
                 *mark = '.';
             }
@@ -555,11 +555,17 @@ static int take_row(table_t* tb, record_t* r, const size_t lineno)
     return 0;
 }
 
-/* One record: a blank line (no cell, or one blank cell: skipped), the header, or a sample. */
+/* One record: a blank line (no cell, or only blank cells, a spreadsheet's ",,": skipped), the
+ * header, or a sample. */
 static int take(table_t* tb, record_t* r, const size_t lineno)
 {
-    const char* first = r->text;
-    if ((r->n == 0U) || ((r->n == 1U) && (nte_py_strip(&first, r->len - 1U) == 0U))) {
+    int blank = 1;
+    for (size_t c = 0U; (c < r->n) && (blank != 0); c++) {
+        const char* cell = r->text + r->start[c];
+        const size_t full = ((c + 1U < r->n) ? r->start[c + 1U] : r->len) - r->start[c] - 1U;
+        blank = (nte_py_strip(&cell, full) == 0U);
+    }
+    if (blank != 0) {
         return 0;
     }
     return (tb->ncols == 0U) ? take_header(tb, r, lineno) : take_row(tb, r, lineno);

@@ -1,10 +1,11 @@
 /*
  * Strict reader of insertion CSV files for the host programs (the C twin of
  * reference_py/tools/csvio.py read_trial, with the rules of its docstring and the csv module's
- * excel dialect: UTF-8 with or without a BOM, '#' comments, blank lines skipped, quoted cells,
- * "" inside quotes, a quoted cell across lines; ',' ';' or a tab between cells as the header's
- * first line shows, a decimal comma where it is not ','; the same refusals word for word).  The rules' constants are
- * generated from the Python reader into nte_units.h.  Host only: uses malloc and double.
+ * excel dialect: UTF-8 with or without a BOM, '#' comments, blank lines and rows of empty cells
+ * skipped, quoted cells, "" inside quotes, a quoted cell across lines; ',' ';' or a tab
+ * between cells as the header's first line shows, a decimal comma where it is not ','; the
+ * same refusals word for word).  The rules' constants are generated from the Python reader
+ * into nte_units.h.  Host only: uses malloc and double.
  */
 #ifndef NTE_CSV_IN_H
 #define NTE_CSV_IN_H

@@ -2,8 +2,9 @@
 
 Reading (:func:`read_table`, :func:`read_trial`)
     Parsed with the standard ``csv`` module; the file is decoded as UTF-8 with an optional BOM
-    (``utf-8-sig``).  Lines starting with ``#`` are comments; blank lines (white space only, or
-    one empty quoted cell) are skipped wherever they stand.  The first other line is the header
+    (``utf-8-sig``).  Lines starting with ``#`` are comments; blank lines (white space only,
+    or only empty cells: a spreadsheet's ``,,``) are skipped wherever they stand.  The first
+    other line is the header
     (column names, surrounding spaces ignored, no duplicates); every later line is one sample
     with exactly as many cells as the header.  Cells are separated by commas, or -- as loggers
     and spreadsheets set to a decimal comma write -- by semicolons or tabs: the header's first
@@ -26,8 +27,8 @@ What the reader is told about a file -- which columns hold what (``--columns``),
 and signs (``--force-unit``...), and the advice for a header that names its units -- is
 :mod:`reference_py.tools.read_options` (its names are re-exported here, as the tools import
 them from this module).  Outputs are written by :mod:`reference_py.tools.safe_write`
-(``write_atomic`` is re-exported here).  Floats are printed with '%.17g' (float64) or '%.9g' (float32): enough digits to
-round-trip, and the same text the C host program prints.
+(``write_atomic`` is re-exported here).  Floats are printed with '%.17g' (float64) or '%.9g'
+(float32): enough digits to round-trip, and the same text the C host program prints.
 """
 from __future__ import annotations
 
@@ -170,8 +171,8 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
     try:
         with fh:
             for cells in records():
-                if not cells or (len(cells) == 1 and cells[0].strip() == ""):
-                    continue                    # a blank line
+                if all(cell.strip() == "" for cell in cells):
+                    continue                    # a blank line, or a row of empty cells
                 if header is None:
                     header = [c.strip() for c in cells]
                     header_line = lineno

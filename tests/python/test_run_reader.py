@@ -109,6 +109,10 @@ EXTRA: list[tuple[str, bytes]] = [
     ("decimal comma without digits", b"t_s;depth_mm;force_n\n0;,;0\n"),
     ("decimal comma in the exponent", b"t_s;depth_mm;force_n\n0;1e1,5;0\n"),
     ("rows of the other separator", b"t_s\tdepth_mm\tforce_n\n0,0,0\n"),
+    ("a spreadsheet's empty rows", H + b"0,0,0\n,,\n , ,\t\n\"\",,\n0.01,0.1,0\n,,\n,,\n"),
+    ("empty cells before the header", b",,\n;;\n" + H + b"0,0,0\n"),
+    ("a tab-only row in a tab file", b"t_s\tdepth_mm\tforce_n\n0\t0\t0\n\t\t\n"),
+    ("one empty cell among numbers", H + b"0,0,0\n0.01,,0\n"),
 ]
 
 

@@ -214,9 +214,9 @@ READER_CASES = [
 
 
 def test_blank_lines_are_skipped_wherever_they_stand(tmp_path):
-    """A logger's or an editor's trailing newline, a blank line between header and samples:
-    the file is read, every sample keeps its physical line."""
-    p = write(tmp_path, "\n  \nt_s,depth_mm,force_n\n\n0,0,0\n \t\n0.1,0.5,0.25\n\n\n")
+    """A logger's or an editor's trailing newline, a blank line between header and samples, a
+    spreadsheet's row of empty cells: the file is read, every sample keeps its physical line."""
+    p = write(tmp_path, "\n  \nt_s,depth_mm,force_n\n\n0,0,0\n \t\n0.1,0.5,0.25\n,,\n\n")
     tr = read_trial(p, units=Units(check=False))
     assert list(tr.t_s) == [0.0, 0.1] and list(tr.depth_mm) == [0.0, 0.5]
     assert tr.lines == [5, 7]
