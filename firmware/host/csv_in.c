@@ -326,8 +326,9 @@ static const char* const time_unit_words[NTE_TIME_UNIT_NAME_WORD_COUNT] = NTE_TI
 static const char* const depth_unit_words[NTE_DEPTH_UNIT_NAME_WORD_COUNT] =
     NTE_DEPTH_UNIT_NAME_WORDS;
 
-/* csvio._named_with_unit: the column is one of the words and the unit in one of the forms
- * (WORD between UNIT after), case aside. */
+/* csvio._named_with_unit: the column is one of the words and the unit (or one of its
+ * spellings, csvio.UNIT_NAME_SPELLINGS: the micro sign, the Greek mu) in one of the forms
+ * (WORD between UNIT after), ASCII case aside. */
 static int named_with_unit(const char* column, const char* const* words, const size_t n_words,
                            const char* unit)
 {
@@ -335,13 +336,24 @@ static int named_with_unit(const char* column, const char* const* words, const s
         const char* between;
         const char* after;
     } forms[NTE_UNIT_NAME_FORM_COUNT] = NTE_UNIT_NAME_FORMS;
-    for (size_t w = 0U; w < n_words; w++) {
-        for (size_t f = 0U; f < NTE_UNIT_NAME_FORM_COUNT; f++) {
-            char name[64];
-            (void)snprintf(name, sizeof name, "%s%s%s%s", words[w], forms[f].between, unit,
-                           forms[f].after);
-            if (same_ignoring_case(column, name) != 0) {
-                return 1;
+    static const struct {
+        const char* unit;
+        const char* spelled;
+    } spellings[NTE_UNIT_NAME_SPELLING_COUNT] = NTE_UNIT_NAME_SPELLINGS;
+    for (size_t sp = 0U; sp <= NTE_UNIT_NAME_SPELLING_COUNT; sp++) {
+        /* sp == 0: the unit as the options call it; then each other spelling of it */
+        const char* spelled = (sp == 0U) ? unit : spellings[sp - 1U].spelled;
+        if ((sp > 0U) && (strcmp(spellings[sp - 1U].unit, unit) != 0)) {
+            continue;
+        }
+        for (size_t w = 0U; w < n_words; w++) {
+            for (size_t f = 0U; f < NTE_UNIT_NAME_FORM_COUNT; f++) {
+                char name[64];
+                (void)snprintf(name, sizeof name, "%s%s%s%s", words[w], forms[f].between, spelled,
+                               forms[f].after);
+                if (same_ignoring_case(column, name) != 0) {
+                    return 1;
+                }
             }
         }
     }

@@ -26,17 +26,20 @@ typedef struct nte_unit_t {
 #define NTE_DEPTH_UNIT_COUNT 3
 #define NTE_DEPTH_UNITS { { "mm", 0x1.0000000000000p+0 }, { "m", 0x1.f400000000000p+9 }, { "um", 0x1.0624dd2f1a9fcp-10 } }
 #define NTE_TIME_UNIT_WORDS { "", "milliseconds", "microseconds" } /* a time step's hint */
-/* csvio.UNIT_SUFFIX_QUANTITIES: a column named WORD, a form's between, UNIT and its
- * after (csvio.UNIT_NAME_FORMS) holds a quantity in UNIT, read with --KIND-unit (key,
- * kind, its words, its table: the arrays force_units, time_units and depth_units that
- * the including file initialises from NTE_*_UNITS, and *_unit_words from
- * NTE_*_UNIT_NAME_WORDS) */
-#define NTE_TIME_UNIT_NAME_WORD_COUNT 2
-#define NTE_TIME_UNIT_NAME_WORDS { "t", "time" }
+/* csvio.UNIT_SUFFIX_QUANTITIES: a column named WORD, a form's between, UNIT and
+ * its after (csvio.UNIT_NAME_FORMS) holds a quantity in UNIT, read with --KIND-unit
+ * (key, kind, its words, its table: the arrays force_units, time_units and
+ * depth_units that the including file initialises from NTE_*_UNITS, and
+ * *_unit_words from NTE_*_UNIT_NAME_WORDS) */
+#define NTE_TIME_UNIT_NAME_WORD_COUNT 3
+#define NTE_TIME_UNIT_NAME_WORDS { "t", "time", "timestamp" }
 #define NTE_DEPTH_UNIT_NAME_WORD_COUNT 7
 #define NTE_DEPTH_UNIT_NAME_WORDS { "depth", "position", "pos", "displacement", "insertion", "insertion depth", "z" }
 #define NTE_FORCE_UNIT_NAME_WORD_COUNT 5
 #define NTE_FORCE_UNIT_NAME_WORDS { "force", "f", "fz", "load", "axial force" }
+/* csvio.UNIT_NAME_SPELLINGS: (a unit, another spelling of it in a name; UTF-8) */
+#define NTE_UNIT_NAME_SPELLING_COUNT 4
+#define NTE_UNIT_NAME_SPELLINGS { { "us", "\xc2\xb5" "s" }, { "us", "\xce\xbc" "s" }, { "um", "\xc2\xb5" "m" }, { "um", "\xce\xbc" "m" } }
 #define NTE_UNIT_NAME_FORM_COUNT 8
 #define NTE_UNIT_NAME_FORMS { { "_", "" }, { " [", "]" }, { "[", "]" }, { " (", ")" }, { "(", ")" }, { " / ", "" }, { "/", "" }, { " in ", "" } }
 #define NTE_UNIT_QUANTITY_COUNT 3

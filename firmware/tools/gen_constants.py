@@ -59,6 +59,20 @@ def hex64(v: float) -> str:
     return x.hex()
 
 
+def c_utf8(text: str) -> str:
+    """The inside of a C string literal holding ``text``'s UTF-8 bytes: ASCII as it is, every
+    other byte a \\xNN escape, the literal closed and reopened after an escape so that no
+    following character is read as one more hex digit."""
+    out, escaped = "", False
+    for b in text.encode("utf-8"):
+        if b < 0x80:
+            out += ('" "' if escaped else "") + chr(b)
+        else:
+            out += f"\\x{b:02x}"
+        escaped = b >= 0x80
+    return out
+
+
 def pair(name: str, v32: float, v64: float) -> tuple[str, str, str]:
     return name, hex32(v32), hex64(v64)
 
@@ -246,15 +260,19 @@ def units_header() -> str:
         out.append(f"#define NTE_{kind}_UNITS {{ {cells} }}")
     words = ", ".join(f'"{csvio.TIME_UNIT_WORDS.get(n, "")}"' for n in csvio.TIME_UNITS)
     out.append(f"#define NTE_TIME_UNIT_WORDS {{ {words} }} /* a time step's hint */")
-    out.append("/* csvio.UNIT_SUFFIX_QUANTITIES: a column named WORD, a form's between, UNIT and its")
-    out.append(" * after (csvio.UNIT_NAME_FORMS) holds a quantity in UNIT, read with --KIND-unit (key,")
-    out.append(" * kind, its words, its table: the arrays force_units, time_units and depth_units that")
-    out.append(" * the including file initialises from NTE_*_UNITS, and *_unit_words from")
-    out.append(" * NTE_*_UNIT_NAME_WORDS) */")
+    out += ["/* csvio.UNIT_SUFFIX_QUANTITIES: a column named WORD, a form's between, UNIT and",
+            " * its after (csvio.UNIT_NAME_FORMS) holds a quantity in UNIT, read with --KIND-unit",
+            " * (key, kind, its words, its table: the arrays force_units, time_units and",
+            " * depth_units that the including file initialises from NTE_*_UNITS, and",
+            " * *_unit_words from NTE_*_UNIT_NAME_WORDS) */"]
     for key, kind, words, t in csvio.UNIT_SUFFIX_QUANTITIES:
         cells = ", ".join(f'"{w}"' for w in words)
         out.append(f"#define NTE_{kinds[id(t)]}_UNIT_NAME_WORD_COUNT {len(words)}")
         out.append(f"#define NTE_{kinds[id(t)]}_UNIT_NAME_WORDS {{ {cells} }}")
+    out.append("/* csvio.UNIT_NAME_SPELLINGS: (a unit, another spelling of it in a name; UTF-8) */")
+    out.append(f"#define NTE_UNIT_NAME_SPELLING_COUNT {len(csvio.UNIT_NAME_SPELLINGS)}")
+    cells = ", ".join(f'{{ "{u}", "{c_utf8(o)}" }}' for u, o in csvio.UNIT_NAME_SPELLINGS)
+    out.append(f"#define NTE_UNIT_NAME_SPELLINGS {{ {cells} }}")
     out.append(f"#define NTE_UNIT_NAME_FORM_COUNT {len(csvio.UNIT_NAME_FORMS)}")
     cells = ", ".join(f'{{ "{b}", "{a}" }}' for b, a in csvio.UNIT_NAME_FORMS)
     out.append(f"#define NTE_UNIT_NAME_FORMS {{ {cells} }}")

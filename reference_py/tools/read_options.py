@@ -51,7 +51,7 @@ DEPTH_UNITS = {"mm": 1.0, "m": 1.0e3, "um": 1.0e-3}
 #: kind, the words, the units.
 #: C twin: unit_suffix_hint in firmware/host/csv_in.c (test_run_columns: word for word).
 UNIT_SUFFIX_QUANTITIES = (
-    ("t", "time", ("t", "time"), TIME_UNITS),
+    ("t", "time", ("t", "time", "timestamp"), TIME_UNITS),
     ("depth", "depth", ("depth", "position", "pos", "displacement", "insertion",
                         "insertion depth", "z"), DEPTH_UNITS),
     ("force", "force", ("force", "f", "fz", "load", "axial force"), FORCE_UNITS))
@@ -59,6 +59,9 @@ UNIT_SUFFIX_QUANTITIES = (
 #: after, for each (between, after)
 UNIT_NAME_FORMS = (("_", ""), (" [", "]"), ("[", "]"), (" (", ")"), ("(", ")"), (" / ", ""),
                    ("/", ""), (" in ", ""))
+#: a unit as a name may write it with the micro sign (U+00B5) or the Greek mu (U+03BC): each
+#: (the unit the options call it, the spelling)
+UNIT_NAME_SPELLINGS = (("us", "\u00b5s"), ("us", "\u03bcs"), ("um", "\u00b5m"), ("um", "\u03bcm"))
 #: what a shell takes without quotes (shlex.quote's set; the C twin quotes alike)
 _SHELL_SAFE = re.compile(r"[\w@%+=:,./-]+", re.ASCII)
 
@@ -70,10 +73,22 @@ def shell_quoted(text: str) -> str:
     return "'" + text.replace("'", "'\"'\"'") + "'"
 
 
+def _ascii_lower(text: str) -> str:
+    """A-Z lowered, every other character as it is (the C twin compares so: str.lower would
+    also lower a few letters beyond ASCII)."""
+    return text.translate(_ASCII_LOWER)
+
+
+_ASCII_LOWER = {c: c + 32 for c in range(ord("A"), ord("Z") + 1)}
+
+
 def _named_with_unit(column: str, words: Sequence[str], unit: str) -> bool:
-    name = column.lower()
-    return any(name == f"{word}{between}{unit}{after}".lower()
-               for word in words for between, after in UNIT_NAME_FORMS)
+    """The column is one of ``words`` and ``unit`` (or one of its UNIT_NAME_SPELLINGS) in one
+    of UNIT_NAME_FORMS, ASCII case aside."""
+    name = _ascii_lower(column)
+    spellings = [unit] + [other for u, other in UNIT_NAME_SPELLINGS if u == unit]
+    return any(name == _ascii_lower(f"{word}{between}{spelled}{after}")
+               for word in words for spelled in spellings for between, after in UNIT_NAME_FORMS)
 
 
 def unit_suffix_hint(header: list[str]) -> str:

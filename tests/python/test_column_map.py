@@ -145,11 +145,16 @@ UNIT_HEADERS = [
     ("Time in s,Insertion Depth [mm],Axial Force [mN]", "read it with --columns "
      "'t=Time in s,depth=Insertion Depth [mm],force=Axial Force [mN]' --force-unit mN",
      (1.0, 1.0, 1e3)),
+    ("Timestamp (\u00b5s),Position [\u03bcm],Force [mN]", "read it with --columns "
+     "'t=Timestamp (\u00b5s),depth=Position [\u03bcm],force=Force [mN]' --time-unit us "
+     "--depth-unit um --force-unit mN", (1e6, 1e3, 1e3)),
     # two force columns, or a quantity named otherwise: nothing sure enough to advise
     ("t_s,depth_mm,force_N,force_mN", "", (1.0, 1.0, 1.0, 1e3)),
     ("time,depth_mm,force_mN", "", (1.0, 1.0, 1e3)),
     ("Time [s],Position [mm],Force [N],Force [mN]", "", (1.0, 1.0, 1.0, 1e3)),
     ("Time [s],Position [mm],Fx [N]", "", (1.0, 1.0, 1.0)),
+    # case is set aside in ASCII only (as the C twin compares): a capital Greek mu is no "us"
+    ("TIME [\u039cS],Position [mm],Force [N]", "", (1.0, 1.0, 1.0)),
 ]
 
 
@@ -161,7 +166,7 @@ def test_a_unit_in_a_column_name_is_refused_with_the_options_that_read_it(
     the refusal gives the options that read the file, and with them it estimates as the
     standard file does (to the rounding of the unit conversion)."""
     src = tmp_path / "units.csv"
-    with open(src, "w") as fh:
+    with open(src, "w", encoding="utf-8") as fh:
         fh.write(header + "\n")
         for r in rows:
             cells = list(r) + [r[-1]] * (len(factors) - 3)

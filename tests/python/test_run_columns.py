@@ -141,7 +141,8 @@ def test_a_unit_in_a_column_name_gets_the_same_advice(tmp_path, header, advice):
     """nte-run's reader gives the refusal of test_column_map's table word for word (its twin
     of csvio.unit_suffix_hint in csv_in.c), and none when a --columns map was given."""
     src = tmp_path / "units.csv"
-    src.write_text(header + "\n" + ",".join(["0"] * header.count(",")) + ",0\n")
+    src.write_text(header + "\n" + ",".join(["0"] * header.count(",")) + ",0\n",
+                   encoding="utf-8")
     want = _refused_alike(src, tmp_path)
     assert want.endswith(f"; {advice}") == bool(advice), want
     if advice:
