@@ -4,8 +4,9 @@ A trial is one insertion recording: times (s), stage/insertion depth (mm), axial
 when the recorder logged it, the stage velocity (mm/s).  Readers are chosen by file suffix from
 :data:`READERS`: CSV (the tools' one reader: a spreadsheet export with a byte-order mark,
 quoted cells, semicolons and a decimal comma is fine; also as ``.tsv`` and ``.txt``, the names
-loggers give their tab-separated exports) and candump logs (``.log``, ``candump -l``/``-L``) decoded with the
-project's DBC (firmware/can/nte.dbc through reference_py.bus.dbc, end-to-end checks included).
+loggers give their tab-separated exports) and candump logs (``.log``, ``candump -l``/``-L``)
+decoded with the project's DBC (firmware/can/nte.dbc through reference_py.bus.dbc, end-to-end
+checks included).
 """
 from __future__ import annotations
 
