@@ -516,6 +516,16 @@ static int take_header(table_t* tb, const record_t* r, const size_t lineno)
     return 0;
 }
 
+/* Cell c of a record, stripped as csvio strips every cell (str.strip): where it begins in the
+ * record's text (an offset: the caller may write there) and its length in *n. */
+static size_t stripped_cell(const record_t* r, const size_t c, size_t* n)
+{
+    const char* cell = r->text + r->start[c];
+    const size_t full = ((c + 1U < r->n) ? r->start[c + 1U] : r->len) - r->start[c] - 1U;
+    *n = nte_py_strip(&cell, full);
+    return (size_t)(cell - r->text);
+}
+
 /* A sample: as many cells as the header, each a finite decimal number, the time increasing.
  * A decimal comma is made a point in place (the cell is read once). */
 static int take_row(table_t* tb, record_t* r, const size_t lineno)
@@ -526,14 +536,12 @@ static int take_row(table_t* tb, record_t* r, const size_t lineno)
         return -1;
     }
     for (size_t c = 0U; c < r->n; c++) {
-        char* text = r->text + r->start[c];
-        const char* cell = text;
-        const size_t full = ((c + 1U < r->n) ? r->start[c + 1U] : r->len) - r->start[c] - 1U;
-        const size_t n = nte_py_strip(&cell, full);
+        size_t n = 0U;
+        char* cell = r->text + stripped_cell(r, c, &n);
         const int decimal_comma = (r->delimiter != ',');
         const int number = is_number(cell, n, decimal_comma);
         if (number && decimal_comma) {
-            char* mark = memchr(text + (cell - text), ',', n); /* the cell, writable */
+            char* mark = memchr(cell, ',', n);
             if (mark != NULL) {
                 *mark = '.';
             }
@@ -573,9 +581,9 @@ static int take(table_t* tb, record_t* r, const size_t lineno)
 {
     int blank = 1;
     for (size_t c = 0U; (c < r->n) && (blank != 0); c++) {
-        const char* cell = r->text + r->start[c];
-        const size_t full = ((c + 1U < r->n) ? r->start[c + 1U] : r->len) - r->start[c] - 1U;
-        blank = (nte_py_strip(&cell, full) == 0U);
+        size_t n = 0U;
+        (void)stripped_cell(r, c, &n);
+        blank = (n == 0U);
     }
     if (blank != 0) {
         return 0;
