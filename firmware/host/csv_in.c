@@ -360,8 +360,9 @@ static int named_with_unit(const char* column, const char* const* words, const s
     return 0;
 }
 
-/* csvio.shell_quoted (shlex.quote): the text as it is when every character is a letter, a
- * digit or one of _@%+=:,./- ; else inside single quotes, a ' written '"'"'. */
+/* Python's shlex.quote (read_options.unit_suffix_hint calls it): the text as it is when every
+ * character is a letter, a digit or one of _@%+=:,./- ; else inside single quotes, a ' written
+ * '"'"'. */
 static void shell_quoted(const char* text, char* out, const size_t cap)
 {
     static const char safe[] = "_@%+=:,./-";

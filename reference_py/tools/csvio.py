@@ -48,7 +48,7 @@ from ..fmath import Array
 from .read_options import (  # noqa: F401  (re-exported: the reader's options live there)
     COLUMN_KEYS, COLUMN_KEYS_REQUIRED, DEPTH_OFFSET_MAX_MM, DEPTH_UNITS, FORCE_UNITS, TIME_UNITS,
     UNIT_NAME_FORMS, UNIT_NAME_SPELLINGS, UNIT_SUFFIX_QUANTITIES, ColumnMap, CsvError, Units,
-    shell_quoted, unit_suffix_hint)
+    unit_suffix_hint)
 from .safe_write import write_atomic  # noqa: F401  (re-exported)
 
 REQUIRED = ("t_s", "depth_mm", "force_n")

@@ -22,7 +22,7 @@ csv_in.c unit_suffix_hint (the advice), nte_units.h (the tables, generated from 
 """
 from __future__ import annotations
 
-import re
+import shlex
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -62,17 +62,6 @@ UNIT_NAME_FORMS = (("_", ""), (" [", "]"), ("[", "]"), (" (", ")"), ("(", ")"), 
 #: a unit as a name may write it with the micro sign (U+00B5) or the Greek mu (U+03BC): each
 #: (the unit the options call it, the spelling)
 UNIT_NAME_SPELLINGS = (("us", "\u00b5s"), ("us", "\u03bcs"), ("um", "\u00b5m"), ("um", "\u03bcm"))
-#: what a shell takes without quotes (shlex.quote's set; the C twin quotes alike)
-_SHELL_SAFE = re.compile(r"[\w@%+=:,./-]+", re.ASCII)
-
-
-def shell_quoted(text: str) -> str:
-    """``text`` as one shell word, as shlex.quote writes it (C twin: csv_in.c shell_quoted)."""
-    if _SHELL_SAFE.fullmatch(text):
-        return text
-    return "'" + text.replace("'", "'\"'\"'") + "'"
-
-
 def _ascii_lower(text: str) -> str:
     """A-Z lowered, every other character as it is (the C twin compares so: str.lower would
     also lower a few letters beyond ASCII)."""
@@ -107,7 +96,7 @@ def unit_suffix_hint(header: list[str]) -> str:
         mapped.append(f"{key}={col}")
         if unit != next(iter(units)):     # the first unit of each table is the tools' own
             options.append(f"--{kind}-unit {unit}")
-    return "read it with --columns " + " ".join([shell_quoted(",".join(mapped))] + options)
+    return "read it with --columns " + " ".join([shlex.quote(",".join(mapped))] + options)
 
 
 @dataclass(frozen=True)
