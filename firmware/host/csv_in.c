@@ -263,6 +263,23 @@ static int is_not_finite(const char* s, size_t n)
     return 0;
 }
 
+/* csvio.is_missing: a stripped cell of n characters is empty or one of the missing words,
+ * A-Z lowered (as csvio.ascii_lower). */
+static int is_missing(const char* s, const size_t n)
+{
+    static const char* const words[NTE_CSV_MISSING_WORD_COUNT] = NTE_CSV_MISSING_WORDS;
+    int found = (n == 0U);
+    for (size_t w = 0U; (w < NTE_CSV_MISSING_WORD_COUNT) && (found == 0); w++) {
+        size_t i = 0U;
+        while ((i < n) && (words[w][i] != '\0') &&
+               ((((s[i] >= 'A') && (s[i] <= 'Z')) ? (s[i] + ('a' - 'A')) : s[i]) == words[w][i])) {
+            i++;
+        }
+        found = (i == n) && (words[w][i] == '\0');
+    }
+    return found;
+}
+
 static int push(nte_trial_t* tr, size_t* cap, const double t, const double l, const double v,
                 const double f, const size_t lineno)
 {
@@ -299,6 +316,7 @@ void nte_columns_standard(nte_columns_t* c)
     (void)snprintf(c->force, sizeof c->force, "force_n");
     (void)snprintf(c->velocity, sizeof c->velocity, "velocity_mm_s");
     c->velocity_required = 0;
+    c->force_ignored = 0;
 }
 
 /* ASCII case-insensitive equality (a header's names are compared as csvio compares them
@@ -487,7 +505,7 @@ static int take_header(table_t* tb, const record_t* r, const size_t lineno)
     tb->header_line = lineno;
     const size_t n_req = (cols->velocity_required != 0) ? 4U : 3U;
     for (size_t k = 0U; k < n_req; k++) {
-        if (tb->idx[k] < 0) {
+        if ((tb->idx[k] < 0) && !((k == 2U) && (cols->force_ignored != 0))) {
             int o = snprintf(tb->err, tb->es,
                              "%s:%zu: column '%s': missing from the header (have: ", tb->path,
                              lineno, want[k]);
@@ -527,8 +545,27 @@ static size_t stripped_cell(const record_t* r, const size_t c, size_t* n)
     return (size_t)(cell - r->text);
 }
 
-/* A sample: as many cells as the header, each a finite decimal number, the time increasing.
- * A decimal comma is made a point in place (the cell is read once). */
+/* Whether key k (1 depth, 2 force, 3 velocity) is read from a column whose missing value
+ * leaves its row out (csvio.read_trial's skip_missing): in the file, and not an ignored force
+ * (a missing one keeps its row, as NaN). */
+static int is_skip_key(const table_t* tb, const size_t k)
+{
+    return (tb->idx[k] >= 0) && !((k == 2U) && (tb->cols->force_ignored != 0));
+}
+
+static int is_skip_column(const table_t* tb, const size_t c)
+{
+    int found = 0;
+    for (size_t k = 1U; k < 4U; k++) {
+        found = found || (is_skip_key(tb, k) && ((int)c == tb->idx[k]));
+    }
+    return found;
+}
+
+/* A sample: as many cells as the header, each a finite decimal number, the time increasing;
+ * or a dropout: a depth, force or velocity missing, the row left out (its line counted), its
+ * other cells numbers or missing, its time not compared.  A decimal comma is made a point in
+ * place (the cell is read once). */
 static int take_row(table_t* tb, record_t* r, const size_t lineno)
 {
     if (r->n != tb->ncols) {
@@ -536,9 +573,20 @@ static int take_row(table_t* tb, record_t* r, const size_t lineno)
              r->n);
         return -1;
     }
+    int skip = 0;
+    for (size_t c = 0U; (c < r->n) && (skip == 0); c++) {
+        size_t n = 0U;
+        const size_t at = stripped_cell(r, c, &n);
+        skip = is_skip_column(tb, c) && is_missing(r->text + at, n);
+    }
     for (size_t c = 0U; c < r->n; c++) {
         size_t n = 0U;
         char* cell = r->text + stripped_cell(r, c, &n);
+        if (((skip != 0) || (((int)c == tb->idx[2]) && (tb->cols->force_ignored != 0))) &&
+            is_missing(cell, n)) {
+            tb->row[c] = (double)NAN;
+            continue;
+        }
         const int decimal_comma = (r->delimiter != ',');
         const int number = is_number(cell, n, decimal_comma);
         if (number && decimal_comma) {
@@ -556,6 +604,14 @@ static int take_row(table_t* tb, record_t* r, const size_t lineno)
             return -1;
         }
     }
+    if (skip != 0) {
+        nte_trial_t* tr = tb->tr;
+        if (tr->left_out < NTE_CSV_LEFT_OUT_LISTED) {
+            tr->left_out_line[tr->left_out] = lineno;
+        }
+        tr->left_out++;
+        return 0;
+    }
     const double t = tb->row[tb->idx[0]];
     if (!(t > tb->prev_t)) {
         char a[40];
@@ -568,8 +624,9 @@ static int take_row(table_t* tb, record_t* r, const size_t lineno)
     }
     tb->prev_t = t;
     const int vi = tb->idx[3];
+    const int fi = tb->idx[2];
     if (push(tb->tr, &tb->cap, t, tb->row[tb->idx[1]], (vi >= 0) ? tb->row[vi] : 0.0,
-             tb->row[tb->idx[2]], lineno) != 0) {
+             (fi >= 0) ? tb->row[fi] : (double)NAN, lineno) != 0) {
         fail(tb->err, tb->es, "%s:%zu: out of memory", tb->path, lineno);
         return -1;
     }
@@ -688,6 +745,26 @@ int nte_trial_read_columns(const char* path, const nte_columns_t* cols, nte_tria
             rc = take(&tb, &r, lineno);
         }
     }
+    if ((rc == 0) && (tr->n == 0U) && (tr->left_out > 0U)) {
+        /* the columns that leave a row out, in the map's order (depth, force, velocity), as
+         * csvio names them (before the header is freed) */
+        int o = snprintf(err, es,
+                         "%s:%zu: no sample: every row after the header has a value "
+                         "missing in column '",
+                         path, tr->left_out_line[0]);
+        size_t named = 0U;
+        for (size_t k = 1U; (k < 4U) && (o >= 0) && ((size_t)o < es); k++) {
+            if (is_skip_key(&tb, k)) {
+                o += snprintf(err + o, es - (size_t)o, "%s%s", (named > 0U) ? "' or '" : "",
+                              tb.header[tb.idx[k]]);
+                named++;
+            }
+        }
+        if ((o >= 0) && ((size_t)o < es)) {
+            (void)snprintf(err + o, es - (size_t)o, "' (%zu rows)", tr->left_out);
+        }
+        rc = -1;
+    }
     free(text);
     free(r.text);
     free(r.start);
@@ -711,6 +788,37 @@ int nte_trial_read_columns(const char* path, const nte_columns_t* cols, nte_tria
         nte_central_difference(tr->t_s, tr->depth_mm, tr->n, tr->velocity_mm_s);
     }
     return 0;
+}
+
+void nte_trial_left_out_note(const char* path, const nte_trial_t* tr, const nte_columns_t* cols,
+                             char* out, const size_t cap)
+{
+    out[0] = '\0';
+    const size_t k = tr->left_out;
+    if (k == 0U) {
+        return;
+    }
+    /* the columns that leave a row out (csvio.Trial.left_out_columns) */
+    const int force = (cols->force_ignored == 0);
+    const int velocity = (tr->velocity_given != 0);
+    int o = snprintf(out, cap,
+                     "%s: %zu of %zu rows left out, a value missing in column '%s%s%s%s%s' "
+                     "(a dropout: line%s",
+                     path, k, k + tr->n, cols->depth, force ? "' or '" : "",
+                     force ? cols->force : "", velocity ? "' or '" : "",
+                     velocity ? cols->velocity : "", (k > 1U) ? "s" : "");
+    const size_t listed = (k < NTE_CSV_LEFT_OUT_LISTED) ? k : NTE_CSV_LEFT_OUT_LISTED;
+    for (size_t i = 0U; (i < listed) && (o >= 0) && ((size_t)o < cap); i++) {
+        o += snprintf(out + o, cap - (size_t)o, "%s%zu", (i > 0U) ? ", " : " ",
+                      tr->left_out_line[i]);
+    }
+    if ((o >= 0) && ((size_t)o < cap)) {
+        if (k > NTE_CSV_LEFT_OUT_LISTED) {
+            (void)snprintf(out + o, cap - (size_t)o, " and %zu more)", k - NTE_CSV_LEFT_OUT_LISTED);
+        } else {
+            (void)snprintf(out + o, cap - (size_t)o, ")");
+        }
+    }
 }
 
 void nte_trial_free(nte_trial_t* tr)

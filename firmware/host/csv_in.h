@@ -3,8 +3,8 @@
  * reference_py/tools/csvio.py read_trial, with the rules of its docstring and the csv module's
  * excel dialect: UTF-8 with or without a BOM, '#' comments, blank lines and rows of empty cells
  * skipped, quoted cells, "" inside quotes, a quoted cell across lines; ',' ';' or a tab
- * between cells as the header's first line shows, a decimal comma where it is not ','; the
- * same refusals word for word).  The rules' constants are generated from the Python reader
+ * between cells as the header's first line shows, a decimal comma where it is not ','; a row
+ * whose depth, force or given velocity is missing left out; the same refusals word for word).  The rules' constants are generated from the Python reader
  * into nte_units.h.  Host only: uses malloc and double.
  */
 #ifndef NTE_CSV_IN_H
@@ -12,6 +12,7 @@
 
 #include "name_value.h"
 #include "nte.h"
+#include "nte_units.h"
 
 #include <stddef.h>
 
@@ -23,6 +24,10 @@ typedef struct nte_trial_t {
     double* force_n;
     size_t* line; /**< the physical line of every sample (1-based) */
     int velocity_given;
+    /** Rows left out for a missing depth, force or given velocity (a dropout: an empty cell,
+     *  nan or NA; csvio.read_table skip_missing): how many, and the first lines of them. */
+    size_t left_out;
+    size_t left_out_line[NTE_CSV_LEFT_OUT_LISTED];
 } nte_trial_t;
 
 /** Which of the file's columns hold the time, depth, force and velocity (csvio.ColumnMap;
@@ -34,7 +39,10 @@ typedef struct nte_columns_t {
     char force[NTE_COLUMN_NAME_MAX];
     char velocity[NTE_COLUMN_NAME_MAX]; /**< read when the file has it; "": never read */
     int velocity_required;              /**< 1: refused when the file lacks it */
-    int mapped; /**< 1: given by --columns (a missing column then gets no unit advice) */
+    int mapped;        /**< 1: given by --columns (a missing column then gets no unit advice) */
+    int force_ignored; /**< 1: --predict-only: the force column may be absent and a missing
+                        *   force keeps its row (such a force is NaN); csvio.read_trial's
+                        *   force_ignored.  Set after nte_column_map_parse. */
 } nte_columns_t;
 
 /** The standard names: t_s, depth_mm, force_n, and velocity_mm_s when the file has it. */
@@ -64,6 +72,10 @@ int nte_trial_read(const char* path, nte_trial_t* trial, char* err, size_t err_s
 int nte_trial_read_columns(const char* path, const nte_columns_t* columns, nte_trial_t* trial,
                            char* err, size_t err_size);
 void nte_trial_free(nte_trial_t* trial);
+/** The note a host program writes to stderr when rows were left out (csvio.left_out_note,
+ *  word for word; "" when none was): the file, how many rows, which columns, the first lines. */
+void nte_trial_left_out_note(const char* path, const nte_trial_t* trial,
+                             const nte_columns_t* columns, char* out, size_t out_size);
 /** Convert the columns from the file's units and signs to N, s, mm (csvio.read_trial with
  *  units): time by its factor, depth and force by factor and sign, a given velocity by depth
  *  factor and sign / time factor, else central differences of the converted depth. */

@@ -992,6 +992,8 @@ int main(int argc, char** argv)
         (nte_column_map_parse(a.columns, &a.units.columns, msg, sizeof msg) != 0)) {
         return bad(msg);
     }
+    /* --predict-only reads no force: a file of depths alone is an input */
+    a.units.columns.force_ignored = a.predict_only;
     nte_trial_t tr;
     if (nte_trial_read_columns(a.csv, &a.units.columns, &tr, msg, sizeof msg) != 0) {
         return bad(msg);
@@ -1010,6 +1012,10 @@ int main(int argc, char** argv)
             nte_trial_free(&tr);
             return bad(msg);
         }
+    }
+    nte_trial_left_out_note(a.csv, &tr, &a.units.columns, msg, sizeof msg);
+    if (msg[0] != '\0') {
+        (void)fprintf(stderr, "%s\n", msg);
     }
     /* the config's params are the new nominal values unless --preset is given; --start's
      * on top of either */

@@ -7,6 +7,11 @@
 /* and the characters Python's str.strip strips (str.isspace, code points). */
 #define NTE_CSV_COMMENT '#'
 #define NTE_CSV_FIELD_LIMIT 131072U
+/* A missing value (a dropout): an empty cell or one of these words, case aside in */
+/* ASCII; a note lists at most LISTED of the lines so left out (csvio.left_out_note). */
+#define NTE_CSV_MISSING_WORD_COUNT 5
+#define NTE_CSV_MISSING_WORDS { "nan", "+nan", "-nan", "na", "n/a" }
+#define NTE_CSV_LEFT_OUT_LISTED 5U
 #define NTE_TEXT_SPACE_COUNT 29
 #define NTE_TEXT_SPACES { 0x9U, 0xaU, 0xbU, 0xcU, 0xdU, 0x1cU, 0x1dU, 0x1eU, 0x1fU, 0x20U, 0x85U, 0xa0U, 0x1680U, 0x2000U, 0x2001U, 0x2002U, 0x2003U, 0x2004U, 0x2005U, 0x2006U, 0x2007U, 0x2008U, 0x2009U, 0x200aU, 0x2028U, 0x2029U, 0x202fU, 0x205fU, 0x3000U }
 /* The characters of the Basic Multilingual Plane above U+007F that Python's repr */

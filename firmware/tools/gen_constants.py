@@ -239,7 +239,13 @@ def units_header() -> str:
            "/* The text: a comment line's mark, the csv module's limit on a cell (characters) */",
            "/* and the characters Python's str.strip strips (str.isspace, code points). */",
            f"#define NTE_CSV_COMMENT '{csvio.COMMENT}'",
-           f"#define NTE_CSV_FIELD_LIMIT {csv.field_size_limit()}U"]
+           f"#define NTE_CSV_FIELD_LIMIT {csv.field_size_limit()}U",
+           "/* A missing value (a dropout): an empty cell or one of these words, case aside in */",
+           "/* ASCII; a note lists at most LISTED of the lines so left out (csvio.left_out_note). */",
+           f"#define NTE_CSV_MISSING_WORD_COUNT {len(csvio.MISSING_WORDS)}",
+           "#define NTE_CSV_MISSING_WORDS { "
+           + ", ".join(f'"{w}"' for w in csvio.MISSING_WORDS) + " }",
+           f"#define NTE_CSV_LEFT_OUT_LISTED {csvio.LEFT_OUT_LISTED}U"]
     spaces = [c for c in range(0x110000) if chr(c).isspace()]
     out.append(f"#define NTE_TEXT_SPACE_COUNT {len(spaces)}")
     out.append("#define NTE_TEXT_SPACES { " + ", ".join(f"0x{c:x}U" for c in spaces) + " }")

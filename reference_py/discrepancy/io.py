@@ -17,7 +17,7 @@ from typing import Callable
 import numpy as np
 
 from ..fmath import Array
-from ..tools.csvio import CsvError, Units
+from ..tools.csvio import CsvError, Units, left_out_note
 from ..tools.csvio import read_trial as read_csv_trial
 
 REQUIRED = ("t_s", "depth_mm", "force_n")
@@ -50,6 +50,8 @@ class Trial:
     depth_mm: Array
     force_n: Array
     velocity_mm_s: Array | None = None
+    #: what the reader left out (csvio.left_out_note: rows with a dropout), or None
+    note: str | None = None
 
 
 def read_csv(path: Path, units: Units | None = None) -> Trial:
@@ -57,7 +59,8 @@ def read_csv(path: Path, units: Units | None = None) -> Trial:
     read by the tools' one reader (reference_py.tools.csvio: its rules and its messages).
 
     Lines starting with '#' are comments.  Times must increase strictly (irregular spacing and
-    gaps are fine); every value must be a finite number.
+    gaps are fine); every value must be a finite number, or missing in the depth or force (a
+    dropout: the row is left out, said by the trial's ``note``).
     """
     try:
         tr = read_csv_trial(path, units=units)
@@ -66,7 +69,7 @@ def read_csv(path: Path, units: Units | None = None) -> Trial:
     if len(tr.t_s) < 2:
         raise InputError(path, None, None, "fewer than 2 data rows")
     return Trial(path.stem, tr.t_s, tr.depth_mm, tr.force_n,
-                 tr.velocity_mm_s if tr.velocity_given else None)
+                 tr.velocity_mm_s if tr.velocity_given else None, left_out_note(tr))
 
 
 def read_candump(path: Path) -> Trial:

@@ -33,7 +33,7 @@ import numpy as np
 
 from . import fixedpoint, phantom, plausible
 from .arguments import EXIT_BAD_INPUT, OneLineParser, add_unit_arguments, bounded, units_from
-from .csvio import CsvError, read_trial, write_atomic
+from .csvio import CsvError, left_out_note, read_trial, write_atomic
 from .safe_write import Outputs
 from ..config import EstimatorConfig
 from ..params import PRESETS, get_preset
@@ -393,7 +393,8 @@ def read_estimate_input(a: argparse.Namespace, cfg: "EstimatorConfig"
     if contact is not None:
         # the stage position may lie anywhere in +-depth_max_mm (the air gap is no error)
         limits = replace(limits, depth_min_mm=-limits.depth_max_mm)
-    return read_trial(a.csv, units=units_from(a), limits=limits), contact
+    return (read_trial(a.csv, units=units_from(a), limits=limits,
+                       force_ignored=bool(getattr(a, "predict_only", False))), contact)
 
 
 def _estimate_trial(a: argparse.Namespace) -> "Trial":
@@ -418,6 +419,9 @@ def _estimate(a: argparse.Namespace) -> int:
         cfg = make_config(preset, a.model, a.profile, a.schedule, overrides)
         from dataclasses import replace
         trial, contact = read_estimate_input(a, cfg)
+        note = left_out_note(trial)
+        if note is not None:
+            print(note, file=sys.stderr)
         force_read = trial.force_n        # the verdict measures the noise on the force read
         if a.predict_only:
             # the force is ignored: the bank is fed 0 N (never rejected, never learned)

@@ -14,10 +14,15 @@ Reading (:func:`read_table`, :func:`read_trial`)
     is absent it is computed by central differences of depth); other columns are kept in
     ``Trial.columns`` and otherwise ignored.  Every cell must be a decimal number (``1``,
     ``-0.5``, ``2.5e-3``; no hex, no ``_``), finite (``nan``, ``inf`` and overflowing values are
-    refused), and ``t_s`` must increase strictly.  A column named in ``sparse`` may have empty
-    cells (no sample on that line; stored as NaN, see ``Trial.present``); one named in
-    ``nan_ok`` may hold ``nan`` (the estimate file's ``surface_mm`` before a surface is found;
-    stored as NaN).  Every refusal is a :class:`CsvError` whose message has one form::
+    refused), and ``t_s`` must increase strictly.  A *missing* value -- an empty cell, ``nan``
+    (as MATLAB and LabVIEW write a dropout) or ``NA`` (R), case aside: :data:`MISSING` -- is
+    allowed in two kinds of column.  One named in ``sparse`` keeps its row (no sample of that
+    quantity on that line, e.g. a 200 Hz force among 1 kHz depths; stored as NaN).  One named in
+    ``skip_missing`` leaves its row out (a sensor's dropout: the row is not a sample; its other
+    cells must still be numbers or missing, and its time is not compared): an insertion's
+    depth, force and given velocity (:func:`read_trial`), each left-out line listed in
+    ``Trial.left_out`` and said by :func:`left_out_note`.  One named in ``nan_ok`` may hold
+    ``nan`` (the estimate file's ``surface_mm`` before a surface is found; stored as NaN).  Every refusal is a :class:`CsvError` whose message has one form::
 
         FILE:LINE: column 'NAME': reason        (or FILE:LINE: reason, or FILE: reason)
 
@@ -48,7 +53,7 @@ from ..fmath import Array
 from .read_options import (  # noqa: F401  (re-exported: the reader's options live there)
     COLUMN_KEYS, COLUMN_KEYS_REQUIRED, DEPTH_OFFSET_MAX_MM, DEPTH_UNITS, FORCE_UNITS, TIME_UNITS,
     UNIT_NAME_FORMS, UNIT_NAME_SPELLINGS, UNIT_SUFFIX_QUANTITIES, ColumnMap, CsvError, Units,
-    unit_suffix_hint)
+    ascii_lower, unit_suffix_hint)
 from .safe_write import write_atomic  # noqa: F401  (re-exported)
 
 REQUIRED = ("t_s", "depth_mm", "force_n")
@@ -65,14 +70,27 @@ _NUMBER_DECIMAL_COMMA = re.compile(r"[+-]?(\d+[.,]?\d*|[.,]\d+)([eE][+-]?\d+)?",
 DELIMITERS = (",", ";", "\t")
 _NOT_FINITE = re.compile(r"[+-]?(nan|inf|infinity)", re.IGNORECASE | re.ASCII)
 _NAN = re.compile(r"[+-]?nan", re.IGNORECASE | re.ASCII)
+#: a missing value: an empty cell or a dropout's word (C twin: csv_in.c is_missing)
+MISSING_WORDS = ("nan", "+nan", "-nan", "na", "n/a")
+#: at most this many left-out lines are listed by left_out_note
+LEFT_OUT_LISTED = 5
+
+
+def is_missing(cell: str) -> bool:
+    """Whether a cell holds no value: empty (spaces aside) or one of MISSING_WORDS, case aside
+    in ASCII only (as the C twin compares)."""
+    text = cell.strip()
+    return text == "" or ascii_lower(text) in MISSING_WORDS
 
 
 @dataclass
 class Table:
     path: str
     header: list[str]
-    columns: dict[str, Array]       # every column, float64 (NaN where a sparse cell is empty)
+    columns: dict[str, Array]       # every column, float64 (NaN where a sparse cell is missing)
     lines: list[int]                # physical line number of every sample
+    left_out: list[int] = field(default_factory=list)  # lines left out (``skip_missing``)
+    left_out_columns: list[str] = field(default_factory=list)  # ``skip_missing`` in the header
 
 
 @dataclass
@@ -85,6 +103,8 @@ class Trial:
     velocity_given: bool
     columns: dict[str, Array]       # every numeric column of the file, by name
     lines: list[int] = field(default_factory=list)
+    left_out: list[int] = field(default_factory=list)   # lines without a depth or force value
+    left_out_columns: list[str] = field(default_factory=list)  # the columns that leave a row out
 
     @property
     def name(self) -> str:
@@ -122,7 +142,7 @@ def parse_cell(name: str, lineno: int, col: str, text: str, decimal_comma: bool 
 
 def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
                sparse: Sequence[str] = (), increasing: str | None = "t_s",
-               nan_ok: Sequence[str] = (),
+               nan_ok: Sequence[str] = (), skip_missing: Sequence[str] = (),
                missing_hint: Callable[[list[str]], str] | None = None) -> Table:
     """Read a numeric CSV by the rules of this module (see the module's docstring).
     ``missing_hint(header)``: advice appended to the refusal of a missing column ("" none)."""
@@ -166,7 +186,9 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
     prev_t = -math.inf
     t_index = -1
     sparse_idx: set[int] = set()
+    skip_idx: set[int] = set()
     nan_idx: set[int] = set()
+    left_out: list[int] = []
     delimiter = ","
     try:
         with fh:
@@ -188,15 +210,21 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
                                        f"name in the header")
                     t_index = header.index(increasing) if increasing in header else -1
                     sparse_idx = {header.index(c) for c in sparse if c in header}
+                    skip_idx = {header.index(c) for c in skip_missing if c in header}
                     nan_idx = {header.index(c) for c in nan_ok if c in header}
                     continue
                 if len(cells) != len(header):
                     raise CsvError(f"{name}:{lineno}: expected {len(header)} cells, found "
                                    f"{len(cells)}")
-                row = [math.nan if ((i in sparse_idx and cell.strip() == "")
+                missing = [is_missing(cell) for cell in cells]
+                skip = any(missing[i] for i in skip_idx)
+                row = [math.nan if ((missing[i] and (skip or i in sparse_idx))
                                     or (i in nan_idx and _NAN.fullmatch(cell.strip())))
                        else parse_cell(name, lineno, col, cell, delimiter != ",")
                        for i, (col, cell) in enumerate(zip(header, cells))]
+                if skip:
+                    left_out.append(lineno)     # a dropout: not a sample
+                    continue
                 if t_index >= 0:
                     t = row[t_index]
                     if not t > prev_t:
@@ -211,10 +239,16 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
         raise CsvError(f"{name}: cannot read: {exc.strerror or exc}") from None
     if header is None:
         raise CsvError(f"{name}:1: no header line")
+    skip_named = [c for c in skip_missing if c in header]
+    if not rows and left_out:
+        cols = "' or '".join(skip_named)
+        raise CsvError(f"{name}:{left_out[0]}: no sample: every row after the header has a "
+                       f"value missing in column '{cols}' ({len(left_out)} rows)")
     if not rows:
         raise CsvError(f"{name}:{header_line + 1}: no samples after the header")
     data = np.asarray(rows, dtype=np.float64)
-    return Table(name, header, {c: data[:, i] for i, c in enumerate(header)}, lines)
+    return Table(name, header, {c: data[:, i] for i, c in enumerate(header)}, lines, left_out,
+                 skip_named)
 
 
 # -- units and conventions ----------------------------------------------------------------
@@ -528,8 +562,11 @@ def _check_direction(tr: "Trial", units: Units, column: str, tare: float, rel: n
 
 def read_trial(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
                sparse: Sequence[str] = (), units: Units | None = None,
-               limits: Limits = Limits()) -> Trial:
+               limits: Limits = Limits(), force_ignored: bool = False) -> Trial:
     """An insertion: t_s, depth_mm, force_n and velocity_mm_s (given or central differences).
+
+    ``force_ignored`` (--predict-only: the model runs on the depth alone): the force column
+    may be absent, and a missing force keeps its row; such a force is NaN.
 
     With ``units``, the columns are the ones ``units.columns`` names (``required`` and
     ``sparse`` give standard names; each is read under its mapped name), converted from the
@@ -537,13 +574,22 @@ def read_trial(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
     sign) and, if ``units.check``, the result is checked by :func:`check_units` against
     ``limits``.  Without, nothing is mapped, converted or checked (the library's own files)."""
     cmap = units.columns if units is not None else ColumnMap()
+    if force_ignored:
+        required = tuple(c for c in required if c != "force_n")
+        sparse = tuple(sparse) + ("force_n",)
     named = tuple(cmap.name(c) for c in required)
     if cmap.text and cmap.velocity is not None:
         named += (cmap.velocity,)       # a velocity the map names must be there
-    table = read_table(path, named, tuple(cmap.name(c) for c in sparse), increasing=cmap.t,
+    sparse_named = tuple(cmap.name(c) for c in sparse)
+    # a dropout of a measured quantity leaves its row out (one not in ``sparse``); the time
+    # cannot be missing (it places the sample)
+    data_named = (cmap.depth, cmap.force) + ((cmap.velocity,) if cmap.velocity else ())
+    table = read_table(path, named, sparse_named, increasing=cmap.t,
+                       skip_missing=tuple(c for c in data_named if c not in sparse_named),
                        missing_hint=None if cmap.text else unit_suffix_hint)
     cols = table.columns
-    t, depth, force = cols[cmap.t], cols[cmap.depth], cols[cmap.force]
+    t, depth = cols[cmap.t], cols[cmap.depth]
+    force = cols[cmap.force] if cmap.force in cols else np.full(len(t), math.nan)
     given = cmap.velocity is not None and cmap.velocity in cols
     vel = cols[cmap.velocity] if given else None  # type: ignore[index]
     if units is not None:
@@ -566,10 +612,25 @@ def read_trial(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
             vel = vel * (kd / kt)
     if vel is None:
         vel = central_difference(t, depth)
-    tr = Trial(table.path, t, depth, force, vel, given, cols, table.lines)
+    tr = Trial(table.path, t, depth, force, vel, given, cols, table.lines, table.left_out,
+               table.left_out_columns)
     if units is not None and units.check:
         check_units(tr, units, limits)
     return tr
+
+
+def left_out_note(tr: Trial) -> str | None:
+    """The note an estimating tool writes (to stderr) when rows of ``tr`` were left out for a
+    missing depth or force value (None when none was): how many, the first LEFT_OUT_LISTED
+    lines.  C twin: csv_in.c nte_trial_left_out_note, word for word."""
+    k = len(tr.left_out)
+    if k == 0:
+        return None
+    named = "' or '".join(tr.left_out_columns)
+    listed = ", ".join(str(line) for line in tr.left_out[:LEFT_OUT_LISTED])
+    more = f" and {k - LEFT_OUT_LISTED} more" if k > LEFT_OUT_LISTED else ""
+    return (f"{tr.path}: {k} of {k + len(tr.t_s)} rows left out, a value missing in column "
+            f"'{named}' (a dropout: line{'s' if k > 1 else ''} {listed}{more})")
 
 
 def central_difference(t: Array, x: Array) -> Array:

@@ -62,7 +62,7 @@ UNIT_NAME_FORMS = (("_", ""), (" [", "]"), ("[", "]"), (" (", ")"), ("(", ")"), 
 #: a unit as a name may write it with the micro sign (U+00B5) or the Greek mu (U+03BC): each
 #: (the unit the options call it, the spelling)
 UNIT_NAME_SPELLINGS = (("us", "\u00b5s"), ("us", "\u03bcs"), ("um", "\u00b5m"), ("um", "\u03bcm"))
-def _ascii_lower(text: str) -> str:
+def ascii_lower(text: str) -> str:
     """A-Z lowered, every other character as it is (the C twin compares so: str.lower would
     also lower a few letters beyond ASCII)."""
     return text.translate(_ASCII_LOWER)
@@ -74,9 +74,9 @@ _ASCII_LOWER = {c: c + 32 for c in range(ord("A"), ord("Z") + 1)}
 def _named_with_unit(column: str, words: Sequence[str], unit: str) -> bool:
     """The column is one of ``words`` and ``unit`` (or one of its UNIT_NAME_SPELLINGS) in one
     of UNIT_NAME_FORMS, ASCII case aside."""
-    name = _ascii_lower(column)
+    name = ascii_lower(column)
     spellings = [unit] + [other for u, other in UNIT_NAME_SPELLINGS if u == unit]
-    return any(name == _ascii_lower(f"{word}{between}{spelled}{after}")
+    return any(name == ascii_lower(f"{word}{between}{spelled}{after}")
                for word in words for spelled in spellings for between, after in UNIT_NAME_FORMS)
 
 

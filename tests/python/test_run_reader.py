@@ -7,7 +7,9 @@ test_cli.BAD_CASES) and of the table below -- a BOM, quoted cells and "" inside 
 quoted cell across lines and to the end of the file, CRLF and a lone CR, comments, blank and
 white-space lines (skipped), semicolons and tabs between cells with a decimal comma, text
 that is not UTF-8, a NUL, Unicode spaces around a number, the number
-grammar's edges, more columns than the C reader once held, the csv module's cell limit -- goes
+grammar's edges, dropouts (an empty cell, nan, NA or n/a in the depth, force or velocity: the
+row left out, and the note that says so word for word), more columns than the C reader once
+held, the csv module's cell limit -- goes
 through the reference and through nte-run and nte-run-double (--no-units-check: the reader
 alone; test_run_units.py holds the units check): both refuse with the same message (one line
 but where a quoted name holds a line break), or both
@@ -28,7 +30,7 @@ from pathlib import Path
 import pytest
 
 from reference_py.tools.cli import main
-from reference_py.tools.csvio import CsvError, Units, read_trial
+from reference_py.tools.csvio import CsvError, Units, left_out_note, read_trial
 from run_records import NEEDS_C, PROGS, c_run
 from test_cli import BAD_CASES
 from test_safe_writer import READER_CASES
@@ -113,6 +115,16 @@ EXTRA: list[tuple[str, bytes]] = [
     ("empty cells before the header", b",,\n;;\n" + H + b"0,0,0\n"),
     ("a tab-only row in a tab file", b"t_s\tdepth_mm\tforce_n\n0\t0\t0\n\t\t\n"),
     ("one empty cell among numbers", H + b"0,0,0\n0.01,,0\n"),
+    ("dropouts of every spelling", H + b"0,0,0\n0.01,,0\n0.02,0.2,NaN\n0.03,NA,n/a\n"
+                                   b"0.04,0.4,-nan\n0.05,0.5,+NaN\n0.06,N/A,1\n0.07,0.7,0\n"),
+    ("a dropout's time not compared", H + b"0,0,0\n0,,0\n0.01,0.1,0\n"),
+    ("a dropout in a quoted cell", H + b'0,0,0\n0.01,0.1,""\n0.02,0.2," nan "\n0.03,0.3,0\n'),
+    ("a given velocity's dropout", b"t_s,depth_mm,velocity_mm_s,force_n\n0,0,1,0\n0.1,1,,0\n"
+                                   b"0.2,2,1,0\n"),
+    ("a dropout with a decimal comma", b"t_s;depth_mm;force_n\n0;0,5;0\n0,1;;0\n0,2;1,5;0\n"),
+    ("one dropout, no sample", H + b"0,,0\n"),
+    ("a dropout's bad time", H + b"0,0,0\nx,,0\n"),
+    ("nan-like words", H + b"0,0,0\n0.1,nana,0\n"),
 ]
 
 
@@ -135,10 +147,14 @@ def _same_reading(path: Path, tmp: Path) -> None:
     """Both readers refuse `path` alike, or both read it and nte-run-double writes the
     reference's estimates."""
     want = _python(path)
+    note = None if want is not None else left_out_note(read_trial(path, units=Units(check=False)))
     for prog in PROGS:
         c = c_run(prog, path, tmp / f"{prog}.csv", "--model", "2", "--no-units-check")
         if want is None:
             assert c.returncode == 0, (prog, c.stderr)
+            # the note on the rows left out (a dropout), word for word, or none
+            assert (c.stderr.startswith(f"{note}\n") if note is not None
+                    else "left out" not in c.stderr), (prog, c.stderr, note)
         else:
             assert c.returncode == 2 and c.stderr == f"{prog}: error: {want}\n", (prog, c.stderr,
                                                                                   want)
@@ -173,7 +189,7 @@ def test_missing_file_and_directory(tmp_path):
 ATOMS = [b"0", b"1", b"2", b"5", b"9", b".", b"e", b"-", b"+", b",", b",", b",", b'"', b'"',
          b"\n", b"\n", b"\n", b"\r\n", b"\r", b" ", b"\t", b"#", b"nan", b"inf", b"1e999",
          b"\xc2\xa0", b"\xef\xbb\xbf", b"\xff", b"'", b"\\", b"x", b"\xe2\x80\x83", b"\xc3\xa9",
-         b"\x1c", b";", b";"]
+         b"\x1c", b";", b";", b"NA", b"NaN", b"n/a"]
 HEADS = [H, b'"t_s",depth_mm, force_n\r\n', b"\xef\xbb\xbf# c\nt_s,depth_mm,velocity_mm_s,force_n\n",
          b"t_s,depth_mm\n", b"", b"t_s;depth_mm;force_n\n", b'\n"t_s"\tdepth_mm\t"force_n"\n']
 
@@ -190,8 +206,8 @@ def test_random_files_read_alike(tmp_path, capsys, seed):
                 t += rng.choice([1, 1, 0, -1])
                 sep = rng.choice([b",", b",", b";", b"\t"])
                 data += sep.join([b"%d" % t, rng.choice([b"1", b"2.5", b" 3 ", b'"4"', b"1e2",
-                                                          b"2,5", b'"0,5"']),
-                                  rng.choice([b"0", b"-1", b".5", b",5"])]) + b"\n"
+                                                          b"2,5", b'"0,5"', b""]),
+                                  rng.choice([b"0", b"-1", b".5", b",5", b"nan", b""])]) + b"\n"
             else:
                 data += b"".join(rng.choice(ATOMS) for _ in range(rng.randint(1, 12)))
         path = tmp_path / "in.csv"

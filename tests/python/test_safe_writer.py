@@ -13,7 +13,7 @@ import pytest
 
 from reference_py.tools import safe_write
 from reference_py.tools.cli import main
-from reference_py.tools.csvio import CsvError, Units, read_table, read_trial
+from reference_py.tools.csvio import CsvError, Units, left_out_note, read_table, read_trial
 from reference_py.tools.safe_write import OutputError, Outputs
 
 SIM = ["simulate", "--preset", "paper-10mms", "--depth", "5", "--dwell", "0", "--rate", "50"]
@@ -192,13 +192,22 @@ def test_bom_quotes_comments_and_optional_velocity(tmp_path):
 
 
 READER_CASES = [
-    ("nan", "t_s,depth_mm,force_n\n0,0,0\n0.01,0,nan\n", ":3: column 'force_n': not finite: 'nan'"),
+    ("nan time", "t_s,depth_mm,force_n\n0,0,0\nnan,0,0\n", ":3: column 't_s': not finite: 'nan'"),
     ("inf", "t_s,depth_mm,force_n\n0,-inf,0\n", ":2: column 'depth_mm': not finite: '-inf'"),
     ("overflow", "t_s,depth_mm,force_n\n0,0,1e999\n", ":2: column 'force_n': not finite: '1e999'"),
     ("hex", "t_s,depth_mm,force_n\n0,0x10,0\n", ":2: column 'depth_mm': not a number: '0x10'"),
     ("underscore", "t_s,depth_mm,force_n\n0,1_0,0\n",
      ":2: column 'depth_mm': not a number: '1_0'"),
-    ("empty cell", "t_s,depth_mm,force_n\n0,,0\n", ":2: column 'depth_mm': not a number: ''"),
+    ("empty time", "t_s,depth_mm,force_n\n,0,0\n", ":2: column 't_s': not a number: ''"),
+    ("every row a dropout", "t_s,depth_mm,force_n\n0,,0\n0.1,1,NaN\n",
+     ":2: no sample: every row after the header has a value missing in column 'depth_mm' or "
+     "'force_n' (2 rows)"),
+    ("a dropout's other cell not a number", "t_s,depth_mm,force_n\n0,0,0\n0.1,x,\n",
+     ":3: column 'depth_mm': not a number: 'x'"),
+    ("a dropout's infinite cell", "t_s,depth_mm,force_n\n0,0,0\n0.1,inf,NA\n",
+     ":3: column 'depth_mm': not finite: 'inf'"),
+    ("a missing time among a dropout's", "t_s,depth_mm,force_n\n,,\n0,0,0\nx,0,\n",
+     ":4: column 't_s': not a number: 'x'"),
     ("duplicate", "t_s,depth_mm,force_n,t_s\n", ":1: column 't_s': duplicate column name in the header"),
     ("not increasing", "t_s,depth_mm,force_n\n0,0,0\n0,0,0\n",
      ":3: column 't_s': time 0.0 does not increase (previous 0.0)"),
@@ -255,11 +264,55 @@ def test_not_utf8_is_refused_with_its_line(tmp_path):
 
 
 def test_sparse_column_empty_cells_are_absent_samples(tmp_path):
-    p = write(tmp_path, "t_s,depth_mm,force_n\n0,0,\n0.001,0.01,0.5\n")
+    p = write(tmp_path, "t_s,depth_mm,force_n\n0,0,\n0.001,0.01,0.5\n0.002,0.02,nan\n")
     t = read_table(p, sparse=("force_n",))
     assert np.isnan(t.columns["force_n"][0]) and t.columns["force_n"][1] == 0.5
+    assert np.isnan(t.columns["force_n"][2]) and t.lines == [2, 3, 4] and t.left_out == []
     with pytest.raises(CsvError, match="column 'force_n': not a number: ''"):
         read_table(p)
+
+
+DROPOUTS = ("t_s,depth_mm,force_n\n0,0,0.01\n0.01,0.1,\n0.02,0.2,NaN\n0.03,,0.04\n"
+            "0.04,N/A,na\n0.04,0.4,-nan\n0.05,0.5,0.06\n0.06,0.6,0.07\n0.07,0.7,+NAN\n"
+            "0.08,0.8,0.09\n")
+
+
+def test_a_dropout_leaves_its_row_out(tmp_path):
+    """A sensor's dropout (an empty cell, nan as MATLAB and LabVIEW write it, NA as R does, any
+    case) in the depth or the force: the row is not a sample.  The rows kept keep their lines,
+    the velocity is the central difference over them, the time of a left-out row is not
+    compared (line 7 repeats line 6's), and the note says how many, which columns, which
+    lines (at most five)."""
+    p = write(tmp_path, DROPOUTS)
+    tr = read_trial(p, units=Units(check=False))
+    assert list(tr.t_s) == [0.0, 0.05, 0.06, 0.08] and tr.lines == [2, 8, 9, 11]
+    assert tr.left_out == [3, 4, 5, 6, 7, 10]
+    assert tr.left_out_columns == ["depth_mm", "force_n"]
+    np.testing.assert_allclose(tr.velocity_mm_s, [10.0, 10.0, 10.0, 10.0])
+    assert left_out_note(tr) == (
+        f"{p}: 6 of 10 rows left out, a value missing in column 'depth_mm' or 'force_n' "
+        f"(a dropout: lines 3, 4, 5, 6, 7 and 1 more)")
+    full = read_trial(write(tmp_path, "t_s,depth_mm,force_n\n0,0,0\n"), units=Units(check=False))
+    assert full.left_out == [] and left_out_note(full) is None
+
+
+def test_a_given_velocity_missing_is_a_dropout_and_predict_only_keeps_the_row(tmp_path):
+    """A given velocity's dropout leaves the row out too.  With ``force_ignored``
+    (--predict-only) the force may be missing (kept, NaN) or absent, and only the depth and
+    the velocity leave a row out."""
+    p = write(tmp_path, "t_s,depth_mm,velocity_mm_s,force_n\n0,0,1,\n0.1,1,,0\n0.2,2,1,nan\n")
+    with pytest.raises(CsvError) as e:
+        read_trial(p, units=Units(check=False))
+    assert str(e.value) == (f"{p}:2: no sample: every row after the header has a value missing "
+                            f"in column 'depth_mm' or 'force_n' or 'velocity_mm_s' (3 rows)")
+    tr = read_trial(p, units=Units(check=False), force_ignored=True)
+    assert tr.lines == [2, 4] and tr.left_out == [3]
+    assert tr.left_out_columns == ["depth_mm", "velocity_mm_s"] and np.all(np.isnan(tr.force_n))
+    alone = read_trial(write(tmp_path, "t_s,depth_mm\n0,0\n0.1,1\n"), units=Units(check=False),
+                       force_ignored=True)
+    assert list(alone.depth_mm) == [0.0, 1.0] and np.all(np.isnan(alone.force_n))
+    with pytest.raises(CsvError, match="column 'force_n': missing from the header"):
+        read_trial(write(tmp_path, "t_s,depth_mm\n0,0\n"), units=Units(check=False))
 
 
 # -- nte-discrepancy writes its report through the same writer --------------------------------
