@@ -320,6 +320,53 @@ def test_export_reread_and_predict_only(loop, model):
                                    names=True)["surface_mm"]) == 7.5
 
 
+def test_predict_only_on_depths_alone(loop):
+    """A robot without a force sensor has a record of depths alone: --predict-only reads it
+    (no force column; or a force column of dropouts), both readers alike, and predicts what
+    it predicts from the full record byte for byte.  A depth's dropout still leaves its row
+    out, said on stderr."""
+    d = loop["dir"]
+    exported = d / "x_alone.json"
+    r = ref(str(loop["p3"]), "--model", "3", "--contact", "on", "--out", str(d / "id_a.csv"),
+            "--export-config", str(exported))
+    assert r.returncode == 0, r.stderr
+    lines = loop["p1"].read_text().splitlines()
+    header = lines[0].split(",")
+    keep = [header.index(c) for c in ("t_s", "depth_mm", "velocity_mm_s")]
+    fi = header.index("force_n")
+    alone, blanked = d / "alone.csv", d / "blanked.csv"
+    alone.write_text("".join(",".join(line.split(",")[k] for k in keep) + "\n"
+                             for line in lines))
+    blanked.write_text("".join(
+        ",".join("" if (k == fi and i % 2) else ("NaN" if k == fi and i else c)
+                 for k, c in enumerate(line.split(","))) + "\n"
+        for i, line in enumerate(lines)))
+    full = d / "full_po.csv"
+    assert ref(str(loop["p1"]), "--config", str(exported), "--predict-only", "--out",
+               str(full)).returncode == 0
+    for src in (alone, blanked):
+        r_out, c_out = d / f"r_{src.name}", d / f"c_{src.name}"
+        r = ref(str(src), "--config", str(exported), "--predict-only", "--out", str(r_out))
+        c = crun(str(src), "--config", str(exported), "--predict-only", "--out", str(c_out))
+        assert r.returncode == 0 and c.returncode == 0, (r.stderr, c.stderr)
+        assert r_out.read_bytes() == c_out.read_bytes() == full.read_bytes(), src.name
+        assert "left out" not in r.stderr + c.stderr
+    # without --predict-only the record of depths alone is refused (the force is required)
+    r = ref(str(alone), "--config", str(exported), "--out", str(d / "no.csv"))
+    assert r.returncode == 2 and "column 'force_n': missing from the header" in r.stderr
+    # a depth's dropout under --predict-only: the row is left out, alike in both
+    cells = lines[200].split(",")
+    cells[header.index("depth_mm")] = "nan"
+    dropped = d / "dropped.csv"
+    dropped.write_text("\n".join(lines[:200] + [",".join(cells)] + lines[201:]) + "\n")
+    r = ref(str(dropped), "--config", str(exported), "--predict-only", "--out", str(d / "r_d"))
+    c = crun(str(dropped), "--config", str(exported), "--predict-only", "--out", str(d / "c_d"))
+    note = (f"{dropped}: 1 of {len(lines) - 1} rows left out, a value missing in column "
+            f"'depth_mm' or 'velocity_mm_s' (a dropout: line 201)\n")
+    assert r.returncode == c.returncode == 0 and note in r.stderr and c.stderr.startswith(note)
+    assert (d / "r_d").read_bytes() == (d / "c_d").read_bytes()
+
+
 def _replay_rmse(record: Path, prediction: Path, tare: float) -> tuple[float, float]:
     """RMSE of a prediction file against the record's force less the tare, and the peak,
     summed as export_select does (double, sample order)."""

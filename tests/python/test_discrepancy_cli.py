@@ -44,7 +44,7 @@ def test_end_to_end_report_and_figures(tmp_path: Path) -> None:
 @pytest.mark.parametrize("text,where", [
     ("t_s,depth_mm\n0,0\n", ":1: column 'force_n'"),
     ("t_s,depth_mm,force_n\n0,0,0\n0.01,abc,0\n", ":3: column 'depth_mm'"),
-    ("t_s,depth_mm,force_n\n0,0,0\n0.01,0,nan\n", ":3: column 'force_n'"),
+    ("t_s,depth_mm,force_n\n0,0,0\n0.01,0,inf\n", ":3: column 'force_n'"),
     ("t_s,depth_mm,force_n\n0,0,0\n0,0,0\n", ":3: column 't_s'"),
     ("t_s,depth_mm,force_n\n0,0,0\n0.01,0\n", ":3"),
 ])
@@ -65,6 +65,29 @@ def test_unknown_and_missing_files_exit_2(tmp_path: Path) -> None:
     f = tmp_path / "x.txt"                    # read as CSV: refused for what it holds
     f.write_text("")
     assert main([str(f), "--out", str(tmp_path / "o")]) == 2
+
+
+def test_dropouts_leave_their_rows_out_and_are_said(tmp_path: Path,
+                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """A measured file whose logger wrote NaN or nothing where a sample was lost is analysed
+    (it was refused, aborting the whole run); the rows left out are said on stderr."""
+    files = _good(tmp_path)
+    f = Path(files[0])
+    lines = f.read_text().splitlines()
+    header = lines[0].split(",")
+    fi, di = header.index("force_n"), header.index("depth_mm")
+    for k, word in ((40, "NaN"), (41, ""), (90, "NA")):
+        cells = lines[k].split(",")
+        cells[fi if k != 90 else di] = word
+        lines[k] = ",".join(cells)
+    f.write_text("\n".join(lines) + "\n")
+    out = tmp_path / "rep"
+    assert main(files + ["--out", str(out), "--no-figures"]) == 0
+    err = capsys.readouterr().err
+    assert (f"nte-discrepancy: {f}: 3 of {len(lines) - 1} rows left out, a value missing in "
+            f"column 'depth_mm' or 'force_n'") in err
+    rep = json.loads((out / "report.json").read_text())
+    assert not rep["skipped"] and rep["named"]
 
 
 def test_short_trial_is_skipped_not_fatal(tmp_path: Path, capsys: pytest.CaptureFixture[str]
