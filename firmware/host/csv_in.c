@@ -807,8 +807,8 @@ void nte_trial_left_out_note(const char* path, const nte_trial_t* tr, const nte_
                      path, k, k + tr->n, cols->depth, force ? "' or '" : "",
                      force ? cols->force : "", velocity ? "' or '" : "",
                      velocity ? cols->velocity : "", (k > 1U) ? "s" : "");
-    const size_t listed = (k < NTE_CSV_LEFT_OUT_LISTED) ? k : NTE_CSV_LEFT_OUT_LISTED;
-    for (size_t i = 0U; (i < listed) && (o >= 0) && ((size_t)o < cap); i++) {
+    for (size_t i = 0U; (i < k) && (i < NTE_CSV_LEFT_OUT_LISTED) && (o >= 0) && ((size_t)o < cap);
+         i++) {
         o += snprintf(out + o, cap - (size_t)o, "%s%zu", (i > 0U) ? ", " : " ",
                       tr->left_out_line[i]);
     }
