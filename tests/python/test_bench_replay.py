@@ -60,9 +60,15 @@ def test_scenario_reader_rejects_bad_input(tmp_path: Path) -> None:
     p.write_text("t_s,depth_mm,velocity_mm_s\n0,0,0\n")
     with pytest.raises(ValueError, match=r"s.csv:1: column 'force_n': missing from the header"):
         read_scenario(p)
-    p.write_text("t_s,depth_mm,velocity_mm_s,force_n\n0,0,0,\n0.001,0,0,nan\n")
-    with pytest.raises(ValueError, match=r"s.csv:3: column 'force_n': not finite: 'nan'"):
+    p.write_text("t_s,depth_mm,velocity_mm_s,force_n\n0,0,0,\n0.001,0,0,inf\n")
+    with pytest.raises(ValueError, match=r"s.csv:3: column 'force_n': not finite: 'inf'"):
         read_scenario(p)
+    # a force written nan (or NA) is no force sample, like an empty cell; a depth's dropout
+    # leaves the row out (no Depth frame)
+    p.write_text("t_s,depth_mm,velocity_mm_s,force_n\n0,0,0,NaN\n0.001,0,0,NA\n"
+                 "0.002,,0,0.5\n0.003,0,0,0.25\n")
+    rows = read_scenario(p)
+    assert [r.force_n for r in rows] == [None, None, 0.25] and rows[2].t_s == 0.003
     p.write_text("t_s,depth_mm,velocity_mm_s,force_n\n0,-1e-9,0,\n0.001,600,0,\n")
     rows = read_scenario(p)
     assert rows[0].depth_mm == 0.0 and rows[0].force_n is None   # tiny negative clamped

@@ -80,7 +80,7 @@ BAD_CASES = [
      "bad.csv:3: column 'depth_mm': not a number: 'abc'"),
     ("non-monotonic", GOOD_HEADER + "\n0,0,0\n0.01,0.1,0\n0.005,0.2,0\n",
      "bad.csv:4: column 't_s': time 0.005 does not increase"),
-    ("nan", GOOD_HEADER + "\n0,0,0\n0.005,0.05,nan\n", "bad.csv:3: column 'force_n': not finite"),
+    ("nan", GOOD_HEADER + "\n0,0,0\n0.005,0.05,inf\n", "bad.csv:3: column 'force_n': not finite"),
     ("ragged", GOOD_HEADER + "\n0,0,0\n0.005,0.05\n", "bad.csv:3: expected 3 cells, found 2"),
     ("empty", "", "bad.csv:1: no header line"),
 ]
