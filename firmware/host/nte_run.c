@@ -10,7 +10,7 @@
  *           [--no-layer-sets]
  *           [--contact on|off] [--surface MM] [--config FILE.json] [--predict-only]
  *           [--start NAME=VALUE,...] [--noise N] [--export-config FILE.json]
- *           [--force-unit N|mN] [--time-unit s|ms|us] [--depth-unit mm|m]
+ *           [--force-unit N|mN|gf|kgf|lbf] [--time-unit s|ms|us] [--depth-unit mm|m|um|cm|in]
  *           [--force-sign +1|-1] [--depth-sign +1|-1] [--depth-offset MM] [--no-units-check]
  *           [--columns t=NAME,depth=NAME,force=NAME[,velocity=NAME]] --out EST.csv
  *
@@ -204,9 +204,11 @@ static void help(void)
            "                         (default: none)\n");
     printf("units and signs of the input CSV (converted by the reader; implausible values are\n"
            "refused naming the likely option):\n"
-           "  --force-unit %-9s unit of the force_n column (default: N)\n"
+           "  --force-unit %s\n"
+           "                         unit of the force_n column (default: N)\n"
            "  --time-unit %-10s unit of the t_s column (default: s)\n"
-           "  --depth-unit %-9s unit of the depth_mm (and velocity_mm_s, per time unit)\n"
+           "  --depth-unit %s\n"
+           "                         unit of the depth_mm (and velocity_mm_s, per time unit)\n"
            "                         column (default: mm)\n"
            "  --force-sign +1|-1     -1: the sensor reads the insertion force as negative\n"
            "                         (default: 1)\n"

@@ -24,12 +24,12 @@ typedef struct nte_unit_t {
     double factor; /* to the tools' unit: N, s or mm */
 } nte_unit_t;
 
-#define NTE_FORCE_UNIT_COUNT 3
-#define NTE_FORCE_UNITS { { "N", 0x1.0000000000000p+0 }, { "mN", 0x1.0624dd2f1a9fcp-10 }, { "gf", 0x1.4158248443c70p-7 } }
+#define NTE_FORCE_UNIT_COUNT 5
+#define NTE_FORCE_UNITS { { "N", 0x1.0000000000000p+0 }, { "mN", 0x1.0624dd2f1a9fcp-10 }, { "gf", 0x1.4158248443c70p-7 }, { "kgf", 0x1.39d013a92a305p+3 }, { "lbf", 0x1.1cafa9b6b9dd7p+2 } }
 #define NTE_TIME_UNIT_COUNT 3
 #define NTE_TIME_UNITS { { "s", 0x1.0000000000000p+0 }, { "ms", 0x1.0624dd2f1a9fcp-10 }, { "us", 0x1.0c6f7a0b5ed8dp-20 } }
-#define NTE_DEPTH_UNIT_COUNT 3
-#define NTE_DEPTH_UNITS { { "mm", 0x1.0000000000000p+0 }, { "m", 0x1.f400000000000p+9 }, { "um", 0x1.0624dd2f1a9fcp-10 } }
+#define NTE_DEPTH_UNIT_COUNT 5
+#define NTE_DEPTH_UNITS { { "mm", 0x1.0000000000000p+0 }, { "m", 0x1.f400000000000p+9 }, { "um", 0x1.0624dd2f1a9fcp-10 }, { "cm", 0x1.4000000000000p+3 }, { "in", 0x1.9666666666666p+4 } }
 #define NTE_TIME_UNIT_WORDS { "", "milliseconds", "microseconds" } /* a time step's hint */
 /* csvio.UNIT_SUFFIX_QUANTITIES: a column named WORD, a form's between, UNIT and
  * its after (csvio.UNIT_NAME_FORMS) holds a quantity in UNIT, read with --KIND-unit
@@ -56,7 +56,11 @@ typedef struct nte_unit_t {
 #define NTE_COLUMN_KEY_REQUIRED_COUNT 3
 #define NTE_COLUMN_KEYS_REQUIRED { "t", "depth", "force" }
 
+/* csvio.SHORT_STROKE_UNITS: (a unit, its name) a stroke under MIN_STROKE_MM may be in */
+#define NTE_UNITS_SHORT_STROKE_COUNT 3
+#define NTE_UNITS_SHORT_STROKE_UNITS { { "m", "metres" }, { "in", "inches" }, { "cm", "centimetres" } }
 #define NTE_UNITS_MIN_STROKE_MM (0x1.0000000000000p+0)
+#define NTE_UNITS_STROKE_MAX_MM (0x1.9000000000000p+7)
 #define NTE_UNITS_MAX_REJECTED_SHARE (0x1.0000000000000p-1)
 #define NTE_UNITS_MAX_FORCE_OUT_SHARE (0x1.999999999999ap-5)
 #define NTE_UNITS_SIGN_DEPART_SHARE (0x1.999999999999ap-4)

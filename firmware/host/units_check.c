@@ -266,6 +266,35 @@ static int check_time(const char* path, const nte_trial_t* tr, const nte_units_t
     return 0;
 }
 
+/* csvio._stroke_hint: a stroke under NTE_UNITS_MIN_STROKE_MM read as mm is named in each unit
+ * of NTE_UNITS_SHORT_STROKE_UNITS that brings it to MIN_STROKE_MM..STROKE_MAX_MM. */
+static void stroke_hint(const double stroke, const nte_units_t* u, char* out, const size_t cap)
+{
+    static const char* const units[NTE_UNITS_SHORT_STROKE_COUNT][2] = NTE_UNITS_SHORT_STROKE_UNITS;
+    size_t named[NTE_UNITS_SHORT_STROKE_COUNT];
+    size_t n = 0U;
+    for (size_t i = 0U; i < NTE_UNITS_SHORT_STROKE_COUNT; i++) {
+        const double s = stroke * depth_unit(units[i][0]);
+        if ((s >= NTE_UNITS_MIN_STROKE_MM) && (s <= NTE_UNITS_STROKE_MAX_MM)) {
+            named[n++] = i;
+        }
+    }
+    if ((strcmp(u->depth, "mm") != 0) || (n == 0U)) {
+        (void)snprintf(out, cap, "no insertion");
+        return;
+    }
+    /* "probably A: ...", "probably A or B: ...", "probably A, B or C: ..." */
+    int o = snprintf(out, cap, "probably ");
+    for (size_t i = 0U; (i < n) && (o >= 0) && ((size_t)o < cap); i++) {
+        const char* sep = (i == 0U) ? "" : ((i + 1U == n) ? " or " : ", ");
+        o += snprintf(out + o, cap - (size_t)o, "%s%s", sep, units[named[i]][1]);
+    }
+    for (size_t i = 0U; (i < n) && (o >= 0) && ((size_t)o < cap); i++) {
+        o += snprintf(out + o, cap - (size_t)o, "%s--depth-unit %s",
+                      (i == 0U) ? ": convert with " : " or ", units[named[i]][0]);
+    }
+}
+
 /* Micrometres read as mm: most depths outside the accepted range, every one inside it and the
  * stroke still a millimetre at a thousandth of the value. */
 static int in_micrometres(const nte_trial_t* tr, const nte_units_t* u, const nte_limits_t* lim,
@@ -301,13 +330,12 @@ static int check_depth(const char* path, const nte_trial_t* tr, const nte_units_
     }
     const double stroke = hi - lo;
     if ((0.0 < stroke) && (stroke < NTE_UNITS_MIN_STROKE_MM)) {
+        char hint[256];
+        stroke_hint(stroke, u, hint, sizeof hint);
         (void)snprintf(err, es,
                        "%s: column '%s': the depth spans only %.4g mm (less than "
                        "%g mm): %s",
-                       path, u->columns.depth, stroke, NTE_UNITS_MIN_STROKE_MM,
-                       (strcmp(u->depth, "mm") == 0)
-                           ? "probably metres: convert with --depth-unit m"
-                           : "no insertion");
+                       path, u->columns.depth, stroke, NTE_UNITS_MIN_STROKE_MM, hint);
         return -1;
     }
     double far = 0.0;

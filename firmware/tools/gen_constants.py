@@ -297,7 +297,11 @@ def units_header() -> str:
     cells = ", ".join(f'"{k}"' for k in csvio.COLUMN_KEYS_REQUIRED)
     out.append(f"#define NTE_COLUMN_KEYS_REQUIRED {{ {cells} }}")
     out.append("")
-    for name in ("MIN_STROKE_MM", "MAX_REJECTED_SHARE", "MAX_FORCE_OUT_SHARE",
+    out.append("/* csvio.SHORT_STROKE_UNITS: (a unit, its name) a stroke under MIN_STROKE_MM may be in */")
+    out.append(f"#define NTE_UNITS_SHORT_STROKE_COUNT {len(csvio.SHORT_STROKE_UNITS)}")
+    cells = ", ".join(f'{{ "{u}", "{w}" }}' for u, w in csvio.SHORT_STROKE_UNITS)
+    out.append(f"#define NTE_UNITS_SHORT_STROKE_UNITS {{ {cells} }}")
+    for name in ("MIN_STROKE_MM", "STROKE_MAX_MM", "MAX_REJECTED_SHARE", "MAX_FORCE_OUT_SHARE",
                  "SIGN_DEPART_SHARE", "DEPTH_OFFSET_MAX_MM"):
         out.append(f"#define NTE_UNITS_{name} ({hex64(getattr(csvio, name))})")
     out.append(f"#define NTE_UNITS_TARE_SAMPLES {int(csvio.TARE_SAMPLES)}U")

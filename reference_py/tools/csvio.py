@@ -304,6 +304,26 @@ FORCE_IMPLAUSIBLE_FACTOR = 1000.0
 TIME_UNIT_WORDS = {"ms": "milliseconds", "us": "microseconds"}
 
 
+#: a stroke under MIN_STROKE_MM read as mm may be in one of these (the unit, its name): each
+#: is named that brings the stroke to MIN_STROKE_MM..STROKE_MAX_MM (a needle's: the values
+#: cannot tell them apart, the rig's manual can)
+SHORT_STROKE_UNITS = (("m", "metres"), ("in", "inches"), ("cm", "centimetres"))
+STROKE_MAX_MM = 200.0
+
+
+def _stroke_hint(stroke: float, units: Units) -> str:
+    """The advice for a depth that spans under MIN_STROKE_MM (C twin: units_check.c
+    stroke_hint)."""
+    named = [(u, word) for u, word in SHORT_STROKE_UNITS
+             if MIN_STROKE_MM <= stroke * DEPTH_UNITS[u] <= STROKE_MAX_MM]
+    if units.depth != "mm" or not named:
+        return "no insertion"
+    words = [word for _, word in named]
+    said = words[0] if len(words) == 1 else f"{', '.join(words[:-1])} or {words[-1]}"
+    return (f"probably {said}: convert with "
+            + " or ".join(f"--depth-unit {u}" for u, _ in named))
+
+
 def _pct(x: float) -> str:
     return f"{100.0 * x:.0f} %"
 
@@ -344,8 +364,7 @@ def check_units(tr: "Trial", units: Units = Units(), limits: Limits = Limits()) 
     d = tr.depth_mm
     stroke = float(np.max(d) - np.min(d))
     if 0.0 < stroke < MIN_STROKE_MM:          # (a depth that never moves is no unit question)
-        hint = ("probably metres: convert with --depth-unit m" if units.depth == "mm"
-                else "no insertion")
+        hint = _stroke_hint(stroke, units)
         raise UnitsError(f"{name}: column '{cd}': the depth spans only {stroke:.4g} mm "
                          f"(less than {MIN_STROKE_MM:g} mm): {hint}")
     far = float(np.mean((d < limits.depth_min_mm) | (d > limits.depth_max_mm)))

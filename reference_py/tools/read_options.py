@@ -37,11 +37,12 @@ COLUMN_KEYS = {"t": "t_s", "depth": "depth_mm", "force": "force_n", "velocity": 
 COLUMN_KEYS_REQUIRED = ("t", "depth", "force")
 
 #: Units the reader converts from (factor to the tools' unit: N, s, mm; the first of each is
-#: the tools' own).  gf: a gram-force (standard gravity, 9.80665 mN), what a load cell read in
-#: grams gives; um: micrometres, a stage's encoder counts.
-FORCE_UNITS = {"N": 1.0, "mN": 1.0e-3, "gf": 9.80665e-3}
+#: the tools' own).  gf, kgf: a gram- and a kilogram-force (standard gravity, 9.80665 m/s^2),
+#: what a load cell read in grams or kilograms gives; lbf: a pound-force (0.45359237 kg at
+#: standard gravity); um: micrometres, a stage's encoder counts; in: an inch, 25.4 mm.
+FORCE_UNITS = {"N": 1.0, "mN": 1.0e-3, "gf": 9.80665e-3, "kgf": 9.80665, "lbf": 4.4482216152605}
 TIME_UNITS = {"s": 1.0, "ms": 1.0e-3, "us": 1.0e-6}
-DEPTH_UNITS = {"mm": 1.0, "m": 1.0e3, "um": 1.0e-3}
+DEPTH_UNITS = {"mm": 1.0, "m": 1.0e3, "um": 1.0e-3, "cm": 10.0, "in": 25.4}
 
 
 #: what a header may name its insertion columns with their unit: one of the quantity's words,

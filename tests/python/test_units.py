@@ -50,6 +50,10 @@ CASES = [
     ("m", lambda t, d, f: (t, d / 1000.0, f), ["--depth-unit", "m"],
      "column 'depth_mm': the depth spans only 0.02 mm (less than 1 mm): probably metres: "
      "convert with --depth-unit m"),
+    # inches: the values cannot tell them from centimetres (both are named)
+    ("in", lambda t, d, f: (t, d / 25.4, f), ["--depth-unit", "in"],
+     "column 'depth_mm': the depth spans only 0.7874 mm (less than 1 mm): probably inches or "
+     "centimetres: convert with --depth-unit in or --depth-unit cm"),
     ("depth mirrored", lambda t, d, f: (t, -d, f), ["--depth-sign", "-1"],
      "column 'depth_mm': 95 % of the depths are negative (down to -20 mm): probably measured "
      "the other way: convert with --depth-sign -1"),
