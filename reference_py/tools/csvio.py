@@ -13,16 +13,18 @@ Reading (:func:`read_table`, :func:`read_trial`)
     for an insertion: ``t_s``, ``depth_mm``, ``force_n``; ``velocity_mm_s`` is optional (when it
     is absent it is computed by central differences of depth); other columns are kept in
     ``Trial.columns`` and otherwise ignored.  Every cell must be a decimal number (``1``,
-    ``-0.5``, ``2.5e-3``; no hex, no ``_``), finite (``nan``, ``inf`` and overflowing values are
-    refused), and ``t_s`` must increase strictly.  A *missing* value -- an empty cell, ``nan``
-    (as MATLAB and LabVIEW write a dropout) or ``NA`` (R), case aside: :data:`MISSING` -- is
-    allowed in two kinds of column.  One named in ``sparse`` keeps its row (no sample of that
-    quantity on that line, e.g. a 200 Hz force among 1 kHz depths; stored as NaN).  One named in
-    ``skip_missing`` leaves its row out (a sensor's dropout: the row is not a sample; its other
-    cells must still be numbers or missing, and its time is not compared): an insertion's
-    depth, force and given velocity (:func:`read_trial`), each left-out line listed in
-    ``Trial.left_out`` and said by :func:`left_out_note`.  One named in ``nan_ok`` may hold
-    ``nan`` (the estimate file's ``surface_mm`` before a surface is found; stored as NaN).  Every refusal is a :class:`CsvError` whose message has one form::
+    ``-0.5``, ``2.5e-3``; no hex, no ``_``), finite (``inf`` and overflowing values are
+    refused, and ``nan`` but where a value may be missing), and ``t_s`` must increase strictly.
+    A *missing* value -- an empty cell, ``nan`` (as MATLAB and LabVIEW write a dropout), ``NA``
+    (R) or ``n/a``, case aside: :func:`is_missing` -- is allowed in two kinds of column.  One
+    named in ``sparse`` keeps its row (no sample of that quantity on that line, e.g. a 200 Hz
+    force among 1 kHz depths; stored as NaN).  One named in ``skip_missing`` leaves its row out
+    (a sensor's dropout: the row is not a sample; its other cells must still be numbers or
+    missing, and its time is not compared): an insertion's depth, force and given velocity
+    (:func:`read_trial`), each left-out line listed in ``Trial.left_out`` and said by
+    :func:`left_out_note`.  One named in ``nan_ok`` may hold ``nan`` (the estimate file's
+    ``surface_mm`` before a surface is found; stored as NaN).  Every refusal is a
+    :class:`CsvError` whose message has one form::
 
         FILE:LINE: column 'NAME': reason        (or FILE:LINE: reason, or FILE: reason)
 
