@@ -7,8 +7,8 @@
 /* and the characters Python's str.strip strips (str.isspace, code points). */
 #define NTE_CSV_COMMENT '#'
 #define NTE_CSV_FIELD_LIMIT 131072U
-/* A missing value (a dropout): an empty cell or one of these words, case aside in */
-/* ASCII; a note lists at most LISTED of the lines so left out (csvio.left_out_note). */
+/* A missing value (a dropout): an empty cell or one of these words, case aside */
+/* in ASCII; a note lists at most LISTED of the lines left out (left_out_note). */
 #define NTE_CSV_MISSING_WORD_COUNT 5
 #define NTE_CSV_MISSING_WORDS { "nan", "+nan", "-nan", "na", "n/a" }
 #define NTE_CSV_LEFT_OUT_LISTED 5U
@@ -56,7 +56,8 @@ typedef struct nte_unit_t {
 #define NTE_COLUMN_KEY_REQUIRED_COUNT 3
 #define NTE_COLUMN_KEYS_REQUIRED { "t", "depth", "force" }
 
-/* csvio.SHORT_STROKE_UNITS: (a unit, its name) a stroke under MIN_STROKE_MM may be in */
+/* csvio.SHORT_STROKE_UNITS: (a unit, its name) a stroke under */
+/* MIN_STROKE_MM may be in */
 #define NTE_UNITS_SHORT_STROKE_COUNT 3
 #define NTE_UNITS_SHORT_STROKE_UNITS { { "m", "metres" }, { "in", "inches" }, { "cm", "centimetres" } }
 #define NTE_UNITS_MIN_STROKE_MM (0x1.0000000000000p+0)

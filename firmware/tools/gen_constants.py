@@ -240,8 +240,8 @@ def units_header() -> str:
            "/* and the characters Python's str.strip strips (str.isspace, code points). */",
            f"#define NTE_CSV_COMMENT '{csvio.COMMENT}'",
            f"#define NTE_CSV_FIELD_LIMIT {csv.field_size_limit()}U",
-           "/* A missing value (a dropout): an empty cell or one of these words, case aside in */",
-           "/* ASCII; a note lists at most LISTED of the lines so left out (csvio.left_out_note). */",
+           "/* A missing value (a dropout): an empty cell or one of these words, case aside */",
+           "/* in ASCII; a note lists at most LISTED of the lines left out (left_out_note). */",
            f"#define NTE_CSV_MISSING_WORD_COUNT {len(csvio.MISSING_WORDS)}",
            "#define NTE_CSV_MISSING_WORDS { "
            + ", ".join(f'"{w}"' for w in csvio.MISSING_WORDS) + " }",
@@ -297,7 +297,8 @@ def units_header() -> str:
     cells = ", ".join(f'"{k}"' for k in csvio.COLUMN_KEYS_REQUIRED)
     out.append(f"#define NTE_COLUMN_KEYS_REQUIRED {{ {cells} }}")
     out.append("")
-    out.append("/* csvio.SHORT_STROKE_UNITS: (a unit, its name) a stroke under MIN_STROKE_MM may be in */")
+    out.append("/* csvio.SHORT_STROKE_UNITS: (a unit, its name) a stroke under */")
+    out.append("/* MIN_STROKE_MM may be in */")
     out.append(f"#define NTE_UNITS_SHORT_STROKE_COUNT {len(csvio.SHORT_STROKE_UNITS)}")
     cells = ", ".join(f'{{ "{u}", "{w}" }}' for u, w in csvio.SHORT_STROKE_UNITS)
     out.append(f"#define NTE_UNITS_SHORT_STROKE_UNITS {{ {cells} }}")
