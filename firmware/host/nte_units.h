@@ -62,6 +62,9 @@ typedef struct nte_unit_t {
 #define NTE_UNITS_SHORT_STROKE_UNITS { { "m", "metres" }, { "in", "inches" }, { "cm", "centimetres" } }
 #define NTE_UNITS_MIN_STROKE_MM (0x1.0000000000000p+0)
 #define NTE_UNITS_STROKE_MAX_MM (0x1.9000000000000p+7)
+#define NTE_UNITS_SLOW_SPEED_MM_S (0x1.999999999999ap-3)
+#define NTE_UNITS_RAMP_FROM (0x1.999999999999ap-4)
+#define NTE_UNITS_RAMP_TO (0x1.ccccccccccccdp-1)
 #define NTE_UNITS_MAX_REJECTED_SHARE (0x1.0000000000000p-1)
 #define NTE_UNITS_MAX_FORCE_OUT_SHARE (0x1.999999999999ap-5)
 #define NTE_UNITS_SIGN_DEPART_SHARE (0x1.999999999999ap-4)

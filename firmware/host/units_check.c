@@ -266,17 +266,25 @@ static int check_time(const char* path, const nte_trial_t* tr, const nte_units_t
     return 0;
 }
 
-/* csvio._stroke_hint: a stroke under NTE_UNITS_MIN_STROKE_MM read as mm is named in each unit
- * of NTE_UNITS_SHORT_STROKE_UNITS that brings it to MIN_STROKE_MM..STROKE_MAX_MM. */
-static void stroke_hint(const double stroke, const nte_units_t* u, char* out, const size_t cap)
+/* csvio._stroke_hint: a stroke under NTE_UNITS_MIN_STROKE_MM at `speed` (mm/s) read as mm is
+ * named in each unit of NTE_UNITS_SHORT_STROKE_UNITS that makes it MIN_STROKE_MM..STROKE_MAX_MM
+ * or, if none does, that makes its speed SLOW_SPEED_MM_S or more. */
+static void stroke_hint(const double stroke, const double speed, const nte_units_t* u, char* out,
+                        const size_t cap)
 {
     static const char* const units[NTE_UNITS_SHORT_STROKE_COUNT][2] = NTE_UNITS_SHORT_STROKE_UNITS;
     size_t named[NTE_UNITS_SHORT_STROKE_COUNT];
     size_t n = 0U;
-    for (size_t i = 0U; i < NTE_UNITS_SHORT_STROKE_COUNT; i++) {
-        const double s = stroke * depth_unit(units[i][0]);
-        if ((s >= NTE_UNITS_MIN_STROKE_MM) && (s <= NTE_UNITS_STROKE_MAX_MM)) {
-            named[n++] = i;
+    /* a needle's stroke in the unit; if no unit gives one, a shallow one at a needle's speed */
+    for (int by_speed = 0; (by_speed < 2) && (n == 0U); by_speed++) {
+        for (size_t i = 0U; i < NTE_UNITS_SHORT_STROKE_COUNT; i++) {
+            const double k = depth_unit(units[i][0]);
+            const int fits = (by_speed != 0) ? ((speed * k) >= NTE_UNITS_SLOW_SPEED_MM_S)
+                                             : (((stroke * k) >= NTE_UNITS_MIN_STROKE_MM) &&
+                                                ((stroke * k) <= NTE_UNITS_STROKE_MAX_MM));
+            if (fits != 0) {
+                named[n++] = i;
+            }
         }
     }
     if ((strcmp(u->depth, "mm") != 0) || (n == 0U)) {
@@ -293,6 +301,33 @@ static void stroke_hint(const double stroke, const nte_units_t* u, char* out, co
         o += snprintf(out + o, cap - (size_t)o, "%s--depth-unit %s",
                       (i == 0U) ? ": convert with " : " or ", units[named[i]][0]);
     }
+}
+
+/* csvio.ramp_speed: how fast the depth moves (mm/s, as read): RAMP_TO - RAMP_FROM of its
+ * largest distance from the first sample over the time from first reaching RAMP_FROM of it to
+ * first reaching RAMP_TO; HUGE_VAL when one sample does it, 0 when the depth never moves. */
+static double ramp_speed(const nte_trial_t* tr)
+{
+    const double d0 = tr->depth_mm[0];
+    double reach = 0.0;
+    for (size_t k = 0U; k < tr->n; k++) {
+        const double away = fabs(tr->depth_mm[k] - d0);
+        reach = (away > reach) ? away : reach;
+    }
+    if (!(reach > 0.0)) {
+        return 0.0;
+    }
+    size_t k_from = tr->n;
+    size_t k_to = tr->n;
+    for (size_t k = 0U; (k < tr->n) && (k_to == tr->n); k++) {
+        const double away = fabs(tr->depth_mm[k] - d0);
+        k_from = ((k_from == tr->n) && (away >= (NTE_UNITS_RAMP_FROM * reach))) ? k : k_from;
+        k_to = (away >= (NTE_UNITS_RAMP_TO * reach)) ? k : k_to;
+    }
+    if (k_to <= k_from) {
+        return HUGE_VAL;
+    }
+    return ((NTE_UNITS_RAMP_TO - NTE_UNITS_RAMP_FROM) * reach) / (tr->t_s[k_to] - tr->t_s[k_from]);
 }
 
 /* Micrometres read as mm: most depths outside the accepted range, every one inside it and the
@@ -329,13 +364,17 @@ static int check_depth(const char* path, const nte_trial_t* tr, const nte_units_
         neg += (d < 0.0) ? 1U : 0U;
     }
     const double stroke = hi - lo;
-    if ((0.0 < stroke) && (stroke < NTE_UNITS_MIN_STROKE_MM)) {
+    /* a depth that never moves, or a shallow one at a needle's speed, is no unit question */
+    const double speed = ((0.0 < stroke) && (stroke < NTE_UNITS_MIN_STROKE_MM)) ? ramp_speed(tr)
+                                                                                : HUGE_VAL;
+    if (speed < NTE_UNITS_SLOW_SPEED_MM_S) {
         char hint[256];
-        stroke_hint(stroke, u, hint, sizeof hint);
+        stroke_hint(stroke, speed, u, hint, sizeof hint);
         (void)snprintf(err, es,
-                       "%s: column '%s': the depth spans only %.4g mm (less than "
-                       "%g mm): %s",
-                       path, u->columns.depth, stroke, NTE_UNITS_MIN_STROKE_MM, hint);
+                       "%s: column '%s': the depth spans only %.4g mm at %.2g mm/s (less than "
+                       "%g mm, slower than %g mm/s): %s",
+                       path, u->columns.depth, stroke, speed, NTE_UNITS_MIN_STROKE_MM,
+                       NTE_UNITS_SLOW_SPEED_MM_S, hint);
         return -1;
     }
     double far = 0.0;

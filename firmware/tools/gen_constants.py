@@ -302,7 +302,8 @@ def units_header() -> str:
     out.append(f"#define NTE_UNITS_SHORT_STROKE_COUNT {len(csvio.SHORT_STROKE_UNITS)}")
     cells = ", ".join(f'{{ "{u}", "{w}" }}' for u, w in csvio.SHORT_STROKE_UNITS)
     out.append(f"#define NTE_UNITS_SHORT_STROKE_UNITS {{ {cells} }}")
-    for name in ("MIN_STROKE_MM", "STROKE_MAX_MM", "MAX_REJECTED_SHARE", "MAX_FORCE_OUT_SHARE",
+    for name in ("MIN_STROKE_MM", "STROKE_MAX_MM", "SLOW_SPEED_MM_S", "RAMP_FROM", "RAMP_TO",
+                 "MAX_REJECTED_SHARE", "MAX_FORCE_OUT_SHARE",
                  "SIGN_DEPART_SHARE", "DEPTH_OFFSET_MAX_MM"):
         out.append(f"#define NTE_UNITS_{name} ({hex64(getattr(csvio, name))})")
     out.append(f"#define NTE_UNITS_TARE_SAMPLES {int(csvio.TARE_SAMPLES)}U")

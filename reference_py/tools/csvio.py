@@ -307,17 +307,44 @@ TIME_UNIT_WORDS = {"ms": "milliseconds", "us": "microseconds"}
 
 
 #: a stroke under MIN_STROKE_MM read as mm may be in one of these (the unit, its name): each
-#: is named that brings the stroke to MIN_STROKE_MM..STROKE_MAX_MM (a needle's: the values
-#: cannot tell them apart, the rig's manual can)
+#: is named in which the stroke is MIN_STROKE_MM..STROKE_MAX_MM (a needle's: the values cannot
+#: tell them apart, the rig's manual can); if none, each in which a shallow stroke would move
+#: at a needle's speed (SLOW_SPEED_MM_S)
 SHORT_STROKE_UNITS = (("m", "metres"), ("in", "inches"), ("cm", "centimetres"))
 STROKE_MAX_MM = 200.0
+#: ... and only when the depth also moves slower than this (mm/s, :func:`ramp_speed`; half the
+#: slowest preset's 0.4 mm/s): a shallow indentation at a needle's speed (a relaxation test's
+#: 0.5 mm ramp at 1 mm/s) is no unit question, while metres read as mm move at 0.02 mm/s at
+#: most (at 20 mm/s), inches under 0.2 up to 5 mm/s (faster ones are not told from mm)
+SLOW_SPEED_MM_S = 0.2
+#: the ramp speed is measured between these fractions of the depth's reach from its start
+RAMP_FROM, RAMP_TO = 0.1, 0.9
 
 
-def _stroke_hint(stroke: float, units: Units) -> str:
-    """The advice for a depth that spans under MIN_STROKE_MM (C twin: units_check.c
-    stroke_hint)."""
+def ramp_speed(t: Array, d: Array) -> float:
+    """How fast the depth moves (mm/s, as read): RAMP_TO - RAMP_FROM of its largest distance
+    from the first sample over the time from first reaching RAMP_FROM of it to first reaching
+    RAMP_TO (a ramp's speed, whatever holds or noise surround it; inf when one sample does it,
+    0 when the depth never moves).  C twin: units_check.c ramp_speed."""
+    away = np.abs(d - d[0])
+    reach = float(np.max(away))
+    if reach == 0.0:
+        return 0.0
+    k_from = int(np.argmax(away >= RAMP_FROM * reach))
+    k_to = int(np.argmax(away >= RAMP_TO * reach))
+    if k_to <= k_from:
+        return math.inf
+    return (RAMP_TO - RAMP_FROM) * reach / float(t[k_to] - t[k_from])
+
+
+def _stroke_hint(stroke: float, speed: float, units: Units) -> str:
+    """The advice for a depth that spans under MIN_STROKE_MM at ``speed`` (C twin:
+    units_check.c stroke_hint)."""
     named = [(u, word) for u, word in SHORT_STROKE_UNITS
              if MIN_STROKE_MM <= stroke * DEPTH_UNITS[u] <= STROKE_MAX_MM]
+    if not named:
+        named = [(u, word) for u, word in SHORT_STROKE_UNITS
+                 if speed * DEPTH_UNITS[u] >= SLOW_SPEED_MM_S]
     if units.depth != "mm" or not named:
         return "no insertion"
     words = [word for _, word in named]
@@ -365,10 +392,13 @@ def check_units(tr: "Trial", units: Units = Units(), limits: Limits = Limits()) 
                              f"{_time_hint(dt, units.time, limits.dt_max_s)}")
     d = tr.depth_mm
     stroke = float(np.max(d) - np.min(d))
-    if 0.0 < stroke < MIN_STROKE_MM:          # (a depth that never moves is no unit question)
-        hint = _stroke_hint(stroke, units)
-        raise UnitsError(f"{name}: column '{cd}': the depth spans only {stroke:.4g} mm "
-                         f"(less than {MIN_STROKE_MM:g} mm): {hint}")
+    # (a depth that never moves, or a shallow one at a needle's speed, is no unit question)
+    speed = ramp_speed(tr.t_s, d) if 0.0 < stroke < MIN_STROKE_MM else math.inf
+    if speed < SLOW_SPEED_MM_S:
+        hint = _stroke_hint(stroke, speed, units)
+        raise UnitsError(f"{name}: column '{cd}': the depth spans only {stroke:.4g} mm at "
+                         f"{speed:.2g} mm/s (less than {MIN_STROKE_MM:g} mm, slower than "
+                         f"{SLOW_SPEED_MM_S:g} mm/s): {hint}")
     far = float(np.mean((d < limits.depth_min_mm) | (d > limits.depth_max_mm)))
     um = DEPTH_UNITS["um"]
     if (far > MAX_REJECTED_SHARE and units.depth == "mm" and stroke * um >= MIN_STROKE_MM

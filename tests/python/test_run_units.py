@@ -180,6 +180,32 @@ def test_units_read_with_their_flag_alike(records, tmp_path, name):
     assert np.max(np.abs(a - b)) <= 1e-6 * max(1.0, float(np.max(np.abs(b))))
 
 
+def test_a_shallow_indentation_at_a_needles_speed_is_read(tmp_path):
+    """A relaxation test's ramp of 0.6 mm at 1 mm/s, then a 20 s hold (phantom skin, seed 2161,
+    the surface at the start): under the 1 mm stroke, but moving at a needle's speed, so no unit
+    question -- both readers read it (it was refused as "probably metres"), and nte-run-double
+    writes the reference's bytes.  The same record in metres (and at a thousandth of the
+    speed) is still refused alike."""
+    shallow = tmp_path / "shallow.csv"
+    subprocess.run([sys.executable, "-m", "reference_py", "phantom", "skin", "--stroke", "0.6",
+                    "--speed", "1", "--dwell", "20", "--surface", "0", "--seed", "2161",
+                    "--out", str(shallow)], check=True, capture_output=True, cwd=ROOT)
+    py, c = tmp_path / "py.csv", tmp_path / "c.csv"
+    r = reference(shallow, py, "--model", "3", "--precision", "float64")
+    assert r.returncode == 0, r.stderr
+    d = c_run("nte-run-double", shallow, c, "--model", "3")
+    assert d.returncode == 0, d.stderr
+    assert c.read_bytes() == py.read_bytes()
+    header, rows = _load(shallow)
+    _scale(("depth_mm", 1e-3), ("velocity_mm_s", 1e-3))(header, rows)
+    metres = _save(tmp_path / "metres.csv", (header, rows))
+    r = reference(metres, py, "--model", "3")
+    assert r.returncode == 2 and "probably metres: convert with --depth-unit m" in r.stderr
+    for prog in PROGS:
+        c = c_run(prog, metres, tmp_path / "o.csv", "--model", "3")
+        assert c.returncode == 2 and body(c.stderr, prog) == body(r.stderr, "nte-ref"), prog
+
+
 @pytest.mark.parametrize("base", ["ph", "ml"])
 def test_correct_records_are_never_refused(records, tmp_path, base):
     from reference_py.tools.csvio import Limits, Units, read_trial

@@ -48,12 +48,8 @@ CASES = [
      "column 't_s': median time step 20 s (longer than the 0.5 s gap limit): probably "
      "milliseconds: convert with --time-unit ms"),
     ("m", lambda t, d, f: (t, d / 1000.0, f), ["--depth-unit", "m"],
-     "column 'depth_mm': the depth spans only 0.02 mm (less than 1 mm): probably metres: "
-     "convert with --depth-unit m"),
-    # inches: the values cannot tell them from centimetres (both are named)
-    ("in", lambda t, d, f: (t, d / 25.4, f), ["--depth-unit", "in"],
-     "column 'depth_mm': the depth spans only 0.7874 mm (less than 1 mm): probably inches or "
-     "centimetres: convert with --depth-unit in or --depth-unit cm"),
+     "column 'depth_mm': the depth spans only 0.02 mm at 0.01 mm/s (less than 1 mm, slower than "
+     "0.2 mm/s): probably metres: convert with --depth-unit m"),
     ("depth mirrored", lambda t, d, f: (t, -d, f), ["--depth-sign", "-1"],
      "column 'depth_mm': 95 % of the depths are negative (down to -20 mm): probably measured "
      "the other way: convert with --depth-sign -1"),
