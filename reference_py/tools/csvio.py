@@ -369,8 +369,8 @@ def _time_hint(dt: float, unit: str, dt_max: float) -> str:
 
 def check_units(tr: "Trial", units: Units = Units(), limits: Limits = Limits()) -> None:
     """Refuse (UnitsError) a trial whose values, in N, s and mm, are implausible: time steps of
-    seconds (ms or us read as s), a depth stroke under a millimetre (m read as mm), depths
-    mostly outside the accepted range that a thousandth would bring in (um read as mm), depth
+    seconds (ms or us read as s), a depth stroke under a millimetre at under a needle's speed
+    (m, in or cm read as mm: _stroke_hint, ramp_speed), depths mostly outside the accepted range that a thousandth would bring in (um read as mm), depth
     mostly negative (the other way, the force's sign with it when read so it is negative while
     inserting; or an origin before the needle's start when the depth grows where the force
     first departs: --depth-offset), falling where the force first rises or first falls
