@@ -1,5 +1,5 @@
 /* The plausibility check of an insertion's units and signs; mirrors
- * reference_py/tools/csvio.py check_units (its numbers formatted as Python formats them:
+ * reference_py/tools/units_check.py check_units (its numbers formatted as Python formats them:
  * "{x:.4g}" and "{x:g}" are C's %.4g and %g, a share "{100 x:.0f} %" is %.0f). */
 #include "units_check.h"
 
@@ -49,7 +49,7 @@ static double tare_of(const nte_trial_t* tr, double* v)
     return (m > 0U) ? median(v, m) : 0.0;
 }
 
-/* csvio._air_tare: the force in the air, which the force's sign is judged from -- the tare of
+/* units_check._air_tare: the force in the air, which the force's sign is judged from -- the tare of
  * the first forces, unless the record ends more than MIN_STROKE_MM shallower than it starts
  * (the medians of the first and last TARE_SAMPLES depths): a logger started, or a node
  * restarted, with the needle in the tissue, whose last forces' median is the air's.
@@ -87,7 +87,7 @@ static int is_inserting(const nte_trial_t* tr, const size_t k, const double way)
            ((way * tr->depth_mm[k]) > 0.0);
 }
 
-/* csvio._negative_while_inserting: the force less its tare, judged on the samples taken while
+/* units_check._negative_while_inserting: the force less its tare, judged on the samples taken while
  * inserting (a force, the stage moving in, the depth beyond 0) that depart from the tare by
  * more than SIGN_DEPART_SHARE of the largest departure there -- their median negative is the
  * sensor's opposite sign.  `way` -1 reads the depth (and
@@ -124,7 +124,7 @@ static int negative_while_inserting(const nte_trial_t* tr, const double tare, co
     return 1;
 }
 
-/* csvio._sign_advice: the options that turn the depth's and/or the force's sign over from the
+/* units_check._sign_advice: the options that turn the depth's and/or the force's sign over from the
  * reading `u` gives -- a sign not given is added, one given is dropped. */
 static void sign_advice(const nte_units_t* u, const int depth, const int force, char* buf,
                         size_t cap)
@@ -169,7 +169,7 @@ static double depth_unit(const char* name)
     return unit_factor(units, NTE_DEPTH_UNIT_COUNT, name);
 }
 
-/* Why a median time step of dt s, read in `unit`, is too long (csvio._time_hint): the first
+/* Why a median time step of dt s, read in `unit`, is too long (units_check._time_hint): the first
  * smaller unit of the table that makes it fit the gap limit, or too coarse. */
 static void time_hint(double dt, const char* unit, double dt_max, char* buf, size_t cap)
 {
@@ -189,8 +189,8 @@ static void time_hint(double dt, const char* unit, double dt_max, char* buf, siz
     (void)snprintf(buf, cap, "too coarse for the estimator");
 }
 
-/* csvio._first_departures: the first INSERTING_MIN_SAMPLES samples taken while the stage moves
- * (either way) where the force departs from its tare by more than SIGN_DEPART_SHARE of its
+/* units_check._first_departures: the first INSERTING_MIN_SAMPLES samples taken while the stage
+ * moves (either way) where the force departs from its tare by more than SIGN_DEPART_SHARE of its
  * largest departure while moving.  Writes their indices to first[] (room for
  * INSERTING_MIN_SAMPLES) and that departure to *top; returns how many (fewer when too few
  * samples move or depart). */
@@ -218,7 +218,7 @@ static size_t first_departures(const nte_trial_t* tr, const double tare, size_t*
     return seen;
 }
 
-/* csvio._offset_advice: the --depth-offset that makes the needle start at 0 mm (d0: its first
+/* units_check._offset_advice: the --depth-offset that makes the needle start at 0 mm (d0: its first
  * depth as read with the offset given), or, beyond its range, what to do instead; with
  * `force`, the force's sign turned over too. */
 static void offset_advice(const nte_units_t* u, const double d0, const int force, char* buf,
@@ -266,7 +266,7 @@ static int check_time(const char* path, const nte_trial_t* tr, const nte_units_t
     return 0;
 }
 
-/* csvio._stroke_hint: a stroke under NTE_UNITS_MIN_STROKE_MM at `speed` (mm/s) read as mm is
+/* units_check._stroke_hint: a stroke under NTE_UNITS_MIN_STROKE_MM at `speed` (mm/s) read as mm is
  * named in each unit of NTE_UNITS_SHORT_STROKE_UNITS that makes it MIN_STROKE_MM..STROKE_MAX_MM
  * or, if none does, that makes its speed SLOW_SPEED_MM_S or more. */
 static void stroke_hint(const double stroke, const double speed, const nte_units_t* u, char* out,
@@ -303,7 +303,7 @@ static void stroke_hint(const double stroke, const double speed, const nte_units
     }
 }
 
-/* csvio.ramp_speed: how fast the depth moves (mm/s, as read): RAMP_TO - RAMP_FROM of its
+/* units_check.ramp_speed: how fast the depth moves (mm/s, as read): RAMP_TO - RAMP_FROM of its
  * largest distance from the first sample over the time from first reaching RAMP_FROM of it to
  * first reaching RAMP_TO; HUGE_VAL when one sample does it, 0 when the depth never moves. */
 static double ramp_speed(const nte_trial_t* tr)
@@ -444,7 +444,7 @@ static int check_depth(const char* path, const nte_trial_t* tr, const nte_units_
     return 0;
 }
 
-/* Rule 5b (csvio._check_direction): a depth that runs the other way although its values are
+/* Rule 5b (units_check._check_direction): a depth that runs the other way although its values are
  * positive (a stage counting down towards the tissue).  The needle loads the force as it goes
  * in, so where the force first leaves its tare while the stage moves, the depth must grow: of
  * the first INSERTING_MIN_SAMPLES moving samples that depart by more than SIGN_DEPART_SHARE of

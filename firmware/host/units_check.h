@@ -1,8 +1,8 @@
 /*
  * The plausibility check of an insertion in N, s and mm (the C twin of
- * reference_py/tools/csvio.py check_units): a file read in the wrong unit or with the opposite
- * sign is refused with the reference's message, naming the likely unit and the option that
- * converts it.  Host only: uses malloc and double.
+ * reference_py/tools/units_check.py check_units): a file read in the wrong unit or with the
+ * opposite sign is refused with the reference's message, naming the likely unit and the option
+ * that converts it.  Host only: uses malloc and double.
  */
 #ifndef NTE_UNITS_CHECK_H
 #define NTE_UNITS_CHECK_H
@@ -21,7 +21,7 @@ typedef struct nte_limits_t {
 } nte_limits_t;
 
 /**
- * Check the converted trial read from `path` (csvio.check_units, rule by rule and in its
+ * Check the converted trial read from `path` (units_check.check_units, rule by rule and in its
  * order).  Returns 0 when plausible; -1 with the reference's message (no newline) in err
  * when not, or when memory runs out.
  */

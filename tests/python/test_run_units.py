@@ -9,7 +9,7 @@ spoiled file goes through `nte-ref estimate`, nte-run-double and nte-run: exit s
 line on stderr, the same message after the program's "PROG: error: " prefix, no output file.
 With the option that converts it (--no-units-check where none does) the reference
 (float64) and nte-run-double write the same bytes, and nte-run runs too.  The correct records
-are never refused.  The rules written inline in csvio.check_units, which
+are never refused.  The rules written inline in units_check.check_units, which
 firmware/tools/gen_constants.py copies into firmware/host/nte_units.h, are probed on the
 reference at each threshold and on both sides of it through the C programs.
 
@@ -264,7 +264,7 @@ def test_help_names_the_unit_flags():
     assert "[--time-unit s|ms|us]" in source and "[--no-units-check]" in source
 
 
-# -- the rules csvio.check_units writes inline, probed at their thresholds --------------------
+# -- the rules units_check.check_units writes inline, probed at their thresholds --------------------
 
 def _inline() -> dict[str, float]:
     sys.path.insert(0, str(ROOT / "firmware" / "tools"))
@@ -547,7 +547,7 @@ def test_a_record_that_starts_in_the_tissue_is_judged_from_the_air(tmp_path, see
     three programs; with the sensor inverted it is still refused, alike, with the air's tare."""
     from config_loop_figures import write_record
     from discrepancy_measured_like import make_trial
-    from reference_py.tools.csvio import TARE_SAMPLES
+    from reference_py.tools.units_check import TARE_SAMPLES
     tr = make_trial(seed)[0]
     k = int(0.3 * len(tr.t_s))
     t, x, f = tr.t_s[k:], tr.depth_mm[k:], tr.force_n[k:]

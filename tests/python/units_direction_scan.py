@@ -1,4 +1,4 @@
-"""The reader's direction and sign rules (csvio.check_units) over the repository's generators:
+"""The reader's direction and sign rules (units_check.check_units) over the repository's generators:
 
     .venv/bin/python tests/python/units_direction_scan.py [--held]
 
