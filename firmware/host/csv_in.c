@@ -243,6 +243,24 @@ static int is_number(const char* s, const size_t n, const int decimal_comma)
     return i == n;
 }
 
+/* A-Z lowered, every other character as it is (read_options.ascii_lower; re.IGNORECASE with
+ * re.ASCII). */
+static int ascii_lower(const int c) { return ((c >= 'A') && (c <= 'Z')) ? (c + ('a' - 'A')) : c; }
+
+/* Whether the n characters at s are one of `count` words, A-Z lowered. */
+static int is_one_of(const char* s, const size_t n, const char* const* words, const size_t count)
+{
+    int found = 0;
+    for (size_t w = 0U; (w < count) && (found == 0); w++) {
+        size_t i = 0U;
+        while ((i < n) && (words[w][i] != '\0') && (ascii_lower(s[i]) == words[w][i])) {
+            i++;
+        }
+        found = (i == n) && (words[w][i] == '\0');
+    }
+    return found;
+}
+
 /* csvio._NOT_FINITE: [+-]?(nan|inf|infinity), case aside. */
 static int is_not_finite(const char* s, size_t n)
 {
@@ -251,33 +269,14 @@ static int is_not_finite(const char* s, size_t n)
         s++;
         n--;
     }
-    for (size_t w = 0U; w < 3U; w++) {
-        size_t i = 0U;
-        while ((i < n) && (words[w][i] != '\0') && ((s[i] | 0x20) == words[w][i])) {
-            i++;
-        }
-        if ((i == n) && (words[w][i] == '\0')) {
-            return 1;
-        }
-    }
-    return 0;
+    return is_one_of(s, n, words, 3U);
 }
 
-/* csvio.is_missing: a stripped cell of n characters is empty or one of the missing words,
- * A-Z lowered (as csvio.ascii_lower). */
+/* csvio.is_missing: a stripped cell of n characters is empty or one of the missing words. */
 static int is_missing(const char* s, const size_t n)
 {
     static const char* const words[NTE_CSV_MISSING_WORD_COUNT] = NTE_CSV_MISSING_WORDS;
-    int found = (n == 0U);
-    for (size_t w = 0U; (w < NTE_CSV_MISSING_WORD_COUNT) && (found == 0); w++) {
-        size_t i = 0U;
-        while ((i < n) && (words[w][i] != '\0') &&
-               ((((s[i] >= 'A') && (s[i] <= 'Z')) ? (s[i] + ('a' - 'A')) : s[i]) == words[w][i])) {
-            i++;
-        }
-        found = (i == n) && (words[w][i] == '\0');
-    }
-    return found;
+    return (n == 0U) || is_one_of(s, n, words, NTE_CSV_MISSING_WORD_COUNT);
 }
 
 static int push(nte_trial_t* tr, size_t* cap, const double t, const double l, const double v,
@@ -324,9 +323,7 @@ void nte_columns_standard(nte_columns_t* c)
 static int same_ignoring_case(const char* a, const char* b)
 {
     while ((*a != '\0') && (*b != '\0')) {
-        const int x = ((*a >= 'A') && (*a <= 'Z')) ? (*a + ('a' - 'A')) : *a;
-        const int y = ((*b >= 'A') && (*b <= 'Z')) ? (*b + ('a' - 'A')) : *b;
-        if (x != y) {
+        if (ascii_lower(*a) != ascii_lower(*b)) {
             return 0;
         }
         a++;
