@@ -257,6 +257,11 @@ def open_bus(interface: str, channel: str, bitrate: int,
                          f"{exc}".splitlines()[0]) from None
 
 
+def _note(text: str) -> None:
+    """What the reader left out of a scenario, on stderr as the estimating tools write it."""
+    print(text, file=sys.stderr)
+
+
 def cmd_replay(a: argparse.Namespace) -> int:
     if a.speed <= 0 and a.player == "canplayer":
         raise ValueError("--player canplayer needs --speed > 0")
@@ -265,7 +270,7 @@ def cmd_replay(a: argparse.Namespace) -> int:
     if a.file.endswith((".log", ".asc", ".blf", ".trc")):
         frames = log_frames(a.file)
     else:
-        frames = scenario_frames(a.file, db, a.depth_rate, clipped, units_from(a))
+        frames = scenario_frames(a.file, db, a.depth_rate, clipped, units_from(a), _note)
     frames = sensor_failures(frames, db, a.force_source, a.sensor_fault, a.sensor_lost)
     for sig, n in sorted(clipped.items()):
         lo, hi = db.signal_range("Force" if sig == "Force" else "Depth", sig)
@@ -427,7 +432,8 @@ def cmd_check(a: argparse.Namespace) -> int:
 def cmd_send(a: argparse.Namespace) -> int:
     from .replay import replay, schedule
     db = NteDatabase(base_id=a.base_id)
-    frames = schedule(read_scenario(a.file, units_from(a)), db, force_every=a.force_every)
+    frames = schedule(read_scenario(a.file, units_from(a), _note), db,
+                      force_every=a.force_every)
     with Outputs() as outs:
         rec_csv = outs.add(a.record_csv, "--record-csv") if a.record_csv else None
         rec_log = outs.add(a.record_log, "--record-log") if a.record_log else None

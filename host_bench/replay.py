@@ -34,7 +34,7 @@ import numpy as np
 
 from reference_py.bus.dbc import TICK_S, TICK_WRAP, NteDatabase, seconds_to_ticks
 from reference_py.config import EstimatorConfig
-from reference_py.tools.csvio import Units, read_trial
+from reference_py.tools.csvio import Units, left_out_note, read_trial
 
 #: the envelope's depth (tests/python/test_envelope.py: the Depth signal's range is the same)
 DEPTH_MAX_MM = EstimatorConfig.depth_max_mm
@@ -49,11 +49,17 @@ class ScenarioRow:
     force_n: float | None
 
 
-def read_scenario(path: str | Path, units: Units | None = None) -> list[ScenarioRow]:
-    """Read a scenario CSV with the tools' one reader (reference_py.tools.csvio: strictly
-    increasing t_s, finite values, velocity_mm_s optional, force_n empty where no force sample
-    was taken), converted and checked by ``units`` when given (csvio.Units)."""
+def read_scenario(path: str | Path, units: Units | None = None,
+                  note: Callable[[str], None] | None = None) -> list[ScenarioRow]:
+    """Read a scenario CSV with the tools' one reader (reference_py.tools.csvio: increasing
+    t_s, finite values, velocity_mm_s optional, force_n empty where no force sample was
+    taken), converted and checked by ``units`` when given (csvio.Units).  The rows the reader
+    left out (a missing depth or velocity, a repeated time) are told to ``note`` in the
+    estimating tools' words (csvio.left_out_note), so the bench says what it does not send."""
     trial = read_trial(path, sparse=("force_n",), units=units)
+    said = left_out_note(trial)
+    if said is not None and note is not None:
+        note(said)
     rows: list[ScenarioRow] = []
     for t, d, v, fo in zip(trial.t_s, trial.depth_mm, trial.velocity_mm_s, trial.force_n):
         d = float(d)
@@ -125,14 +131,14 @@ def schedule(rows: Sequence[ScenarioRow], db: NteDatabase, force_every: int = 1)
 
 
 def scenario_frames(csv_path: str, db: NteDatabase, depth_rate_hz: float,
-                    clipped: dict[str, int] | None = None,
-                    units: Units | None = None) -> list[ScheduledFrame]:
+                    clipped: dict[str, int] | None = None, units: Units | None = None,
+                    note: Callable[[str], None] | None = None) -> list[ScheduledFrame]:
     """The scenario CSV resampled (nte-bench replay): depth at depth_rate_hz (interpolated),
     force at the CSV rows that have one; at equal times depth first.  Times are on the 100 us
     tick grid.  A value outside its signal's DBC range is clipped to the range and counted in
     ``clipped`` (by signal name) when a dict is given; ``units`` converts and checks the CSV
-    (csvio)."""
-    rows = read_scenario(csv_path, units)
+    (csvio) and tells ``note`` what the reader left out (read_scenario)."""
+    rows = read_scenario(csv_path, units, note)
     t = np.array([r.t_s for r in rows])
     d = np.array([r.depth_mm for r in rows])
     v = np.array([r.velocity_mm_s for r in rows])

@@ -41,7 +41,8 @@ static int refuse(const char* text, const char* why, char* msg, size_t cap)
     return -1;
 }
 
-int nte_column_map_parse(const char* text, nte_columns_t* c, char* msg, size_t cap)
+int nte_column_map_parse(const char* text, const int force_optional, nte_columns_t* c, char* msg,
+                         size_t cap)
 {
     static nte_nv_t items[NTE_NV_MAX];
     const char* given[NTE_COLUMN_KEY_COUNT] = {NULL};
@@ -90,6 +91,10 @@ int nte_column_map_parse(const char* text, nte_columns_t* c, char* msg, size_t c
             }
         }
         given[k] = it->value;
+    }
+    const int force = key_index("force");
+    if ((force_optional != 0) && (given[force] == NULL)) {
+        given[force] = keys[force].standard; /* --predict-only reads no force */
     }
     for (size_t r = 0U; r < NTE_COLUMN_KEY_REQUIRED_COUNT; r++) {
         if (given[key_index(required[r])] == NULL) {

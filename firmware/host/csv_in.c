@@ -561,7 +561,8 @@ static int is_skip_column(const table_t* tb, const size_t c)
 
 /* A sample: as many cells as the header, each a finite decimal number, the time increasing;
  * or a dropout: a depth, force or velocity missing, the row left out (its line counted), its
- * other cells numbers or missing, its time not compared.  A decimal comma is made a point in
+ * other cells numbers or missing, its time not compared; or a repeat: the time equal to the
+ * previous sample's, the row left out (its line counted).  A decimal comma is made a point in
  * place (the cell is read once). */
 static int take_row(table_t* tb, record_t* r, const size_t lineno)
 {
@@ -610,6 +611,16 @@ static int take_row(table_t* tb, record_t* r, const size_t lineno)
         return 0;
     }
     const double t = tb->row[tb->idx[0]];
+    if ((t >= tb->prev_t) && (t <= tb->prev_t)) {
+        /* a repeat (the same time, exactly): the library would reject it (not later than the
+         * last sample) */
+        nte_trial_t* tr = tb->tr;
+        if (tr->repeated < NTE_CSV_LEFT_OUT_LISTED) {
+            tr->repeated_line[tr->repeated] = lineno;
+        }
+        tr->repeated++;
+        return 0;
+    }
     if (!(t > tb->prev_t)) {
         char a[40];
         char b[40];
@@ -787,34 +798,51 @@ int nte_trial_read_columns(const char* path, const nte_columns_t* cols, nte_tria
     return 0;
 }
 
+/* One line of the note: "PATH: K of TOTAL rows left out, WHY: lines A, B and N more)" at
+ * out + o; returns the new end (cap when the note is cut). */
+static size_t left_out_line(char* out, const size_t cap, size_t o, const char* path,
+                            const size_t* lines, const size_t k, const size_t total,
+                            const char* why)
+{
+    int w = snprintf(out + o, cap - o, "%s: %zu of %zu rows left out, %s: line%s", path, k, total,
+                     why, (k > 1U) ? "s" : "");
+    for (size_t i = 0U;
+         (i < k) && (i < NTE_CSV_LEFT_OUT_LISTED) && (w >= 0) && ((size_t)w < cap - o); i++) {
+        o += (size_t)w;
+        w = snprintf(out + o, cap - o, "%s%zu", (i > 0U) ? ", " : " ", lines[i]);
+    }
+    if ((w >= 0) && ((size_t)w < cap - o)) {
+        o += (size_t)w;
+        w = (k > NTE_CSV_LEFT_OUT_LISTED)
+                ? snprintf(out + o, cap - o, " and %zu more)", k - NTE_CSV_LEFT_OUT_LISTED)
+                : snprintf(out + o, cap - o, ")");
+    }
+    return ((w >= 0) && ((size_t)w < cap - o)) ? o + (size_t)w : cap;
+}
+
 void nte_trial_left_out_note(const char* path, const nte_trial_t* tr, const nte_columns_t* cols,
                              char* out, const size_t cap)
 {
     out[0] = '\0';
-    const size_t k = tr->left_out;
-    if (k == 0U) {
-        return;
+    const size_t total = tr->n + tr->left_out + tr->repeated;
+    size_t o = 0U;
+    if (tr->left_out > 0U) {
+        /* the columns that leave a row out (csvio.Trial.left_out_columns) */
+        const int force = (cols->force_ignored == 0);
+        const int velocity = (tr->velocity_given != 0);
+        char why[4U * NTE_COLUMN_NAME_MAX + 64U];
+        (void)snprintf(why, sizeof why, "a value missing in column '%s%s%s%s%s' (a dropout",
+                       cols->depth, force ? "' or '" : "", force ? cols->force : "",
+                       velocity ? "' or '" : "", velocity ? cols->velocity : "");
+        o = left_out_line(out, cap, o, path, tr->left_out_line, tr->left_out, total, why);
     }
-    /* the columns that leave a row out (csvio.Trial.left_out_columns) */
-    const int force = (cols->force_ignored == 0);
-    const int velocity = (tr->velocity_given != 0);
-    int o = snprintf(out, cap,
-                     "%s: %zu of %zu rows left out, a value missing in column '%s%s%s%s%s' "
-                     "(a dropout: line%s",
-                     path, k, k + tr->n, cols->depth, force ? "' or '" : "",
-                     force ? cols->force : "", velocity ? "' or '" : "",
-                     velocity ? cols->velocity : "", (k > 1U) ? "s" : "");
-    for (size_t i = 0U; (i < k) && (i < NTE_CSV_LEFT_OUT_LISTED) && (o >= 0) && ((size_t)o < cap);
-         i++) {
-        o += snprintf(out + o, cap - (size_t)o, "%s%zu", (i > 0U) ? ", " : " ",
-                      tr->left_out_line[i]);
-    }
-    if ((o >= 0) && ((size_t)o < cap)) {
-        if (k > NTE_CSV_LEFT_OUT_LISTED) {
-            (void)snprintf(out + o, cap - (size_t)o, " and %zu more)", k - NTE_CSV_LEFT_OUT_LISTED);
-        } else {
-            (void)snprintf(out + o, cap - (size_t)o, ")");
+    if ((tr->repeated > 0U) && (o + 1U < cap)) {
+        if (o > 0U) {
+            out[o++] = '\n';
+            out[o] = '\0';
         }
+        (void)left_out_line(out, cap, o, path, tr->repeated_line, tr->repeated, total,
+                            "the time equal to the previous sample's (a repeat");
     }
 }
 

@@ -4,8 +4,9 @@
  * excel dialect: UTF-8 with or without a BOM, '#' comments, blank lines and rows of empty cells
  * skipped, quoted cells, "" inside quotes, a quoted cell across lines; ',' ';' or a tab
  * between cells as the header's first line shows, a decimal comma where it is not ','; a row
- * whose depth, force or given velocity is missing left out; the same refusals word for word).  The rules' constants are generated from the Python reader
- * into nte_units.h.  Host only: uses malloc and double.
+ * whose depth, force or given velocity is missing left out, and one whose time repeats the
+ * previous sample's; the same refusals word for word).  The rules' constants are generated
+ * from the Python reader into nte_units.h.  Host only: uses malloc and double.
  */
 #ifndef NTE_CSV_IN_H
 #define NTE_CSV_IN_H
@@ -28,6 +29,11 @@ typedef struct nte_trial_t {
      *  nan or NA; csvio.read_table skip_missing): how many, and the first lines of them. */
     size_t left_out;
     size_t left_out_line[NTE_CSV_LEFT_OUT_LISTED];
+    /** Rows left out because their time equals the previous sample's (a repeat; the library
+     *  rejects a sample not later than the last; csvio.read_table repeat_left_out): how many,
+     *  and the first lines of them.  A time that goes back is refused. */
+    size_t repeated;
+    size_t repeated_line[NTE_CSV_LEFT_OUT_LISTED];
 } nte_trial_t;
 
 /** Which of the file's columns hold the time, depth, force and velocity (csvio.ColumnMap;
@@ -73,7 +79,8 @@ int nte_trial_read_columns(const char* path, const nte_columns_t* columns, nte_t
                            char* err, size_t err_size);
 void nte_trial_free(nte_trial_t* trial);
 /** The note a host program writes to stderr when rows were left out (csvio.left_out_note,
- *  word for word; "" when none was): the file, how many rows, which columns, the first lines. */
+ *  word for word; "" when none was): a line for the dropouts (the file, how many rows, which
+ *  columns, the first lines) and one for the repeated times, joined by a newline. */
 void nte_trial_left_out_note(const char* path, const nte_trial_t* trial,
                              const nte_columns_t* columns, char* out, size_t out_size);
 /** Convert the columns from the file's units and signs to N, s, mm (csvio.read_trial with

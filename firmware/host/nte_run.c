@@ -991,7 +991,7 @@ int main(int argc, char** argv)
         nte_config_default(&cfg, a.model, sch);
     }
     if ((a.columns != NULL) &&
-        (nte_column_map_parse(a.columns, &a.units.columns, msg, sizeof msg) != 0)) {
+        (nte_column_map_parse(a.columns, a.predict_only, &a.units.columns, msg, sizeof msg) != 0)) {
         return bad(msg);
     }
     /* --predict-only reads no force: a file of depths alone is an input */

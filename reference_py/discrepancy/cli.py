@@ -84,8 +84,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"nte-discrepancy: {exc}", file=sys.stderr)
         return 2
     for trial in trials:
-        if trial.note is not None:
-            print(f"nte-discrepancy: {trial.note}", file=sys.stderr)
+        for line in (trial.note or "").splitlines():
+            print(f"nte-discrepancy: {line}", file=sys.stderr)
     figs = not args.no_figures
     if args.each:
         stems = [Path(f).stem for f in args.files]

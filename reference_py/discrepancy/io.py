@@ -58,9 +58,10 @@ def read_csv(path: Path, units: Units | None = None) -> Trial:
     """CSV with a header naming t_s, depth_mm, force_n (any order) and optionally velocity_mm_s,
     read by the tools' one reader (reference_py.tools.csvio: its rules and its messages).
 
-    Lines starting with '#' are comments.  Times must increase strictly (irregular spacing and
-    gaps are fine); every value must be a finite number, or missing in the depth or force (a
-    dropout: the row is left out, said by the trial's ``note``).
+    Lines starting with '#' are comments.  Times must increase (irregular spacing and gaps are
+    fine; a row whose time repeats the previous sample's is left out); every value must be a
+    finite number, or missing in the depth or force (a dropout: the row is left out).  What was
+    left out is said by the trial's ``note``.
     """
     try:
         tr = read_csv_trial(path, units=units)

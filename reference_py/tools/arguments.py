@@ -108,8 +108,10 @@ def add_unit_arguments(p: argparse.ArgumentParser) -> None:
 
 def units_from(a: argparse.Namespace) -> "Units":
     """The reader's Units from the flags of add_unit_arguments; a malformed --columns is a
-    CsvError (``--columns MAP: reason``)."""
+    CsvError (``--columns MAP: reason``).  Under --predict-only the map may leave out the
+    force (none is read)."""
     from .csvio import ColumnMap, Units
-    columns = ColumnMap() if a.columns is None else ColumnMap.parse(a.columns)
+    columns = ColumnMap() if a.columns is None else ColumnMap.parse(
+        a.columns, force_optional=bool(getattr(a, "predict_only", False)))
     return Units(a.force_unit, a.time_unit, a.depth_unit, a.force_sign, a.depth_sign,
                  not a.no_units_check, columns, a.depth_offset)

@@ -14,7 +14,11 @@ Reading (:func:`read_table`, :func:`read_trial`)
     is absent it is computed by central differences of depth); other columns are kept in
     ``Trial.columns`` and otherwise ignored.  Every cell must be a decimal number (``1``,
     ``-0.5``, ``2.5e-3``; no hex, no ``_``), finite (``inf`` and overflowing values are
-    refused, and ``nan`` but where a value may be missing), and ``t_s`` must increase strictly.
+    refused, and ``nan`` but where a value may be missing), and ``t_s`` must increase -- but
+    in an insertion (:func:`read_trial`) a row whose time *equals* the previous sample's (a
+    logger that wrote a sample twice, or a time printed too coarsely for the rate) is left
+    out, as the library rejects a sample not later than the last; it is listed in
+    ``Trial.repeated`` and said by :func:`left_out_note`.  A time that goes back is refused.
     A *missing* value -- an empty cell, ``nan`` (as MATLAB and LabVIEW write a dropout), ``NA``
     (R) or ``n/a``, case aside: :func:`is_missing` -- is allowed in two kinds of column.  One
     named in ``sparse`` keeps its row (no sample of that quantity on that line, e.g. a 200 Hz
@@ -95,6 +99,7 @@ class Table:
     lines: list[int]                # physical line number of every sample
     left_out: list[int] = field(default_factory=list)  # lines left out (``skip_missing``)
     left_out_columns: list[str] = field(default_factory=list)  # ``skip_missing`` in the header
+    repeated: list[int] = field(default_factory=list)  # lines of a repeated time
 
 
 @dataclass
@@ -109,6 +114,7 @@ class Trial:
     lines: list[int] = field(default_factory=list)
     left_out: list[int] = field(default_factory=list)   # lines without a depth or force value
     left_out_columns: list[str] = field(default_factory=list)  # the columns that leave a row out
+    repeated: list[int] = field(default_factory=list)   # lines whose time equals the previous
 
     @property
     def name(self) -> str:
@@ -147,9 +153,12 @@ def parse_cell(name: str, lineno: int, col: str, text: str, decimal_comma: bool 
 def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
                sparse: Sequence[str] = (), increasing: str | None = "t_s",
                nan_ok: Sequence[str] = (), skip_missing: Sequence[str] = (),
-               missing_hint: Callable[[list[str]], str] | None = None) -> Table:
+               missing_hint: Callable[[list[str]], str] | None = None,
+               repeat_left_out: bool = False) -> Table:
     """Read a numeric CSV by the rules of this module (see the module's docstring).
-    ``missing_hint(header)``: advice appended to the refusal of a missing column ("" none)."""
+    ``missing_hint(header)``: advice appended to the refusal of a missing column ("" none).
+    ``repeat_left_out``: a row whose ``increasing`` value equals the previous sample's is left
+    out (listed in ``Table.repeated``) instead of refused."""
     name = str(path)
     try:
         fh = open(path, "rb")
@@ -193,6 +202,7 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
     skip_idx: set[int] = set()
     nan_idx: set[int] = set()
     left_out: list[int] = []
+    repeated: list[int] = []
     delimiter = ","
     try:
         with fh:
@@ -231,6 +241,9 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
                     continue
                 if t_index >= 0:
                     t = row[t_index]
+                    if repeat_left_out and t == prev_t:
+                        repeated.append(lineno)     # the library would reject it: not later
+                        continue
                     if not t > prev_t:
                         raise CsvError(f"{name}:{lineno}: column '{increasing}': time {t!r} "
                                        f"does not increase (previous {prev_t!r})")
@@ -252,7 +265,7 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
         raise CsvError(f"{name}:{header_line + 1}: no samples after the header")
     data = np.asarray(rows, dtype=np.float64)
     return Table(name, header, {c: data[:, i] for i, c in enumerate(header)}, lines, left_out,
-                 skip_named)
+                 skip_named, repeated)
 
 
 def read_trial(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
@@ -281,7 +294,8 @@ def read_trial(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
     data_named = (cmap.depth, cmap.force) + ((cmap.velocity,) if cmap.velocity else ())
     table = read_table(path, named, sparse_named, increasing=cmap.t,
                        skip_missing=tuple(c for c in data_named if c not in sparse_named),
-                       missing_hint=None if cmap.text else unit_suffix_hint)
+                       missing_hint=None if cmap.text else unit_suffix_hint,
+                       repeat_left_out=True)
     cols = table.columns
     t, depth = cols[cmap.t], cols[cmap.depth]
     force = cols[cmap.force] if cmap.force in cols else np.full(len(t), math.nan)
@@ -308,24 +322,33 @@ def read_trial(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
     if vel is None:
         vel = central_difference(t, depth)
     tr = Trial(table.path, t, depth, force, vel, given, cols, table.lines, table.left_out,
-               table.left_out_columns)
+               table.left_out_columns, table.repeated)
     if units is not None and units.check:
         check_units(tr, units, limits)
     return tr
 
 
 def left_out_note(tr: Trial) -> str | None:
-    """The note an estimating tool writes (to stderr) when rows of ``tr`` were left out for a
-    missing depth or force value (None when none was): how many, the first LEFT_OUT_LISTED
-    lines.  C twin: csv_in.c nte_trial_left_out_note, word for word."""
-    k = len(tr.left_out)
-    if k == 0:
-        return None
+    """The note an estimating tool writes (to stderr) when rows of ``tr`` were left out (None
+    when none was): one line for the rows without a depth or force value (a dropout), one for
+    the rows whose time equals the previous sample's (a repeat); each says how many and the
+    first LEFT_OUT_LISTED lines.  C twin: csv_in.c nte_trial_left_out_note, word for word."""
+    total = len(tr.t_s) + len(tr.left_out) + len(tr.repeated)
     named = "' or '".join(tr.left_out_columns)
-    listed = ", ".join(str(line) for line in tr.left_out[:LEFT_OUT_LISTED])
+    said = [_left_out_line(tr.path, rows, total, why)
+            for rows, why in ((tr.left_out, f"a value missing in column '{named}' (a dropout"),
+                              (tr.repeated, "the time equal to the previous sample's (a repeat"))
+            if rows]
+    return "\n".join(said) if said else None
+
+
+def _left_out_line(path: str, rows: list[int], total: int, why: str) -> str:
+    """One line of :func:`left_out_note`: ``why`` opens the parenthesis the lines close."""
+    k = len(rows)
+    listed = ", ".join(str(line) for line in rows[:LEFT_OUT_LISTED])
     more = f" and {k - LEFT_OUT_LISTED} more" if k > LEFT_OUT_LISTED else ""
-    return (f"{tr.path}: {k} of {k + len(tr.t_s)} rows left out, a value missing in column "
-            f"'{named}' (a dropout: line{'s' if k > 1 else ''} {listed}{more})")
+    return (f"{path}: {k} of {total} rows left out, {why}: line{'s' if k > 1 else ''} "
+            f"{listed}{more})")
 
 
 def central_difference(t: Array, x: Array) -> Array:

@@ -112,10 +112,11 @@ class ColumnMap:
     text: str = ""              # the --columns value it was parsed from ("": the standard names)
 
     @classmethod
-    def parse(cls, text: str) -> "ColumnMap":
+    def parse(cls, text: str, force_optional: bool = False) -> "ColumnMap":
         """``t=NAME,depth=NAME,force=NAME[,velocity=NAME]``, or CsvError naming what is wrong:
         an item that is not KEY=NAME, an unknown or repeated key, a key missing, one column
-        given two meanings."""
+        given two meanings.  ``force_optional`` (--predict-only, which reads no force): the
+        map may leave out ``force=`` (the standard name then stands, absent or ignored)."""
         def refuse(why: str) -> CsvError:
             return CsvError(f"--columns {text}: {why}")
 
@@ -136,6 +137,8 @@ class ColumnMap:
             if twin is not None:
                 raise refuse(f"column {name!r} given for both {twin!r} and {key!r}")
             given[key] = name
+        if force_optional:
+            given.setdefault("force", COLUMN_KEYS["force"])
         missing = [k for k in COLUMN_KEYS_REQUIRED if k not in given]
         if missing:
             raise refuse(f"key {missing[0]!r} missing ({', '.join(COLUMN_KEYS_REQUIRED)} are "

@@ -54,7 +54,7 @@ def write_scenario(path: Path) -> list[tuple[float, float, float, float | None]]
 
 def test_scenario_reader_rejects_bad_input(tmp_path: Path) -> None:
     p = tmp_path / "s.csv"
-    p.write_text("t_s,depth_mm,velocity_mm_s,force_n\n0,0,0,\n0,1,0,0.1\n")
+    p.write_text("t_s,depth_mm,velocity_mm_s,force_n\n0,0,0,\n-1,1,0,0.1\n")
     with pytest.raises(ValueError, match="increase"):
         read_scenario(p)
     p.write_text("t_s,depth_mm,velocity_mm_s\n0,0,0\n")
@@ -67,8 +67,11 @@ def test_scenario_reader_rejects_bad_input(tmp_path: Path) -> None:
     # leaves the row out (no Depth frame)
     p.write_text("t_s,depth_mm,velocity_mm_s,force_n\n0,0,0,NaN\n0.001,0,0,NA\n"
                  "0.002,,0,0.5\n0.003,0,0,0.25\n")
-    rows = read_scenario(p)
+    said: list[str] = []
+    rows = read_scenario(p, note=said.append)
     assert [r.force_n for r in rows] == [None, None, 0.25] and rows[2].t_s == 0.003
+    assert said == [f"{p}: 1 of 4 rows left out, a value missing in column 'depth_mm' or "
+                    f"'velocity_mm_s' (a dropout: line 4)"]
     p.write_text("t_s,depth_mm,velocity_mm_s,force_n\n0,-1e-9,0,\n0.001,600,0,\n")
     rows = read_scenario(p)
     assert rows[0].depth_mm == 0.0 and rows[0].force_n is None   # tiny negative clamped
@@ -277,9 +280,9 @@ def test_bench_bad_files(tmp_path, capsys):
     assert rc == 2 and line == f"nte-bench: error: {tmp_path}/absent.log: cannot read: " \
                                f"No such file or directory"
     bad = tmp_path / "bad.csv"
-    bad.write_text("t_s,depth_mm,force_n\n0,0,0\n0,0,0\n")
+    bad.write_text("t_s,depth_mm,force_n\n0,0,0\n-0.5,0,0\n")
     rc, line = _bench(["replay", bad, "--out", out], capsys)
-    assert rc == 2 and line.endswith("bad.csv:3: column 't_s': time 0.0 does not increase "
+    assert rc == 2 and line.endswith("bad.csv:3: column 't_s': time -0.5 does not increase "
                                      "(previous 0.0)")
     rc, line = _bench(["replay", _small(tmp_path), "--out", tmp_path / "no" / "dir"], capsys)
     assert rc == 2 and line == (f"nte-bench: error: --out {tmp_path}/no/dir: directory "
@@ -340,6 +343,25 @@ def test_out_of_range_values_are_clipped_and_counted(tmp_path):
     forces = [rx.decode(m.arbitration_id, m.data)[1]["Force"] for _, m in frames
               if m.arbitration_id == db.frame_id("Force")]
     assert forces == pytest.approx([0.0, FORCE_MAX, -FORCE_MAX, 1.0], abs=1e-4)
+
+
+def test_bench_says_the_rows_it_leaves_out(tmp_path, capsys):
+    """nte-bench tells, in the estimating tools' words and before it opens a bus, which rows
+    of the scenario it does not send: a depth's dropout, a repeated time."""
+    from host_bench.cli import main
+    p = tmp_path / "s.csv"
+    p.write_text("t_s,depth_mm,force_n\n0,0,0\n0.01,,0.1\n0.02,0.2,0.2\n0.02,0.2,0.2\n"
+                 "0.03,0.3,\n")
+    for cmd in ("send", "replay"):
+        extra = ["--out", str(tmp_path / "out")] if cmd == "replay" else []
+        rc = main([cmd, str(p), "--interface", "socketcan", "--channel", "nte-no-such0"] + extra)
+        err = capsys.readouterr().err.splitlines()
+        assert rc == 2 and err[:2] == [
+            f"{p}: 1 of 5 rows left out, a value missing in column 'depth_mm' (a dropout: "
+            f"line 3)",
+            f"{p}: 1 of 5 rows left out, the time equal to the previous sample's (a repeat: "
+            f"line 5)"], (cmd, err)
+        assert len(err) == 3 and err[2].startswith("nte-bench: error: "), err
 
 
 def test_help_lists_every_flag_with_its_default(capsys):

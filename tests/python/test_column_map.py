@@ -190,8 +190,8 @@ def test_a_unit_in_a_column_name_is_refused_with_the_options_that_read_it(
 
 def test_the_mapped_time_must_increase(tmp_path, capsys):
     rig = tmp_path / "rig.csv"
-    rig.write_text("time_us,pz,fz\n0,0,0\n10000,0.1,0\n10000,0.2,0\n")
-    with pytest.raises(CsvError, match=r"rig.csv:4: column 'time_us': time 10000.0 does not "
+    rig.write_text("time_us,pz,fz\n0,0,0\n10000,0.1,0\n9999,0.2,0\n")
+    with pytest.raises(CsvError, match=r"rig.csv:4: column 'time_us': time 9999.0 does not "
                                        r"increase \(previous 10000.0\)"):
         read_trial(rig, units=Units(time="us", columns=ColumnMap.parse(RIG_MAP),
                                     check=False))

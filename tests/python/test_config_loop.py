@@ -354,6 +354,21 @@ def test_predict_only_on_depths_alone(loop):
     # without --predict-only the record of depths alone is refused (the force is required)
     r = ref(str(alone), "--config", str(exported), "--out", str(d / "no.csv"))
     assert r.returncode == 2 and "column 'force_n': missing from the header" in r.stderr
+    # a robot's own names: --columns needs no force= under --predict-only (it reads none)
+    named = d / "named.csv"
+    named.write_text(alone.read_text().replace("t_s,depth_mm,velocity_mm_s",
+                                               "time,z_mm,vz", 1))
+    cmap = ["--columns", "t=time,depth=z_mm,velocity=vz"]
+    r_out, c_out = d / "r_named.csv", d / "c_named.csv"
+    r = ref(str(named), "--config", str(exported), "--predict-only", *cmap, "--out", str(r_out))
+    c = crun(str(named), "--config", str(exported), "--predict-only", *cmap, "--out", str(c_out))
+    assert r.returncode == 0 and c.returncode == 0, (r.stderr, c.stderr)
+    assert r_out.read_bytes() == c_out.read_bytes() == full.read_bytes()
+    for run in (ref, crun):                           # with the force read, force= is required
+        r = run(str(named), "--config", str(exported), *cmap, "--out", str(d / "no.csv"))
+        assert r.returncode == 2 and r.stderr.endswith(
+            "--columns t=time,depth=z_mm,velocity=vz: key 'force' missing (t, depth, force are "
+            "required, velocity is optional)\n"), r.stderr
     # a depth's dropout under --predict-only: the row is left out, alike in both
     cells = lines[200].split(",")
     cells[header.index("depth_mm")] = "nan"

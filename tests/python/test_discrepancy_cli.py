@@ -45,7 +45,7 @@ def test_end_to_end_report_and_figures(tmp_path: Path) -> None:
     ("t_s,depth_mm\n0,0\n", ":1: column 'force_n'"),
     ("t_s,depth_mm,force_n\n0,0,0\n0.01,abc,0\n", ":3: column 'depth_mm'"),
     ("t_s,depth_mm,force_n\n0,0,0\n0.01,0,inf\n", ":3: column 'force_n'"),
-    ("t_s,depth_mm,force_n\n0,0,0\n0,0,0\n", ":3: column 't_s'"),
+    ("t_s,depth_mm,force_n\n0,0,0\n-0.01,0,0\n", ":3: column 't_s'"),
     ("t_s,depth_mm,force_n\n0,0,0\n0.01,0\n", ":3"),
 ])
 def test_bad_input_names_file_line_column(tmp_path: Path, capsys: pytest.CaptureFixture[str],
@@ -69,8 +69,9 @@ def test_unknown_and_missing_files_exit_2(tmp_path: Path) -> None:
 
 def test_dropouts_leave_their_rows_out_and_are_said(tmp_path: Path,
                                                    capsys: pytest.CaptureFixture[str]) -> None:
-    """A measured file whose logger wrote NaN or nothing where a sample was lost is analysed
-    (it was refused, aborting the whole run); the rows left out are said on stderr."""
+    """A measured file whose logger wrote NaN or nothing where a sample was lost, or a sample
+    twice, is analysed (it was refused, aborting the whole run); the rows left out are said
+    on stderr, each line of the note with the tool's name."""
     files = _good(tmp_path)
     f = Path(files[0])
     lines = f.read_text().splitlines()
@@ -80,12 +81,15 @@ def test_dropouts_leave_their_rows_out_and_are_said(tmp_path: Path,
         cells = lines[k].split(",")
         cells[fi if k != 90 else di] = word
         lines[k] = ",".join(cells)
+    lines.insert(61, lines[60])                   # a sample written twice: line 62 repeats 61
     f.write_text("\n".join(lines) + "\n")
     out = tmp_path / "rep"
     assert main(files + ["--out", str(out), "--no-figures"]) == 0
     err = capsys.readouterr().err
     assert (f"nte-discrepancy: {f}: 3 of {len(lines) - 1} rows left out, a value missing in "
             f"column 'depth_mm' or 'force_n'") in err
+    assert (f"\nnte-discrepancy: {f}: 1 of {len(lines) - 1} rows left out, the time equal to "
+            f"the previous sample's (a repeat: line 62)\n") in err
     rep = json.loads((out / "report.json").read_text())
     assert not rep["skipped"] and rep["named"]
 

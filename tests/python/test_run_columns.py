@@ -120,9 +120,9 @@ def test_microseconds_read_as_seconds_name_the_column(files, tmp_path):
 
 def test_the_mapped_time_and_duplicates_are_named_alike(tmp_path):
     rig = tmp_path / "rig.csv"
-    rig.write_text("time_us,pz,fz\n0,0,0\n10000,0.1,0\n10000,0.2,0\n")
+    rig.write_text("time_us,pz,fz\n0,0,0\n10000,0.1,0\n9000,0.2,0\n")
     want = _refused_alike(rig, tmp_path, "--columns", RIG_MAP, "--time-unit", "us")
-    assert want == f"{rig}:4: column 'time_us': time 10000.0 does not increase (previous 10000.0)"
+    assert want == f"{rig}:4: column 'time_us': time 9000.0 does not increase (previous 10000.0)"
     dup = tmp_path / "dup.csv"
     dup.write_text("time_us,pz,fz,fz\n0,0,0,0\n")
     want = _refused_alike(dup, tmp_path, "--columns", RIG_MAP, "--time-unit", "us")

@@ -125,6 +125,11 @@ EXTRA: list[tuple[str, bytes]] = [
     ("one dropout, no sample", H + b"0,,0\n"),
     ("a dropout's bad time", H + b"0,0,0\nx,,0\n"),
     ("nan-like words", H + b"0,0,0\n0.1,nana,0\n"),
+    ("a repeated time", H + b"0,0,0\n0.01,0.1,0.1\n0.01,0.1,0.1\n0.01,0.2,0.3\n0.02,0.3,0\n"),
+    ("repeats and dropouts", H + b"0,0,0\n0,,0\n0,0.1,0\n" + b"".join(
+        b"0.%02d,0.%02d,0\n0.%02d,0.%02d,1\n" % (k, k, k, k) for k in range(1, 9))),
+    ("a repeat in microseconds", H + b"0.000001,0,0\n0.0000010,0,0\n1e-6,0,0\n"),
+    ("a time that goes back", H + b"0,0,0\n0.01,0,0\n0.01,0,0\n0.005,0,0\n"),
 ]
 
 

@@ -209,8 +209,8 @@ READER_CASES = [
     ("a missing time among a dropout's", "t_s,depth_mm,force_n\n,,\n0,0,0\nx,0,\n",
      ":4: column 't_s': not a number: 'x'"),
     ("duplicate", "t_s,depth_mm,force_n,t_s\n", ":1: column 't_s': duplicate column name in the header"),
-    ("not increasing", "t_s,depth_mm,force_n\n0,0,0\n0,0,0\n",
-     ":3: column 't_s': time 0.0 does not increase (previous 0.0)"),
+    ("not increasing", "t_s,depth_mm,force_n\n0,0,0\n-0.01,0,0\n",
+     ":3: column 't_s': time -0.01 does not increase (previous 0.0)"),
     ("no samples", "# only\nt_s,depth_mm,force_n\n", ":3: no samples after the header"),
     ("quoted text", 't_s,depth_mm,force_n\n0,"a,b",0\n', ":2: column 'depth_mm': not a number: 'a,b'"),
     ("NUL", "t_s,depth_mm,force_n\n0,0\x00,0\n", ":2: column 'depth_mm': not a number: '0\\x00'"),
@@ -294,6 +294,33 @@ def test_a_dropout_leaves_its_row_out(tmp_path):
         f"(a dropout: lines 3, 4, 5, 6, 7 and 1 more)")
     full = read_trial(write(tmp_path, "t_s,depth_mm,force_n\n0,0,0\n"), units=Units(check=False))
     assert full.left_out == [] and left_out_note(full) is None
+
+
+def test_a_repeated_time_leaves_its_row_out_and_a_time_going_back_is_refused(tmp_path):
+    """A row whose time equals the previous sample's (a logger that wrote a sample twice, a
+    time printed too coarsely for the rate) is left out -- the library rejects a sample not
+    later than the last -- whatever its values; the note's second line says so, the total
+    counting both kinds.  A time that goes back is still refused."""
+    p = write(tmp_path, "t_s,depth_mm,force_n\n0,0,0\n0.010,0.1,0.1\n0.01,0.1,0.1\n"
+                        "1e-2,0.3,0.2\n0.02,,0.4\n0.02,0.2,0.2\n0.03,0.3,0.3\n")
+    tr = read_trial(p, units=Units(check=False))
+    assert list(tr.t_s) == [0.0, 0.01, 0.02, 0.03] and tr.lines == [2, 3, 7, 8]
+    assert tr.repeated == [4, 5] and tr.left_out == [6]
+    assert list(tr.force_n) == [0.0, 0.1, 0.2, 0.3]      # the first of the repeats is kept
+    np.testing.assert_allclose(tr.velocity_mm_s, [10.0, 10.0, 10.0, 10.0])
+    assert left_out_note(tr) == (
+        f"{p}: 1 of 7 rows left out, a value missing in column 'depth_mm' or 'force_n' "
+        f"(a dropout: line 6)\n"
+        f"{p}: 2 of 7 rows left out, the time equal to the previous sample's (a repeat: "
+        f"lines 4, 5)")
+    alone = read_trial(write(tmp_path, "t_s,depth_mm,force_n\n0,0,0\n0,0,0\n"),
+                       units=Units(check=False))
+    assert left_out_note(alone) == (f"{tmp_path / 'in.csv'}: 1 of 2 rows left out, the time "
+                                    f"equal to the previous sample's (a repeat: line 3)")
+    with pytest.raises(CsvError, match=r":5: column 't_s': time 0.005 does not increase "
+                                       r"\(previous 0.01\)"):
+        read_trial(write(tmp_path, "t_s,depth_mm,force_n\n0,0,0\n0.01,0,0\n0.01,0,0\n"
+                                   "0.005,0,0\n"), units=Units(check=False))
 
 
 def test_a_given_velocity_missing_is_a_dropout_and_predict_only_keeps_the_row(tmp_path):
