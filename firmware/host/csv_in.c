@@ -185,9 +185,45 @@ static int feed(record_t* r, const int c)
 
 /* ---- csvio.read_table: the header, then one sample a record ------------------------------ */
 
+/* csvio._names: whether the header line cut at `d` (outside double quotes, the quotes dropped,
+ * each name stripped) has every one of the `n_want` names `want`. */
+static int names_hold(const char* line, const size_t n, const char d, const char* const* want,
+                      const size_t n_want)
+{
+    char* cell = malloc(n + 1U);
+    if (cell == NULL) {
+        return 0; /* out of memory: the first separator stands */
+    }
+    unsigned found = 0U;
+    size_t len = 0U;
+    int quoted = 0;
+    for (size_t i = 0U; i <= n; i++) {
+        if ((i < n) && (quoted || (line[i] != d))) {
+            if (line[i] == '"') {
+                quoted = !quoted;
+            } else {
+                cell[len++] = line[i];
+            }
+            continue;
+        }
+        const char* name = cell;
+        const size_t m = nte_py_strip(&name, len);
+        for (size_t k = 0U; k < n_want; k++) {
+            if ((strlen(want[k]) == m) && (memcmp(name, want[k], m) == 0)) {
+                found |= 1U << k;
+            }
+        }
+        len = 0U;
+    }
+    free(cell);
+    return found == ((1U << n_want) - 1U);
+}
+
 /* csvio.delimiter_of: the first of ',', ';', '\t' (csvio.DELIMITERS) outside double quotes in
- * the header's first line, ',' when none is. */
-static char delimiter_of(const char* line, const size_t n)
+ * the header's first line, ',' when none is; where it holds more than one, the first under
+ * which the line's names include every one of `want` (names_hold). */
+static char delimiter_of(const char* line, const size_t n, const char* const* want,
+                         const size_t n_want)
 {
     static const char order[3] = {',', ';', '\t'};
     int seen[3] = {0, 0, 0};
@@ -201,6 +237,12 @@ static char delimiter_of(const char* line, const size_t n)
             }
         } else {
             /* a separator inside quotes is a name's */
+        }
+    }
+    const int several = (seen[0] + seen[1] + seen[2]) > 1;
+    for (size_t d = 0U; (d < 3U) && several && (n_want > 0U); d++) {
+        if ((seen[d] != 0) && names_hold(line, n, order[d], want, n_want)) {
+            return order[d];
         }
     }
     for (size_t d = 0U; d < 3U; d++) {
@@ -691,6 +733,15 @@ int nte_trial_read_columns(const char* path, const nte_columns_t* cols, nte_tria
     (void)memset(&r, 0, sizeof r);
     record_reset(&r);
     r.delimiter = ',';
+    /* the columns read (as csvio.read_trial requires them), which the separator must keep */
+    const char* want[4] = {cols->t, cols->depth, NULL, NULL};
+    size_t n_want = 2U;
+    if (cols->force_ignored == 0) {
+        want[n_want++] = cols->force;
+    }
+    if (cols->velocity_required != 0) {
+        want[n_want++] = cols->velocity;
+    }
     int decided = 0; /* the delimiter, from the first line that is not blank */
     int rc = 0;
     size_t lineno = 0U;
@@ -716,7 +767,7 @@ int nte_trial_read_columns(const char* path, const nte_columns_t* cols, nte_tria
         }
         const char* visible = line;
         if ((decided == 0) && (nte_py_strip(&visible, n) > 0U)) {
-            r.delimiter = delimiter_of(line, n);
+            r.delimiter = delimiter_of(line, n, want, n_want);
             decided = 1;
         }
         int e = 0;

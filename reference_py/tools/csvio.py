@@ -122,16 +122,38 @@ class Trial:
         return Path(self.path).stem
 
 
-def delimiter_of(line: str) -> str:
+def delimiter_of(line: str, wanted: Sequence[str] = ()) -> str:
     """The cell separator of a file whose header starts with ``line``: the first of DELIMITERS
-    found outside double quotes, a comma when there is none (a one-column header)."""
+    found outside double quotes, a comma when there is none (a one-column header).  Where the
+    line holds more than one, the first under which its names include every one of ``wanted``
+    (the columns to read): a semicolon file may have a name with a comma, "Temp, C"."""
     outside, quoted = [], False
     for ch in line:
         if ch == '"':
             quoted = not quoted
         elif not quoted:
             outside.append(ch)
-    return next((d for d in DELIMITERS if d in outside), ",")
+    found = [d for d in DELIMITERS if d in outside]
+    for d in found if len(found) > 1 and wanted else []:
+        if set(wanted) <= set(_names(line, d)):
+            return d
+    return found[0] if found else ","
+
+
+def _names(line: str, delimiter: str) -> list[str]:
+    """The header line's names as ``delimiter`` would cut them: cut outside double quotes, the
+    quotes dropped, each stripped (what :func:`delimiter_of` compares; C twin: csv_in.c
+    names_hold)."""
+    names, cell, quoted = [], [], False
+    for ch in line:
+        if ch == '"':
+            quoted = not quoted
+        elif ch == delimiter and not quoted:
+            names.append("".join(cell).strip())
+            cell = []
+        else:
+            cell.append(ch)
+    return names + ["".join(cell).strip()]
 
 
 def parse_cell(name: str, lineno: int, col: str, text: str, decimal_comma: bool = False
@@ -189,7 +211,7 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
             if text.strip():
                 break
         nonlocal delimiter
-        delimiter = delimiter_of(ahead[-1]) if ahead else ","
+        delimiter = delimiter_of(ahead[-1], required) if ahead else ","
         yield from csv.reader(itertools.chain(ahead, lines), delimiter=delimiter)
 
     header: list[str] | None = None

@@ -130,6 +130,13 @@ EXTRA: list[tuple[str, bytes]] = [
         b"0.%02d,0.%02d,0\n0.%02d,0.%02d,1\n" % (k, k, k, k) for k in range(1, 9))),
     ("a repeat in microseconds", H + b"0.000001,0,0\n0.0000010,0,0\n1e-6,0,0\n"),
     ("a time that goes back", H + b"0,0,0\n0.01,0,0\n0.01,0,0\n0.005,0,0\n"),
+    ("a comma in a semicolon file's name", b"t_s;depth_mm;force_n;Temp, C\n0;0,5;0;21,5\n"
+                                           b"0,01;0,6;0,1;21,5\n"),
+    ("a comma in a tab file's name", b"t_s\tnote, free\tdepth_mm\tforce_n\n0\t1\t0,5\t0\n"),
+    ("a comma in a quoted name", b'"t_s";"Temp, C";"depth_mm";"force_n"\n0;1;0,5;0\n'),
+    ("tabs after commas", b"t_s,\tdepth_mm,\tforce_n\n0,\t0.5,\t0\n"),
+    ("no separator keeps the names", b"t_s;depth, mm;force_n\n0;0;0\n"),
+    ("a semicolon in a comma file's name", b"t_s,depth_mm,force_n,a;b\n0,0.5,0,1\n"),
 ]
 
 
