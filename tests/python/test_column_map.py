@@ -113,6 +113,18 @@ def test_a_malformed_map_is_refused_naming_the_problem(rows, tmp_path, capsys, t
         ColumnMap.parse(text)
 
 
+def test_a_map_without_force_only_where_none_is_read():
+    """--predict-only reads no force: its map may leave force= out (the standard name stands,
+    absent or ignored); every other refusal of the map stands."""
+    cmap = ColumnMap.parse("t=time_us,depth=pz", force_optional=True)
+    assert (cmap.t, cmap.depth, cmap.force, cmap.velocity) == ("time_us", "pz", "force_n", None)
+    assert ColumnMap.parse(RIG_MAP, force_optional=True) == ColumnMap.parse(RIG_MAP)
+    with pytest.raises(CsvError, match="key 'force' missing"):
+        ColumnMap.parse("t=time_us,depth=pz")
+    with pytest.raises(CsvError, match="key 'depth' missing"):
+        ColumnMap.parse("t=time_us,force=fz", force_optional=True)
+
+
 @pytest.mark.parametrize("text,missing", [("t=time_us,depth=pz,force=f_z", "f_z"),
                                           (RIG_MAP + ",velocity=vz", "vz")])
 def test_a_mapped_column_the_file_lacks_is_named(rows, tmp_path, capsys, text, missing):
