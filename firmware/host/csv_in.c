@@ -601,6 +601,15 @@ static int is_skip_column(const table_t* tb, const size_t c)
     return found;
 }
 
+/* A row left out: counted, its line kept among the first NTE_CSV_LEFT_OUT_LISTED. */
+static void count_left_out(size_t* count, size_t* lines, const size_t lineno)
+{
+    if (*count < NTE_CSV_LEFT_OUT_LISTED) {
+        lines[*count] = lineno;
+    }
+    (*count)++;
+}
+
 /* A sample: as many cells as the header, each a finite decimal number, the time increasing;
  * or a dropout: a depth, force or velocity missing, the row left out (its line counted), its
  * other cells numbers or missing, its time not compared; or a repeat: the time equal to the
@@ -645,22 +654,14 @@ static int take_row(table_t* tb, record_t* r, const size_t lineno)
         }
     }
     if (skip != 0) {
-        nte_trial_t* tr = tb->tr;
-        if (tr->left_out < NTE_CSV_LEFT_OUT_LISTED) {
-            tr->left_out_line[tr->left_out] = lineno;
-        }
-        tr->left_out++;
+        count_left_out(&tb->tr->left_out, tb->tr->left_out_line, lineno);
         return 0;
     }
     const double t = tb->row[tb->idx[0]];
     if ((t >= tb->prev_t) && (t <= tb->prev_t)) {
         /* a repeat (the same time, exactly): the library would reject it (not later than the
          * last sample) */
-        nte_trial_t* tr = tb->tr;
-        if (tr->repeated < NTE_CSV_LEFT_OUT_LISTED) {
-            tr->repeated_line[tr->repeated] = lineno;
-        }
-        tr->repeated++;
+        count_left_out(&tb->tr->repeated, tb->tr->repeated_line, lineno);
         return 0;
     }
     if (!(t > tb->prev_t)) {
