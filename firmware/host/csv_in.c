@@ -449,9 +449,10 @@ static void shell_quoted(const char* text, char* out, const size_t cap)
 
 /* Twin of csvio.unit_suffix_hint: "read it with --columns t=..,depth=..,force=.. [--KIND-unit
  * U]..." (the map quoted for the shell where a name needs it) when each of the time, depth and
- * force has exactly one column named with its unit (t_ms, depth_m, "Force [mN]": csvio's
- * UNIT_SUFFIX_QUANTITIES and UNIT_NAME_FORMS), "" otherwise.  The reader does not guess from a
- * name (a column so named may hold anything); the refusal says how to read the file. */
+ * force has exactly one column named by its quantity, with its unit (t_ms, depth_m, "Force
+ * [mN]": csvio's UNIT_SUFFIX_QUANTITIES and UNIT_NAME_FORMS) or without ("Time": the tools'
+ * own unit), "" otherwise.  The reader does not guess from a name (a column so named may hold
+ * anything); the refusal says how to read the file. */
 static void unit_suffix_hint(char* const* header, const size_t nc, char* out, const size_t cap)
 {
     const struct {
@@ -471,6 +472,15 @@ static void unit_suffix_hint(char* const* header, const size_t nc, char* out, co
         const nte_unit_t* unit = NULL;
         size_t unit_index = 0U;
         for (size_t c = 0U; c < nc; c++) {
+            /* a word alone: the tools' own unit (the first of the table) */
+            for (size_t w = 0U; w < quantities[q].n_words; w++) {
+                if (same_ignoring_case(header[c], quantities[q].words[w]) != 0) {
+                    found++;
+                    column = header[c];
+                    unit = &quantities[q].units[0];
+                    unit_index = 0U;
+                }
+            }
             for (size_t u = 0U; u < quantities[q].n_units; u++) {
                 if (named_with_unit(header[c], quantities[q].words, quantities[q].n_words,
                                     quantities[q].units[u].name) != 0) {

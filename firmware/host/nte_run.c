@@ -10,7 +10,7 @@
  *           [--no-layer-sets]
  *           [--contact on|off] [--surface MM] [--config FILE.json] [--predict-only]
  *           [--start NAME=VALUE,...] [--noise N] [--export-config FILE.json]
- *           [--force-unit N|mN|gf|kgf|lbf] [--time-unit s|ms|us] [--depth-unit mm|m|um|cm|in]
+ *           [--force-unit N|mN|gf|kgf|lbf] [--time-unit s|ms|us|ns] [--depth-unit mm|m|um|cm|in]
  *           [--force-sign +1|-1] [--depth-sign +1|-1] [--depth-offset MM] [--no-units-check]
  *           [--columns t=NAME,depth=NAME,force=NAME[,velocity=NAME]] --out EST.csv
  *

@@ -26,18 +26,18 @@ typedef struct nte_unit_t {
 
 #define NTE_FORCE_UNIT_COUNT 5
 #define NTE_FORCE_UNITS { { "N", 0x1.0000000000000p+0 }, { "mN", 0x1.0624dd2f1a9fcp-10 }, { "gf", 0x1.4158248443c70p-7 }, { "kgf", 0x1.39d013a92a305p+3 }, { "lbf", 0x1.1cafa9b6b9dd7p+2 } }
-#define NTE_TIME_UNIT_COUNT 3
-#define NTE_TIME_UNITS { { "s", 0x1.0000000000000p+0 }, { "ms", 0x1.0624dd2f1a9fcp-10 }, { "us", 0x1.0c6f7a0b5ed8dp-20 } }
+#define NTE_TIME_UNIT_COUNT 4
+#define NTE_TIME_UNITS { { "s", 0x1.0000000000000p+0 }, { "ms", 0x1.0624dd2f1a9fcp-10 }, { "us", 0x1.0c6f7a0b5ed8dp-20 }, { "ns", 0x1.12e0be826d695p-30 } }
 #define NTE_DEPTH_UNIT_COUNT 5
 #define NTE_DEPTH_UNITS { { "mm", 0x1.0000000000000p+0 }, { "m", 0x1.f400000000000p+9 }, { "um", 0x1.0624dd2f1a9fcp-10 }, { "cm", 0x1.4000000000000p+3 }, { "in", 0x1.9666666666666p+4 } }
-#define NTE_TIME_UNIT_WORDS { "", "milliseconds", "microseconds" } /* a time step's hint */
+#define NTE_TIME_UNIT_WORDS { "", "milliseconds", "microseconds", "nanoseconds" } /* a time step's hint */
 /* csvio.UNIT_SUFFIX_QUANTITIES: a column named WORD, a form's between, UNIT and
  * its after (csvio.UNIT_NAME_FORMS) holds a quantity in UNIT, read with --KIND-unit
  * (key, kind, its words, its table: the arrays force_units, time_units and
  * depth_units that the including file initialises from NTE_*_UNITS, and
  * *_unit_words from NTE_*_UNIT_NAME_WORDS) */
-#define NTE_TIME_UNIT_NAME_WORD_COUNT 3
-#define NTE_TIME_UNIT_NAME_WORDS { "t", "time", "timestamp" }
+#define NTE_TIME_UNIT_NAME_WORD_COUNT 4
+#define NTE_TIME_UNIT_NAME_WORDS { "t", "time", "timestamp", "%time" }
 #define NTE_DEPTH_UNIT_NAME_WORD_COUNT 7
 #define NTE_DEPTH_UNIT_NAME_WORDS { "depth", "position", "pos", "displacement", "insertion", "insertion depth", "z" }
 #define NTE_FORCE_UNIT_NAME_WORD_COUNT 5

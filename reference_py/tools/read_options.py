@@ -13,7 +13,7 @@ Units (:class:`Units`: ``--force-unit``, ``--time-unit``, ``--depth-unit``, the 
     How the mapped columns are converted to N, s and mm before anything else reads them
     (reference_py.tools.arguments parses the flags into one).
 
-A header that names its units (:func:`unit_suffix_hint`)
+A header that names its quantities, with their units or without (:func:`unit_suffix_hint`)
     Not guessed at; the refusal of a missing standard column gives the options that read it.
 
 Every refusal is a :class:`CsvError` (``--OPTION VALUE: reason`` for an option).  The reader,
@@ -39,20 +39,23 @@ COLUMN_KEYS_REQUIRED = ("t", "depth", "force")
 #: Units the reader converts from (factor to the tools' unit: N, s, mm; the first of each is
 #: the tools' own).  gf, kgf: a gram- and a kilogram-force (standard gravity, 9.80665 m/s^2),
 #: what a load cell read in grams or kilograms gives; lbf: a pound-force (0.45359237 kg at
-#: standard gravity); um: micrometres, a stage's encoder counts; in: an inch, 25.4 mm.
+#: standard gravity); um: micrometres, a stage's encoder counts; in: an inch, 25.4 mm; ns:
+#: nanoseconds, a robot middleware's stamps (ROS exports its messages' times so, since 1970).
 FORCE_UNITS = {"N": 1.0, "mN": 1.0e-3, "gf": 9.80665e-3, "kgf": 9.80665, "lbf": 4.4482216152605}
-TIME_UNITS = {"s": 1.0, "ms": 1.0e-3, "us": 1.0e-6}
+TIME_UNITS = {"s": 1.0, "ms": 1.0e-3, "us": 1.0e-6, "ns": 1.0e-9}
 DEPTH_UNITS = {"mm": 1.0, "m": 1.0e3, "um": 1.0e-3, "cm": 10.0, "in": 25.4}
 
 
-#: what a header may name its insertion columns with their unit: one of the quantity's words,
-#: then one of its units in one of UNIT_NAME_FORMS (case aside: force_mN, t_ms, "Time [s]",
-#: "Position (mm)", "Fz / N").  The reader does not guess (a column named so may hold
-#: anything); it says how to read them.  Per quantity: the --columns key, the --KIND-unit
-#: kind, the words, the units.
+#: what a header may name its insertion columns: one of the quantity's words, alone or with
+#: one of its units in one of UNIT_NAME_FORMS (case aside: force_mN, t_ms, "Time [s]",
+#: "Position (mm)", "Fz / N"; "Time", "Position", "Force").  The reader does not guess (a
+#: column named so may hold anything); it says how to read them, a word alone in the tools'
+#: own unit (the units check then judges the values: a time in ms read as s is refused with
+#: --time-unit ms).  Per quantity: the --columns key, the --KIND-unit kind, the words (%time:
+#: a ROS export's stamps), the units.
 #: C twin: unit_suffix_hint in firmware/host/csv_in.c (test_run_columns: word for word).
 UNIT_SUFFIX_QUANTITIES = (
-    ("t", "time", ("t", "time", "timestamp"), TIME_UNITS),
+    ("t", "time", ("t", "time", "timestamp", "%time"), TIME_UNITS),
     ("depth", "depth", ("depth", "position", "pos", "displacement", "insertion",
                         "insertion depth", "z"), DEPTH_UNITS),
     ("force", "force", ("force", "f", "fz", "load", "axial force"), FORCE_UNITS))
@@ -82,20 +85,22 @@ def _named_with_unit(column: str, words: Sequence[str], unit: str) -> bool:
 
 
 def unit_suffix_hint(header: list[str]) -> str:
-    """The options that read a header whose time, depth and force columns carry their unit in
-    their names (t_ms, depth_m, "Force [mN]"...): ``--columns t=..,depth=..,force=..`` (quoted
-    for the shell where a name needs it) and a ``--KIND-unit U`` for every unit that is not the
-    tools' own; "" when a quantity has no such column or more than one (then nothing is sure
-    enough to advise)."""
+    """The options that read a header whose time, depth and force columns are named by their
+    quantity, with their unit (t_ms, depth_m, "Force [mN]"...) or without ("Time", "Depth"):
+    ``--columns t=..,depth=..,force=..`` (quoted for the shell where a name needs it) and a
+    ``--KIND-unit U`` for every unit named that is not the tools' own; "" when a quantity has
+    no such column or more than one (then nothing is sure enough to advise)."""
     mapped, options = [], []
     for key, kind, words, units in UNIT_SUFFIX_QUANTITIES:
-        found = [(col, unit) for col in header for unit in units
-                 if _named_with_unit(col, words, unit)]
+        own = next(iter(units))            # the first unit of each table is the tools' own
+        found = [(col, own) for col in header if ascii_lower(col) in words]
+        found += [(col, unit) for col in header for unit in units
+                  if _named_with_unit(col, words, unit)]
         if len(found) != 1:
             return ""
         col, unit = found[0]
         mapped.append(f"{key}={col}")
-        if unit != next(iter(units)):     # the first unit of each table is the tools' own
+        if unit != own:
             options.append(f"--{kind}-unit {unit}")
     return "read it with --columns " + " ".join([shlex.quote(",".join(mapped))] + options)
 

@@ -79,7 +79,7 @@ DEPARTURE_MADS = 15.0
 #: A force beyond this many times the configured range is not a force in N.
 FORCE_IMPLAUSIBLE_FACTOR = 1000.0
 #: The words a time step's hint gives the smaller units it proposes.
-TIME_UNIT_WORDS = {"ms": "milliseconds", "us": "microseconds"}
+TIME_UNIT_WORDS = {"ms": "milliseconds", "us": "microseconds", "ns": "nanoseconds"}
 
 
 #: a stroke under MIN_STROKE_MM read as mm may be in one of these (the unit, its name): each

@@ -89,6 +89,41 @@ def test_microseconds_read_as_seconds_name_the_unit(rows, tmp_path, capsys):
         f"0.5 s gap limit): probably microseconds: convert with --time-unit us"]
 
 
+#: a robot middleware's export (ROS): the message's time in integer nanoseconds since 1970
+ROS_MAP = "t=%time,depth=depth_mm,force=force_n"
+
+
+def write_ros(path: Path, rows: list[tuple[float, float, float]], std: Path) -> Path:
+    """``rows`` as a ROS export writes them (``%time`` in integer nanoseconds since 1970), and
+    in ``std`` the same samples in the standard form, the time converted as the reader
+    converts nanoseconds (one product by 1e-9)."""
+    stamps = [1_764_540_000_000_000_000 + round(t * 1e9) for t, _, _ in rows]
+    with open(path, "w") as ros, open(std, "w") as fh:
+        ros.write("%time,depth_mm,force_n\n")
+        fh.write("t_s,depth_mm,force_n\n")
+        for ns, (_, d, f) in zip(stamps, rows):
+            ros.write(f"{ns},{d!r},{f!r}\n")
+            fh.write(f"{ns * 1e-9!r},{d!r},{f!r}\n")
+    return path
+
+
+def test_a_ros_export_in_nanoseconds_since_1970_is_read_as_the_advice_says(rows, tmp_path,
+                                                                           capsys):
+    """The refusal gives the map, the map's refusal the unit, and with both the estimate is the
+    standard file's holding the same times in seconds, byte for byte."""
+    std = tmp_path / "std.csv"
+    ros = write_ros(tmp_path / "ros.csv", rows, std)
+    assert refused(capsys, ros, tmp_path / "e.csv", "--model", "2") == [
+        f"nte-ref: error: {ros}:1: column 't_s': missing from the header (have: %time, "
+        f"depth_mm, force_n); read it with --columns {ROS_MAP}"]
+    assert refused(capsys, ros, tmp_path / "e.csv", "--model", "2", "--columns", ROS_MAP) == [
+        f"nte-ref: error: {ros}: column '%time': median time step 2e+07 s (longer than the "
+        f"0.5 s gap limit): probably nanoseconds: convert with --time-unit ns"]
+    assert estimate(std, tmp_path / "std_e.csv") == 0
+    assert estimate(ros, tmp_path / "ros_e.csv", "--columns", ROS_MAP, "--time-unit", "ns") == 0
+    assert (tmp_path / "ros_e.csv").read_bytes() == (tmp_path / "std_e.csv").read_bytes()
+
+
 BAD_MAPS = [
     ("t=time_us,depth=pz", "key 'force' missing (t, depth, force are required, velocity is "
                            "optional)"),
@@ -160,9 +195,20 @@ UNIT_HEADERS = [
     ("Timestamp (\u00b5s),Position [\u03bcm],Force [mN]", "read it with --columns "
      "'t=Timestamp (\u00b5s),depth=Position [\u03bcm],force=Force [mN]' --time-unit us "
      "--depth-unit um --force-unit mN", (1e6, 1e3, 1e3)),
-    # two force columns, or a quantity named otherwise: nothing sure enough to advise
+    ("Timestamp (ns),Insertion depth [mm],Fz [N]", "read it with --columns "
+     "'t=Timestamp (ns),depth=Insertion depth [mm],force=Fz [N]' --time-unit ns",
+     (1e9, 1.0, 1.0)),
+    # a word alone: the tools' own unit (the units check judges the values)
+    ("time,depth_mm,force_mN", "read it with --columns t=time,depth=depth_mm,force=force_mN "
+     "--force-unit mN", (1.0, 1.0, 1e3)),
+    ("Time,Depth,Force", "read it with --columns t=Time,depth=Depth,force=Force",
+     (1.0, 1.0, 1.0)),
+    ("%time,Position,Load [N]", "read it with --columns 't=%time,depth=Position,force=Load [N]'",
+     (1.0, 1.0, 1.0)),
+    # two force columns, two times, or a quantity named otherwise: nothing sure enough to advise
     ("t_s,depth_mm,force_N,force_mN", "", (1.0, 1.0, 1.0, 1e3)),
-    ("time,depth_mm,force_mN", "", (1.0, 1.0, 1e3)),
+    ("time,timestamp,depth,force", "", (1.0, 1.0, 1.0, 1.0)),
+    ("t,d,f", "", (1.0, 1.0, 1.0)),
     ("Time [s],Position [mm],Force [N],Force [mN]", "", (1.0, 1.0, 1.0, 1e3)),
     ("Time [s],Position [mm],Fx [N]", "", (1.0, 1.0, 1.0)),
     # case is set aside in ASCII only (as the C twin compares): a capital Greek mu is no "us"

@@ -21,8 +21,8 @@ import pytest
 
 from c_twin import ROOT
 from run_records import NEEDS_C, PROGS, body, c_run, reference
-from test_column_map import (BAD_MAPS, RIG_HEADER, RIG_MAP, UNIT_HEADERS, write_rig,
-                             write_standard)
+from test_column_map import (BAD_MAPS, RIG_HEADER, RIG_MAP, ROS_MAP, UNIT_HEADERS, write_rig,
+                             write_ros, write_standard)
 
 pytestmark = NEEDS_C
 
@@ -68,6 +68,25 @@ def test_a_logger_file_gives_the_references_bytes(files, tmp_path):
     assert d.returncode == 0, d.stderr
     assert c.read_bytes() == py.read_bytes()
     assert d.stdout.splitlines()[-1] == r.stdout.splitlines()[-1]
+
+
+def test_a_ros_export_in_nanoseconds_is_refused_and_read_alike(files, tmp_path):
+    """test_column_map's ROS export (%time in nanoseconds since 1970): both programs refuse it
+    without the map and without the unit with the same words, and read with both nte-run-double
+    writes the reference's bytes, which are those of the same times in seconds."""
+    rows = [(float(r["t_s"]), float(r["depth_mm"]), float(r["force_n"]))
+            for r in csv.DictReader(open(files["sim"]))]
+    std = tmp_path / "std.csv"
+    ros = write_ros(tmp_path / "ros.csv", rows, std)
+    assert _refused_alike(ros, tmp_path).endswith(f"; read it with --columns {ROS_MAP}")
+    assert _refused_alike(ros, tmp_path, "--columns", ROS_MAP).endswith(
+        "probably nanoseconds: convert with --time-unit ns")
+    flags = ["--model", "3", "--columns", ROS_MAP, "--time-unit", "ns"]
+    py, c, c_std = tmp_path / "py.csv", tmp_path / "c.csv", tmp_path / "c_std.csv"
+    assert reference(ros, py, "--precision", "float64", *flags).returncode == 0
+    assert c_run("nte-run-double", ros, c, *flags).returncode == 0
+    assert c_run("nte-run-double", std, c_std, "--model", "3").returncode == 0
+    assert c.read_bytes() == py.read_bytes() == c_std.read_bytes()
 
 
 def test_velocity_only_when_the_map_names_it(files, tmp_path):

@@ -156,7 +156,7 @@ def test_discrepancy_flags_refused_in_one_line(tmp_path, capsys):
     assert e.value.code == 2
     assert capsys.readouterr().err.strip().splitlines() == [
         "nte-discrepancy: error: argument --time-unit: invalid choice: 'min' (choose from 's', "
-        "'ms', 'us') (see nte-discrepancy --help)"]
+        "'ms', 'us', 'ns') (see nte-discrepancy --help)"]
 
 
 @pytest.mark.parametrize("peak,advice", [
