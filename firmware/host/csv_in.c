@@ -4,6 +4,8 @@
  * repr) are name_value.h's. */
 #include "csv_in.h"
 
+#include "clock_time.h"
+
 #include "name_value.h"
 #include "nte_file_in.h"
 
@@ -520,6 +522,9 @@ typedef struct table_t {
     int idx[4]; /* t, depth, force, velocity: the column, or -1 */
     double* row;
     double prev_t;
+    int time_form; /* the time column's: -1 numbers, 0 times of day, 1 dates and times, 2 not
+                    * yet known (csvio._TimeColumn) */
+    nte_clock_column_t clock;
     size_t cap;
     char* err;
     size_t es;
@@ -620,6 +625,31 @@ static void count_left_out(size_t* count, size_t* lines, const size_t lineno)
     (*count)++;
 }
 
+/* The time column's cell (csvio._TimeColumn.read): a clock time while the column is one and in
+ * the first row's form; otherwise a number.  1: *t is the time; 0: a number to read; -1:
+ * refused. */
+static int time_cell(table_t* tb, const char* cell, const size_t n, const int decimal_comma,
+                     const size_t lineno, double* t)
+{
+    static const char* const forms[2] = {"a time of day", "a date and time"};
+    nte_stamp_t stamp;
+    if ((tb->time_form >= 0) && (nte_clock_read_stamp(cell, n, decimal_comma, &stamp) != 0) &&
+        ((tb->time_form == 2) || (tb->time_form == stamp.dated))) {
+        tb->time_form = stamp.dated;
+        *t = nte_clock_seconds(&tb->clock, &stamp);
+        return 1;
+    }
+    if (tb->time_form >= 0 && tb->time_form < 2) {
+        char shown[512];
+        nte_py_repr_bytes(cell, n, shown, sizeof shown);
+        fail(tb->err, tb->es, "%s:%zu: column '%s': not %s as in the first row: %s", tb->path,
+             lineno, tb->header[tb->idx[0]], forms[tb->time_form], shown);
+        return -1;
+    }
+    tb->time_form = -1;
+    return 0;
+}
+
 /* A sample: as many cells as the header, each a finite decimal number, the time increasing;
  * or a dropout: a depth, force or velocity missing, the row left out (its line counted), its
  * other cells numbers or missing, its time not compared; or a repeat: the time equal to the
@@ -647,6 +677,15 @@ static int take_row(table_t* tb, record_t* r, const size_t lineno)
             continue;
         }
         const int decimal_comma = (r->delimiter != ',');
+        if ((int)c == tb->idx[0]) {
+            const int clock = time_cell(tb, cell, n, decimal_comma, lineno, &tb->row[c]);
+            if (clock < 0) {
+                return -1;
+            }
+            if (clock > 0) {
+                continue;
+            }
+        }
         const int number = is_number(cell, n, decimal_comma);
         if (number && decimal_comma) {
             char* mark = memchr(cell, ',', n);
@@ -735,6 +774,7 @@ int nte_trial_read_columns(const char* path, const nte_columns_t* cols, nte_tria
     tb.cols = cols;
     tb.tr = tr;
     tb.prev_t = -HUGE_VAL;
+    tb.time_form = 2;
     tb.err = err;
     tb.es = es;
     for (size_t k = 0U; k < 4U; k++) {
@@ -835,6 +875,7 @@ int nte_trial_read_columns(const char* path, const nte_columns_t* cols, nte_tria
         }
         rc = -1;
     }
+    tr->clock = (tb.time_form == 0) || (tb.time_form == 1);
     free(text);
     free(r.text);
     free(r.start);

@@ -34,6 +34,9 @@ typedef struct nte_trial_t {
      *  and the first lines of them.  A time that goes back is refused. */
     size_t repeated;
     size_t repeated_line[NTE_CSV_LEFT_OUT_LISTED];
+    /** 1: the time column is written as clock times (a time of day, or a date and time:
+     *  clock_time.h), read in seconds; a time unit other than s is then refused. */
+    int clock;
 } nte_trial_t;
 
 /** Which of the file's columns hold the time, depth, force and velocity (csvio.ColumnMap;

@@ -1000,6 +1000,15 @@ int main(int argc, char** argv)
     if (nte_trial_read_columns(a.csv, &a.units.columns, &tr, msg, sizeof msg) != 0) {
         return bad(msg);
     }
+    if ((tr.clock != 0) && (strcmp(a.units.time, "s") != 0)) {
+        /* csvio.read_trial: a clock reads in seconds by its own writing */
+        (void)snprintf(msg, sizeof msg,
+                       "--time-unit %s: column '%s' holds clock times, read in "
+                       "seconds",
+                       a.units.time, a.units.columns.t);
+        nte_trial_free(&tr);
+        return bad(msg);
+    }
     nte_trial_convert(&tr, &a.units);
     if (a.units.check != 0) {
         /* the configuration's accepted ranges (csvio.Limits.from_config); with the front end

@@ -170,14 +170,18 @@ static double depth_unit(const char* name)
 }
 
 /* Why a median time step of dt s, read in `unit`, is too long (units_check._time_hint): the first
- * smaller unit of the table that makes it fit the gap limit, or too coarse. */
-static void time_hint(double dt, const char* unit, double dt_max, char* buf, size_t cap)
+ * smaller unit of the table that makes it fit the gap limit, or too coarse (always for a clock:
+ * its time is in seconds by its writing). */
+static void time_hint(double dt, const char* unit, double dt_max, int clock, char* buf, size_t cap)
 {
     static const nte_unit_t units[NTE_TIME_UNIT_COUNT] = NTE_TIME_UNITS;
     static const char* const words[NTE_TIME_UNIT_COUNT] = NTE_TIME_UNIT_WORDS;
     size_t i = 0U;
     while ((i < NTE_TIME_UNIT_COUNT) && (strcmp(units[i].name, unit) != 0)) {
         i++;
+    }
+    if (clock != 0) {
+        i = NTE_TIME_UNIT_COUNT;
     }
     for (size_t j = i + 1U; j < NTE_TIME_UNIT_COUNT; j++) {
         if (((dt * units[j].factor) / units[i].factor) <= dt_max) {
@@ -256,7 +260,7 @@ static int check_time(const char* path, const nte_trial_t* tr, const nte_units_t
     const double dt = median(v, tr->n - 1U);
     if (dt > lim->dt_max_s) {
         char hint[128];
-        time_hint(dt, u->time, lim->dt_max_s, hint, sizeof hint);
+        time_hint(dt, u->time, lim->dt_max_s, tr->clock, hint, sizeof hint);
         (void)snprintf(err, es,
                        "%s: column '%s': median time step %.4g s (longer than the %g "
                        "s gap limit): %s",

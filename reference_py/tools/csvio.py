@@ -61,6 +61,7 @@ from .read_options import (  # noqa: F401  (re-exported: the reader's options li
     COLUMN_KEYS, COLUMN_KEYS_REQUIRED, DEPTH_OFFSET_MAX_MM, DEPTH_UNITS, FORCE_UNITS, TIME_UNITS,
     UNIT_NAME_FORMS, UNIT_NAME_SPELLINGS, UNIT_SUFFIX_QUANTITIES, ColumnMap, CsvError, Units,
     ascii_lower, unit_suffix_hint)
+from .clock_time import ClockColumn, read_stamp
 from .safe_write import write_atomic  # noqa: F401  (re-exported)
 from .units_check import Limits, UnitsError, check_units  # noqa: F401  (re-exported)
 
@@ -100,6 +101,7 @@ class Table:
     left_out: list[int] = field(default_factory=list)  # lines left out (``skip_missing``)
     left_out_columns: list[str] = field(default_factory=list)  # ``skip_missing`` in the header
     repeated: list[int] = field(default_factory=list)  # lines of a repeated time
+    clock: bool = False     # the time column is written as clock times (clock_time)
 
 
 @dataclass
@@ -115,6 +117,7 @@ class Trial:
     left_out: list[int] = field(default_factory=list)   # lines without a depth or force value
     left_out_columns: list[str] = field(default_factory=list)  # the columns that leave a row out
     repeated: list[int] = field(default_factory=list)   # lines whose time equals the previous
+    clock: bool = False     # the time column is written as clock times, read in seconds
 
     @property
     def name(self) -> str:
@@ -172,6 +175,32 @@ def parse_cell(name: str, lineno: int, col: str, text: str, decimal_comma: bool 
     raise CsvError(f"{name}:{lineno}: column '{col}': not a number: {cell!r}")
 
 
+#: what a time column holds when its first row is written as a clock (clock_time.Stamp.dated)
+TIME_FORMS = {False: "a time of day", True: "a date and time"}
+
+
+class _TimeColumn:
+    """The time column's cells: numbers, or clock times (clock_time) when its first row is one;
+    every row then in the first row's form (C twin: csv_in.c time_cell)."""
+
+    def __init__(self) -> None:
+        self.dated: bool | None = None      # None: numbers (or no row yet)
+        self.numbers = False
+        self.clock = ClockColumn()
+
+    def read(self, name: str, lineno: int, col: str, text: str, decimal_comma: bool) -> float:
+        cell = text.strip()
+        stamp = None if self.numbers else read_stamp(cell, decimal_comma)
+        if stamp is not None and self.dated in (None, stamp.dated):
+            self.dated = stamp.dated
+            return self.clock.seconds(stamp)
+        if self.dated is not None:
+            raise CsvError(f"{name}:{lineno}: column '{col}': not {TIME_FORMS[self.dated]} as "
+                           f"in the first row: {cell!r}")
+        self.numbers = True
+        return parse_cell(name, lineno, col, cell, decimal_comma)
+
+
 def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
                sparse: Sequence[str] = (), increasing: str | None = "t_s",
                nan_ok: Sequence[str] = (), skip_missing: Sequence[str] = (),
@@ -226,6 +255,7 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
     left_out: list[int] = []
     repeated: list[int] = []
     delimiter = ","
+    times = _TimeColumn()
     try:
         with fh:
             for cells in records():
@@ -256,6 +286,8 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
                 skip = any(missing[i] for i in skip_idx)
                 row = [math.nan if ((missing[i] and (skip or i in sparse_idx))
                                     or (i in nan_idx and _NAN.fullmatch(cell.strip())))
+                       else times.read(name, lineno, col, cell, delimiter != ",")
+                       if i == t_index
                        else parse_cell(name, lineno, col, cell, delimiter != ",")
                        for i, (col, cell) in enumerate(zip(header, cells))]
                 if skip:
@@ -287,7 +319,7 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
         raise CsvError(f"{name}:{header_line + 1}: no samples after the header")
     data = np.asarray(rows, dtype=np.float64)
     return Table(name, header, {c: data[:, i] for i, c in enumerate(header)}, lines, left_out,
-                 skip_named, repeated)
+                 skip_named, repeated, times.dated is not None)
 
 
 def read_trial(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
@@ -329,6 +361,9 @@ def read_trial(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
                                   ("depth", units.depth, DEPTH_UNITS)):
             if unit not in known:
                 raise CsvError(f"--{kind}-unit {unit}: not one of {', '.join(known)}")
+        if table.clock and units.time != next(iter(TIME_UNITS)):
+            raise CsvError(f"--time-unit {units.time}: column '{cmap.t}' holds clock times, "
+                           f"read in seconds")
         kt, kd = TIME_UNITS[units.time], DEPTH_UNITS[units.depth] * units.depth_sign
         kf = FORCE_UNITS[units.force] * units.force_sign
         if kt != 1.0:
@@ -344,7 +379,7 @@ def read_trial(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
     if vel is None:
         vel = central_difference(t, depth)
     tr = Trial(table.path, t, depth, force, vel, given, cols, table.lines, table.left_out,
-               table.left_out_columns, table.repeated)
+               table.left_out_columns, table.repeated, table.clock)
     if units is not None and units.check:
         check_units(tr, units, limits)
     return tr

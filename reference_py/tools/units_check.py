@@ -29,6 +29,7 @@ class Insertion(Protocol):
     force_n: Array           # NaN where no force was read (a sparse column)
     velocity_mm_s: Array
     lines: list[int]         # the physical line of every sample
+    clock: bool              # the time was written as clock times (in seconds by its writing)
 
 
 class UnitsError(CsvError):
@@ -133,11 +134,12 @@ def _pct(x: float) -> str:
     return f"{100.0 * x:.0f} %"
 
 
-def _time_hint(dt: float, unit: str, dt_max: float) -> str:
+def _time_hint(dt: float, unit: str, dt_max: float, clock: bool) -> str:
     """Why a median time step of ``dt`` s (read as ``unit``) is too long: the smaller unit
-    (of TIME_UNITS, after ``unit``) that makes it fit the gap limit, or too coarse."""
+    (of TIME_UNITS, after ``unit``) that makes it fit the gap limit, or too coarse (a clock's
+    time is in seconds by its writing: a logger that stamps whole seconds at 100 Hz)."""
     units = list(TIME_UNITS)
-    for smaller in units[units.index(unit) + 1:]:
+    for smaller in units[units.index(unit) + 1:] if not clock else []:
         if dt * TIME_UNITS[smaller] / TIME_UNITS[unit] <= dt_max:
             return f"probably {TIME_UNIT_WORDS[smaller]}: convert with --time-unit {smaller}"
     return "too coarse for the estimator"
@@ -166,7 +168,7 @@ def check_units(tr: Insertion, units: Units = Units(), limits: Limits = Limits()
         if dt > limits.dt_max_s:
             raise UnitsError(f"{name}: column '{ct}': median time step {dt:.4g} s "
                              f"(longer than the {limits.dt_max_s:g} s gap limit): "
-                             f"{_time_hint(dt, units.time, limits.dt_max_s)}")
+                             f"{_time_hint(dt, units.time, limits.dt_max_s, tr.clock)}")
     d = tr.depth_mm
     stroke = float(np.max(d) - np.min(d))
     # (a depth that never moves, or a shallow one at a needle's speed, is no unit question)

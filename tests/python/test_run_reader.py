@@ -31,7 +31,7 @@ import pytest
 
 from reference_py.tools.cli import main
 from reference_py.tools.csvio import CsvError, Units, left_out_note, read_trial
-from run_records import NEEDS_C, PROGS, c_run
+from run_records import NEEDS_C, PROGS, c_run, reference
 from test_cli import BAD_CASES
 from test_safe_writer import READER_CASES
 
@@ -137,6 +137,47 @@ EXTRA: list[tuple[str, bytes]] = [
     ("tabs after commas", b"t_s,\tdepth_mm,\tforce_n\n0,\t0.5,\t0\n"),
     ("no separator keeps the names", b"t_s;depth, mm;force_n\n0;0;0\n"),
     ("a semicolon in a comma file's name", b"t_s,depth_mm,force_n,a;b\n0,0.5,0,1\n"),
+    # clock times (clock_time): a date and time, or a time of day, read in seconds
+    ("dates and times, space", H + b"2026-11-30 12:00:00.000000,0,0\n"
+                               b"2026-11-30 12:00:00.010267,0.1,0\n2026-11-30 12:00:01,0.2,0\n"),
+    ("dates and times, T and Z", H + b"2026-11-30T12:00:00.5Z,0,0\n2026-11-30T12:00:00.51Z,0,0\n"),
+    ("dates and times, zones", H + b"2026-11-30T13:00:00+01:00,0,0\n"
+                               b"2026-11-30T12:00:00.25+0000,0,0\n"
+                               b"2026-11-30T06:30:00.5-05:30,0,0\n"),
+    ("dates with slashes", H + b"2026/11/30 12:00:00.1,0,0\n2026/11/30 12:00:00.2,0,0\n"),
+    ("dates across a month, a year, a leap day", H + b"2023-12-31 23:59:59.9,0,0\n"
+                                                 b"2024-01-01 00:00:00,0,0\n"
+                                                 b"2024-02-29 00:00:00,0,0\n"
+                                                 b"2024-03-01 00:00:00,0,0\n"),
+    ("dates before 1970, the calendar's ends", H + b"0001-01-01 00:00:00,0,0\n"
+                                               b"1969-12-31 23:59:59.5,0,0\n"
+                                               b"9999-12-31 23:59:59.999,0,0\n"),
+    ("times of day", H + b"9:59:59.98,0,0\n9:59:59.99,0,0\n10:00:00.00,0,0\n"),
+    ("times of day across midnight", H + b"23:59:59.98,0,0\n23:59:59.99,0,0\n"
+                                     b"00:00:00.00,0,0\n00:00:00.01,0,0\n"),
+    ("times of day, a decimal comma", b"t_s;depth_mm;force_n\n12:00:00,5;0,5;0\n"
+                                      b"12:00:00,75;0,6;0\n"),
+    ("a decimal comma in a comma file's clock", H + b'"12:00:00,5",0,0\n'),
+    ("a clock's eighteen digits", H + b"12:00:00.123456789012345678,0,0\n"),
+    ("a clock's nineteen digits", H + b"12:00:00.1234567890123456789,0,0\n"),
+    ("a clock's mark without digits", H + b"12:00:00.,0,0\n"),
+    ("a clock repeated", H + b"12:00:00.01,0,0\n12:00:00.01,0,0\n12:00:00.02,0,0\n"),
+    ("a clock going back", H + b"12:00:00.01,0,0\n11:59:00,0,0\n"),
+    ("no 29 February", H + b"2023-02-29 00:00:00,0,0\n"),
+    ("no month 13", H + b"2026-13-01 00:00:00,0,0\n"),
+    ("no hour 24, no second 60", H + b"24:00:00,0,0\n"),
+    ("no second 60", H + b"2026-11-30 23:59:60,0,0\n"),
+    ("no year 0", H + b"0000-01-01 00:00:00,0,0\n"),
+    ("a zone without a date", H + b"12:00:00Z,0,0\n"),
+    ("a zone of 24 h", H + b"2026-11-30 12:00:00+24:00,0,0\n"),
+    ("a three-digit hour", H + b"123:00:00,0,0\n"),
+    ("a day-first date", H + b"30.11.2026 12:00:00,0,0\n"),
+    ("a date alone", H + b"2026-11-30,0,0\n"),
+    ("a date, then a time of day", H + b"2026-11-30 12:00:00,0,0\n12:00:01,0,0\n"),
+    ("a time of day, then a number", H + b"12:00:00,0,0\n43201,0,0\n"),
+    ("a number, then a clock", H + b"0,0,0\n12:00:00,0,0\n"),
+    ("a clock in another column", H + b"0,12:00:00,0\n"),
+    ("a dropout beside a clock", H + b"12:00:00,0,0\n12:00:01,,0\n12:00:02,0.1,0\n"),
 ]
 
 
@@ -191,6 +232,39 @@ def test_the_table_reaches_both_outcomes(tmp_path):
         (tmp_path / "in.csv").write_bytes(data)
         read += _python(tmp_path / "in.csv") is None
     assert 12 <= read <= len(_cases()) - 40, read
+
+
+@pytest.mark.parametrize("first", ["12:00:00.00", "2026-11-30T12:00:00.00Z"])
+def test_a_clock_with_a_time_unit_is_refused_alike(tmp_path, first):
+    """A clock reads in seconds by its own writing: --time-unit ms with it is refused, by both
+    readers in the same words, and the file is read without it."""
+    path = tmp_path / "clock.csv"
+    path.write_bytes(H + f"{first},0,0\n".encode() + first.replace(".00", ".01").encode()
+                     + b",0.1,0\n")
+    r = reference(path, tmp_path / "ref.csv", "--model", "2", "--time-unit", "ms")
+    want = "--time-unit ms: column 't_s' holds clock times, read in seconds"
+    assert r.returncode == 2 and r.stderr == f"nte-ref: error: {want}\n", r.stderr
+    for prog in PROGS:
+        c = c_run(prog, path, tmp_path / f"{prog}.csv", "--model", "2", "--time-unit", "ms")
+        assert c.returncode == 2 and c.stderr == f"{prog}: error: {want}\n", (prog, c.stderr)
+        assert c_run(prog, path, tmp_path / f"{prog}.csv", "--model", "2",
+                     "--no-units-check").returncode == 0
+
+
+def test_a_clock_of_whole_seconds_is_too_coarse_alike(tmp_path):
+    """A logger that stamps whole seconds at 100 Hz: the repeats are left out, and what is left
+    (a sample a second) is refused as too coarse, not as milliseconds read as seconds."""
+    path = tmp_path / "whole.csv"
+    path.write_bytes(H + b"".join(b"12:00:%02d,%.2f,0.01\n" % (k // 100, k * 0.01)
+                                  for k in range(600)))
+    r = reference(path, tmp_path / "ref.csv", "--model", "2")
+    assert r.returncode == 2, r.stderr
+    want = r.stderr.removeprefix("nte-ref: error: ")
+    assert want.endswith("median time step 1 s (longer than the 0.5 s gap limit): too coarse "
+                         "for the estimator\n"), want
+    for prog in PROGS:
+        c = c_run(prog, path, tmp_path / f"{prog}.csv", "--model", "2")
+        assert c.returncode == 2 and c.stderr == f"{prog}: error: {want}", (prog, c.stderr)
 
 
 def test_missing_file_and_directory(tmp_path):
