@@ -5,6 +5,7 @@
 #include "csv_in.h"
 
 #include "clock_time.h"
+#include "units_row.h"
 
 #include "name_value.h"
 #include "nte_file_in.h"
@@ -525,6 +526,7 @@ typedef struct table_t {
     int time_form; /* the time column's: -1 numbers, 0 times of day, 1 dates and times, 2 not
                     * yet known (csvio._TimeColumn) */
     nte_clock_column_t clock;
+    int first_record; /* 1: no record read after the header yet (a units row may come) */
     size_t cap;
     char* err;
     size_t es;
@@ -557,6 +559,7 @@ static int take_header(table_t* tb, const record_t* r, const size_t lineno)
     }
     tb->ncols = r->n;
     tb->header_line = lineno;
+    tb->first_record = 1;
     const size_t n_req = (cols->velocity_required != 0) ? 4U : 3U;
     for (size_t k = 0U; k < n_req; k++) {
         if ((tb->idx[k] < 0) && !((k == 2U) && (cols->force_ignored != 0))) {
@@ -625,6 +628,59 @@ static void count_left_out(size_t* count, size_t* lines, const size_t lineno)
     (*count)++;
 }
 
+/* The first record after the header as a units row (csvio._units_row): no cell a number, the
+ * time's, depth's and force's cells each empty or a unit (nte_unit_of_token), one at least.  1:
+ * it is one, its cells kept in the trial; 0: it is not; -1: out of memory. */
+static int take_units_row(table_t* tb, const record_t* r, const size_t lineno)
+{
+    const int decimal_comma = (r->delimiter != ',');
+    for (size_t c = 0U; c < r->n; c++) {
+        size_t n = 0U;
+        const size_t at = stripped_cell(r, c, &n);
+        if (is_number(r->text + at, n, decimal_comma)) {
+            return 0;
+        }
+    }
+    size_t units = 0U;
+    for (size_t k = 0U; k < 3U; k++) {
+        size_t n = 0U;
+        const char* kind = NULL;
+        const char* unit = NULL;
+        if (tb->idx[k] < 0) {
+            continue;
+        }
+        const char* cell = r->text + stripped_cell(r, (size_t)tb->idx[k], &n);
+        if (n == 0U) {
+            continue;
+        }
+        if (nte_unit_of_token(cell, n, &kind, &unit) == 0) {
+            return 0;
+        }
+        units++;
+    }
+    if (units == 0U) {
+        return 0;
+    }
+    for (size_t k = 0U; k < 3U; k++) {
+        size_t n = 0U;
+        if (tb->idx[k] < 0) {
+            continue;
+        }
+        const char* cell = r->text + stripped_cell(r, (size_t)tb->idx[k], &n);
+        if (n > 0U) {
+            tb->tr->units_row[k] = malloc(n + 1U);
+            if (tb->tr->units_row[k] == NULL) {
+                fail(tb->err, tb->es, "%s:%zu: out of memory", tb->path, lineno);
+                return -1;
+            }
+            (void)memcpy(tb->tr->units_row[k], cell, n);
+            tb->tr->units_row[k][n] = '\0';
+        }
+    }
+    tb->tr->units_row_line = lineno;
+    return 1;
+}
+
 /* The time column's cell (csvio._TimeColumn.read): a clock time while the column is one and in
  * the first row's form; otherwise a number.  1: *t is the time; 0: a number to read; -1:
  * refused. */
@@ -661,6 +717,13 @@ static int take_row(table_t* tb, record_t* r, const size_t lineno)
         fail(tb->err, tb->es, "%s:%zu: expected %zu cells, found %zu", tb->path, lineno, tb->ncols,
              r->n);
         return -1;
+    }
+    if (tb->first_record != 0) {
+        tb->first_record = 0;
+        const int units = take_units_row(tb, r, lineno);
+        if (units != 0) {
+            return (units > 0) ? 0 : -1;
+        }
     }
     int skip = 0;
     for (size_t c = 0U; (c < r->n) && (skip == 0); c++) {
@@ -956,6 +1019,9 @@ void nte_trial_free(nte_trial_t* tr)
     free(tr->velocity_mm_s);
     free(tr->force_n);
     free(tr->line);
+    for (size_t k = 0U; k < 3U; k++) {
+        free(tr->units_row[k]);
+    }
     memset(tr, 0, sizeof *tr);
 }
 

@@ -37,6 +37,11 @@ typedef struct nte_trial_t {
     /** 1: the time column is written as clock times (a time of day, or a date and time:
      *  clock_time.h), read in seconds; a time unit other than s is then refused. */
     int clock;
+    /** A units row under the header (units_row.h): its line (0: none) and the time's, depth's
+     *  and force's cells, stripped (NULL where empty), which nte_units_row_check holds to the
+     *  units they are read in. */
+    size_t units_row_line;
+    char* units_row[3];
 } nte_trial_t;
 
 /** Which of the file's columns hold the time, depth, force and velocity (csvio.ColumnMap;

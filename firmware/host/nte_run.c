@@ -10,7 +10,8 @@
  *           [--no-layer-sets]
  *           [--contact on|off] [--surface MM] [--config FILE.json] [--predict-only]
  *           [--start NAME=VALUE,...] [--noise N] [--export-config FILE.json]
- *           [--force-unit N|mN|gf|kgf|lbf] [--time-unit s|ms|us|ns] [--depth-unit mm|m|um|cm|in]
+ *           [--force-unit N|mN|gf|kgf|lbf|kN] [--time-unit s|ms|us|ns]
+ *           [--depth-unit mm|m|um|cm|in]
  *           [--force-sign +1|-1] [--depth-sign +1|-1] [--depth-offset MM] [--no-units-check]
  *           [--columns t=NAME,depth=NAME,force=NAME[,velocity=NAME]] --out EST.csv
  *
@@ -42,6 +43,7 @@
 #include "nte_preset_config.h"
 #include "starts.h"
 #include "units_check.h"
+#include "units_row.h"
 #include "verdict.h"
 
 #include <errno.h>
@@ -1006,6 +1008,11 @@ int main(int argc, char** argv)
                        "--time-unit %s: column '%s' holds clock times, read in "
                        "seconds",
                        a.units.time, a.units.columns.t);
+        nte_trial_free(&tr);
+        return bad(msg);
+    }
+    if ((tr.units_row_line > 0U) &&
+        (nte_units_row_check(a.csv, &tr, &a.units, msg, sizeof msg) != 0)) {
         nte_trial_free(&tr);
         return bad(msg);
     }

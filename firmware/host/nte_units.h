@@ -24,8 +24,8 @@ typedef struct nte_unit_t {
     double factor; /* to the tools' unit: N, s or mm */
 } nte_unit_t;
 
-#define NTE_FORCE_UNIT_COUNT 5
-#define NTE_FORCE_UNITS { { "N", 0x1.0000000000000p+0 }, { "mN", 0x1.0624dd2f1a9fcp-10 }, { "gf", 0x1.4158248443c70p-7 }, { "kgf", 0x1.39d013a92a305p+3 }, { "lbf", 0x1.1cafa9b6b9dd7p+2 } }
+#define NTE_FORCE_UNIT_COUNT 6
+#define NTE_FORCE_UNITS { { "N", 0x1.0000000000000p+0 }, { "mN", 0x1.0624dd2f1a9fcp-10 }, { "gf", 0x1.4158248443c70p-7 }, { "kgf", 0x1.39d013a92a305p+3 }, { "lbf", 0x1.1cafa9b6b9dd7p+2 }, { "kN", 0x1.f400000000000p+9 } }
 #define NTE_TIME_UNIT_COUNT 4
 #define NTE_TIME_UNITS { { "s", 0x1.0000000000000p+0 }, { "ms", 0x1.0624dd2f1a9fcp-10 }, { "us", 0x1.0c6f7a0b5ed8dp-20 }, { "ns", 0x1.12e0be826d695p-30 } }
 #define NTE_DEPTH_UNIT_COUNT 5
@@ -38,8 +38,8 @@ typedef struct nte_unit_t {
  * *_unit_words from NTE_*_UNIT_NAME_WORDS) */
 #define NTE_TIME_UNIT_NAME_WORD_COUNT 4
 #define NTE_TIME_UNIT_NAME_WORDS { "t", "time", "timestamp", "%time" }
-#define NTE_DEPTH_UNIT_NAME_WORD_COUNT 7
-#define NTE_DEPTH_UNIT_NAME_WORDS { "depth", "position", "pos", "displacement", "insertion", "insertion depth", "z" }
+#define NTE_DEPTH_UNIT_NAME_WORD_COUNT 8
+#define NTE_DEPTH_UNIT_NAME_WORDS { "depth", "position", "pos", "displacement", "insertion", "insertion depth", "z", "extension" }
 #define NTE_FORCE_UNIT_NAME_WORD_COUNT 5
 #define NTE_FORCE_UNIT_NAME_WORDS { "force", "f", "fz", "load", "axial force" }
 /* csvio.UNIT_NAME_SPELLINGS: (a unit, another spelling of it in a name; UTF-8) */

@@ -63,6 +63,7 @@ from .read_options import (  # noqa: F401  (re-exported: the reader's options li
     ascii_lower, unit_suffix_hint)
 from .clock_time import ClockColumn, read_stamp
 from .safe_write import write_atomic  # noqa: F401  (re-exported)
+from .units_row import unit_of_token, units_row_check
 from .units_check import Limits, UnitsError, check_units  # noqa: F401  (re-exported)
 
 REQUIRED = ("t_s", "depth_mm", "force_n")
@@ -102,6 +103,8 @@ class Table:
     left_out_columns: list[str] = field(default_factory=list)  # ``skip_missing`` in the header
     repeated: list[int] = field(default_factory=list)  # lines of a repeated time
     clock: bool = False     # the time column is written as clock times (clock_time)
+    units_row: dict[str, str] = field(default_factory=dict)  # a units row's cells, by column
+    units_row_line: int = 0
 
 
 @dataclass
@@ -205,11 +208,15 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
                sparse: Sequence[str] = (), increasing: str | None = "t_s",
                nan_ok: Sequence[str] = (), skip_missing: Sequence[str] = (),
                missing_hint: Callable[[list[str]], str] | None = None,
-               repeat_left_out: bool = False) -> Table:
+               repeat_left_out: bool = False, units_row: Sequence[str] = ()) -> Table:
     """Read a numeric CSV by the rules of this module (see the module's docstring).
     ``missing_hint(header)``: advice appended to the refusal of a missing column ("" none).
     ``repeat_left_out``: a row whose ``increasing`` value equals the previous sample's is left
-    out (listed in ``Table.repeated``) instead of refused."""
+    out (listed in ``Table.repeated``) instead of refused.  ``units_row``: the columns whose
+    cells name a unit in a units row: the first record after the header, when none of its
+    cells is a number and each of these columns' cells is empty or a unit
+    (units_row.unit_of_token), one at least, is no sample: ``Table.units_row`` keeps those
+    cells (for units_row.units_row_check)."""
     name = str(path)
     try:
         fh = open(path, "rb")
@@ -256,6 +263,8 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
     repeated: list[int] = []
     delimiter = ","
     times = _TimeColumn()
+    units_cells: dict[str, str] = {}
+    units_line = 0
     try:
         with fh:
             for cells in records():
@@ -282,6 +291,11 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
                 if len(cells) != len(header):
                     raise CsvError(f"{name}:{lineno}: expected {len(header)} cells, found "
                                    f"{len(cells)}")
+                if not rows and not units_line and not left_out and not repeated:
+                    units_cells = _units_row(header, cells, units_row, delimiter != ",")
+                    if units_cells:
+                        units_line = lineno
+                        continue
                 missing = [is_missing(cell) for cell in cells]
                 skip = any(missing[i] for i in skip_idx)
                 row = [math.nan if ((missing[i] and (skip or i in sparse_idx))
@@ -319,7 +333,20 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
         raise CsvError(f"{name}:{header_line + 1}: no samples after the header")
     data = np.asarray(rows, dtype=np.float64)
     return Table(name, header, {c: data[:, i] for i, c in enumerate(header)}, lines, left_out,
-                 skip_named, repeated, times.dated is not None)
+                 skip_named, repeated, times.dated is not None, units_cells, units_line)
+
+
+def _units_row(header: list[str], cells: list[str], named: Sequence[str],
+               decimal_comma: bool) -> dict[str, str]:
+    """The first record after the header as a units row (read_table's ``units_row``): the
+    named columns' non-empty cells, or {} when it is not one."""
+    number = _NUMBER_DECIMAL_COMMA if decimal_comma else _NUMBER
+    if any(number.fullmatch(cell.strip()) for cell in cells):
+        return {}
+    found = {col: cell for col, cell in zip(header, cells) if col in named and cell.strip()}
+    if not found or any(unit_of_token(cell) is None for cell in found.values()):
+        return {}
+    return found
 
 
 def read_trial(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
@@ -349,7 +376,7 @@ def read_trial(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
     table = read_table(path, named, sparse_named, increasing=cmap.t,
                        skip_missing=tuple(c for c in data_named if c not in sparse_named),
                        missing_hint=None if cmap.text else unit_suffix_hint,
-                       repeat_left_out=True)
+                       repeat_left_out=True, units_row=(cmap.t, cmap.depth, cmap.force))
     cols = table.columns
     t, depth = cols[cmap.t], cols[cmap.depth]
     force = cols[cmap.force] if cmap.force in cols else np.full(len(t), math.nan)
@@ -364,6 +391,8 @@ def read_trial(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
         if table.clock and units.time != next(iter(TIME_UNITS)):
             raise CsvError(f"--time-unit {units.time}: column '{cmap.t}' holds clock times, "
                            f"read in seconds")
+        if table.units_row:
+            units_row_check(table.path, table.units_row_line, table.units_row, units)
         kt, kd = TIME_UNITS[units.time], DEPTH_UNITS[units.depth] * units.depth_sign
         kf = FORCE_UNITS[units.force] * units.force_sign
         if kt != 1.0:

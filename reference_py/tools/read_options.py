@@ -39,9 +39,11 @@ COLUMN_KEYS_REQUIRED = ("t", "depth", "force")
 #: Units the reader converts from (factor to the tools' unit: N, s, mm; the first of each is
 #: the tools' own).  gf, kgf: a gram- and a kilogram-force (standard gravity, 9.80665 m/s^2),
 #: what a load cell read in grams or kilograms gives; lbf: a pound-force (0.45359237 kg at
-#: standard gravity); um: micrometres, a stage's encoder counts; in: an inch, 25.4 mm; ns:
+#: standard gravity); kN: a materials tester's load cell; um: micrometres, a stage's encoder
+#: counts; in: an inch, 25.4 mm; ns:
 #: nanoseconds, a robot middleware's stamps (ROS exports its messages' times so, since 1970).
-FORCE_UNITS = {"N": 1.0, "mN": 1.0e-3, "gf": 9.80665e-3, "kgf": 9.80665, "lbf": 4.4482216152605}
+FORCE_UNITS = {"N": 1.0, "mN": 1.0e-3, "gf": 9.80665e-3, "kgf": 9.80665, "lbf": 4.4482216152605,
+               "kN": 1.0e3}
 TIME_UNITS = {"s": 1.0, "ms": 1.0e-3, "us": 1.0e-6, "ns": 1.0e-9}
 DEPTH_UNITS = {"mm": 1.0, "m": 1.0e3, "um": 1.0e-3, "cm": 10.0, "in": 25.4}
 
@@ -57,7 +59,7 @@ DEPTH_UNITS = {"mm": 1.0, "m": 1.0e3, "um": 1.0e-3, "cm": 10.0, "in": 25.4}
 UNIT_SUFFIX_QUANTITIES = (
     ("t", "time", ("t", "time", "timestamp", "%time"), TIME_UNITS),
     ("depth", "depth", ("depth", "position", "pos", "displacement", "insertion",
-                        "insertion depth", "z"), DEPTH_UNITS),
+                        "insertion depth", "z", "extension"), DEPTH_UNITS),
     ("force", "force", ("force", "f", "fz", "load", "axial force"), FORCE_UNITS))
 #: a word and a unit joined as loggers and spreadsheets write them: WORD + between + UNIT +
 #: after, for each (between, after)

@@ -17,6 +17,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from c_twin import ROOT
@@ -87,6 +88,31 @@ def test_a_ros_export_in_nanoseconds_is_refused_and_read_alike(files, tmp_path):
     assert c_run("nte-run-double", ros, c, *flags).returncode == 0
     assert c_run("nte-run-double", std, c_std, "--model", "3").returncode == 0
     assert c.read_bytes() == py.read_bytes() == c_std.read_bytes()
+
+
+def test_a_materials_testers_export_reads_with_the_advice(files, tmp_path):
+    """A materials tester's export: quoted names without units, a units row, the load in kN.
+    Refused without the map (advised), then for the units row's kN (advised), and read with
+    both as the same samples in N: nte-run-double writes the reference's bytes, and the
+    estimate follows the standard file's to the rounding of the conversion."""
+    rows = [(float(r["t_s"]), float(r["depth_mm"]), float(r["force_n"]))
+            for r in csv.DictReader(open(files["sim"]))]
+    src = tmp_path / "tester.csv"
+    src.write_text('"Time","Extension","Load"\n"(s)","(mm)","(kN)"\n' + "".join(
+        f'"{t!r}","{d!r}","{f / 1e3!r}"\n' for t, d, f in rows))
+    tester_map = "t=Time,depth=Extension,force=Load"
+    assert _refused_alike(src, tmp_path).endswith(f"; read it with --columns {tester_map}")
+    assert _refused_alike(src, tmp_path, "--columns", tester_map) == (
+        f"{src}:2: column 'Load': the units row gives '(kN)': convert with --force-unit kN")
+    flags = ["--model", "2", "--columns", tester_map, "--force-unit", "kN"]
+    py, c, std = tmp_path / "py.csv", tmp_path / "c.csv", tmp_path / "std.csv"
+    assert reference(src, py, "--precision", "float64", *flags).returncode == 0
+    assert c_run("nte-run-double", src, c, *flags).returncode == 0
+    assert c.read_bytes() == py.read_bytes()
+    assert c_run("nte-run-double", files["std"], std, "--model", "2").returncode == 0
+    a = np.loadtxt(std, delimiter=",", skiprows=1)
+    b = np.loadtxt(c, delimiter=",", skiprows=1)
+    np.testing.assert_allclose(b[:, 1], a[:, 1], rtol=1e-9, atol=1e-9)   # force_hat_n
 
 
 def test_velocity_only_when_the_map_names_it(files, tmp_path):

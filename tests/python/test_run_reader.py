@@ -137,6 +137,22 @@ EXTRA: list[tuple[str, bytes]] = [
     ("tabs after commas", b"t_s,\tdepth_mm,\tforce_n\n0,\t0.5,\t0\n"),
     ("no separator keeps the names", b"t_s;depth, mm;force_n\n0;0;0\n"),
     ("a semicolon in a comma file's name", b"t_s,depth_mm,force_n,a;b\n0,0.5,0,1\n"),
+    # a units row (units_row): no sample; held to the units the columns are read in
+    ("a units row", H + b"(s),(mm),(N)\n0,0,0\n0.01,0.1,0\n"),
+    ("a units row, bare and bracketed, another column's text",
+     b"t_s,depth_mm,force_n,temp\ns,[ mm ], N ,(\xc2\xb0C)\n0,0,0,21\n"),
+    ("a units row with empty cells", H + b",mm,\n0,0,0\n"),
+    ("a units row in ms", H + b"(ms),(mm),(N)\n0,0,0\n"),
+    ("a units row in kN", H + b"s,mm,kN\n0,0,0\n"),
+    ("a units row in micro-seconds", H + "(\u00b5s),mm,N\n0,0,0\n".encode()),
+    ("a units row of another quantity", H + b"(mm),(mm),(N)\n0,0,0\n"),
+    ("a units row with a number", H + b"s,mm,1\n"),
+    ("a units row with an unknown unit", H + b"s,mm,kip\n0,0,0\n"),
+    ("a units row after a sample", H + b"0,0,0\ns,mm,N\n"),
+    ("a units row twice", H + b"s,mm,N\ns,mm,N\n0,0,0\n"),
+    ("a units row alone", H + b"s,mm,N\n"),
+    ("a units row, semicolons", b"t_s;depth_mm;force_n\n[s];[mm];[N]\n0;0,5;0\n"),
+    ("a units row of empty brackets", H + b"(),mm,N\n0,0,0\n"),
     # clock times (clock_time): a date and time, or a time of day, read in seconds
     ("dates and times, space", H + b"2026-11-30 12:00:00.000000,0,0\n"
                                b"2026-11-30 12:00:00.010267,0.1,0\n2026-11-30 12:00:01,0.2,0\n"),

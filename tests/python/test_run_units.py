@@ -234,7 +234,7 @@ def test_converted_nothing_without_flags(records, tmp_path):
 
 
 @pytest.mark.parametrize("flags", [
-    ["--force-unit", "kN"], ["--time-unit", "min"], ["--depth-unit", "ft"],
+    ["--force-unit", "daN"], ["--time-unit", "min"], ["--depth-unit", "ft"],
     ["--force-sign", "2"], ["--depth-sign", "+2"], ["--force-sign", "-"],
     ["--depth-unit"], ["--depth-offset", "x"], ["--depth-offset", "1000.5"],
     ["--depth-offset", "inf"], ["--depth-offset", "nan"], ["--depth-offset"],

@@ -121,7 +121,7 @@ def test_implausible_force_and_mostly_out_of_range(tmp_path):
 
 
 def test_unknown_unit_and_sign_flags(tmp_path, capsys):
-    for flags, msg in ((["--force-unit", "kN"], "argument --force-unit: invalid choice: 'kN'"),
+    for flags, msg in ((["--force-unit", "daN"], "argument --force-unit: invalid choice: 'daN'"),
                        (["--depth-sign", "2"], "argument --depth-sign: must be +1 or -1")):
         with pytest.raises(SystemExit) as e:
             main(["estimate", "x.csv", "--model", "2", "--out", str(tmp_path / "o"), *flags])
