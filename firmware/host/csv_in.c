@@ -527,10 +527,70 @@ typedef struct table_t {
                     * yet known (csvio._TimeColumn) */
     nte_clock_column_t clock;
     int first_record; /* 1: no record read after the header yet (a units row may come) */
+    char* preamble;   /* the refusal of a line before the header (a logger's preamble) as one,
+                       * to give if no header comes: the first that advises, else the first */
+    int preamble_advised;
     size_t cap;
     char* err;
     size_t es;
 } table_t;
+
+/* Whether a record is a sample's, not a preamble's or a header's (csvio._is_data): two cells
+ * at least, each a number or missing, a number among them. */
+static int is_data(const record_t* r)
+{
+    const int decimal_comma = (r->delimiter != ',');
+    int numbers = 0;
+    for (size_t c = 0U; c < r->n; c++) {
+        const char* cell = r->text + r->start[c];
+        const size_t full = ((c + 1U < r->n) ? r->start[c + 1U] : r->len) - r->start[c] - 1U;
+        const size_t n = nte_py_strip(&cell, full);
+        if (is_number(cell, n, decimal_comma)) {
+            numbers++;
+        } else if (!is_missing(cell, n)) {
+            return 0;
+        }
+    }
+    return (r->n >= 2U) && (numbers > 0);
+}
+
+/* A record refused as the header, its refusal in tb->err (csvio.read_table's preamble): a
+ * sample's ends the search (-1, the preamble's refusal if one was kept); any other is a line of
+ * a logger's preamble, skipped (0), its refusal kept if it is the first, or the first that
+ * advises. */
+static int preamble_line(table_t* tb, const record_t* r, const int advised, const size_t lineno)
+{
+    if (is_data(r)) {
+        if (tb->preamble != NULL) {
+            (void)snprintf(tb->err, tb->es, "%s", tb->preamble);
+        }
+        return -1;
+    }
+    if ((tb->preamble == NULL) || ((advised != 0) && (tb->preamble_advised == 0))) {
+        const size_t n = strlen(tb->err) + 1U;
+        char* kept = malloc(n);
+        if (kept == NULL) {
+            fail(tb->err, tb->es, "%s:%zu: out of memory", tb->path, lineno);
+            return -1;
+        }
+        (void)memcpy(kept, tb->err, n);
+        free(tb->preamble);
+        tb->preamble = kept;
+        tb->preamble_advised = advised;
+    }
+    tb->err[0] = '\0';
+    tb->ncols = 0U;
+    free(tb->names);
+    free(tb->header);
+    free(tb->row);
+    tb->names = NULL;
+    tb->header = NULL;
+    tb->row = NULL;
+    for (size_t k = 0U; k < 4U; k++) {
+        tb->idx[k] = -1;
+    }
+    return 0;
+}
 
 /* The header: names stripped, the required columns there (else the file's names and, for the
  * standard names, how to read a unit in a name), no name twice. */
@@ -577,7 +637,7 @@ static int take_header(table_t* tb, const record_t* r, const size_t lineno)
             if ((o >= 0) && ((size_t)o < tb->es)) {
                 (void)snprintf(tb->err + o, tb->es - (size_t)o, ")%s", advice);
             }
-            return -1;
+            return preamble_line(tb, r, advice[0] != '\0', lineno);
         }
     }
     for (size_t a = 0U; a < r->n; a++) {
@@ -946,9 +1006,14 @@ int nte_trial_read_columns(const char* path, const nte_columns_t* cols, nte_tria
     free(tb.header);
     free(tb.row);
     if ((rc == 0) && (tb.ncols == 0U)) {
-        fail(err, es, "%s:1: no header line", path);
+        if (tb.preamble != NULL) {
+            (void)snprintf(err, es, "%s", tb.preamble);
+        } else {
+            fail(err, es, "%s:1: no header line", path);
+        }
         rc = -1;
     }
+    free(tb.preamble);
     if ((rc == 0) && (tr->n == 0U)) {
         fail(err, es, "%s:%zu: no samples after the header", path, tb.header_line + 1U);
         rc = -1;

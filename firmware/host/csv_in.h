@@ -5,7 +5,9 @@
  * skipped, quoted cells, "" inside quotes, a quoted cell across lines; ',' ';' or a tab
  * between cells as the header's first line shows, a decimal comma where it is not ','; a row
  * whose depth, force or given velocity is missing left out, and one whose time repeats the
- * previous sample's; the same refusals word for word).  The rules' constants are generated
+ * previous sample's; a preamble before the header skipped, a units row after it kept
+ * (units_row.h), a time written as a clock read in seconds (clock_time.h); the same refusals
+ * word for word).  The rules' constants are generated
  * from the Python reader into nte_units.h.  Host only: uses malloc and double.
  */
 #ifndef NTE_CSV_IN_H

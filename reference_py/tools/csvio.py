@@ -4,9 +4,13 @@ Reading (:func:`read_table`, :func:`read_trial`)
     Parsed with the standard ``csv`` module; the file is decoded as UTF-8 with an optional BOM
     (``utf-8-sig``).  Lines starting with ``#`` are comments; blank lines (white space only,
     or only empty cells: a spreadsheet's ``,,``) are skipped wherever they stand.  The first
-    other line is the header
-    (column names, surrounding spaces ignored, no duplicates); every later line is one sample
-    with exactly as many cells as the header.  Cells are separated by commas, or -- as loggers
+    other line that holds every required name is the header (column names, surrounding spaces
+    ignored, no duplicates); the lines before it are a logger's preamble, skipped -- unless a
+    sample (:func:`_is_data`) comes first, when the first of them is refused as the header
+    (the first whose names ``missing_hint`` advises on, if any).  Every later line is one
+    sample with exactly as many cells as the header; the first may be a *units row*
+    (:mod:`reference_py.tools.units_row`).  A time written as a clock reads in seconds
+    (:mod:`reference_py.tools.clock_time`).  Cells are separated by commas, or -- as loggers
     and spreadsheets set to a decimal comma write -- by semicolons or tabs: the header's first
     line decides (:func:`delimiter_of`).  Where the separator is not a comma, a number may
     write its decimal mark as a comma (``2,5`` is 2.5).  Cells may be quoted.  Required columns
@@ -265,20 +269,31 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
     times = _TimeColumn()
     units_cells: dict[str, str] = {}
     units_line = 0
+    # the lines before the header (a logger's preamble) that were refused as one: the refusal
+    # to give if no header comes, the first that advises how to read the file, else the first
+    preamble: tuple[bool, str] | None = None
     try:
         with fh:
             for cells in records():
                 if all(cell.strip() == "" for cell in cells):
                     continue                    # a blank line, or a row of empty cells
                 if header is None:
-                    header = [c.strip() for c in cells]
+                    names = [c.strip() for c in cells]
+                    absent = next((col for col in required if col not in names), None)
+                    if absent is not None:
+                        # a logger's preamble line, or a header without the names: refused
+                        # when the samples begin (or the file ends) before the names come
+                        advice = missing_hint(names) if missing_hint else ""
+                        refusal = (f"{name}:{lineno}: column '{absent}': missing from the "
+                                   f"header (have: {', '.join(names)})"
+                                   + (f"; {advice}" if advice else ""))
+                        if _is_data(cells, delimiter != ","):
+                            raise CsvError(preamble[1] if preamble else refusal)
+                        if not preamble or (advice and not preamble[0]):
+                            preamble = (bool(advice), refusal)
+                        continue
+                    header = names
                     header_line = lineno
-                    for col in required:
-                        if col not in header:
-                            advice = missing_hint(header) if missing_hint else ""
-                            raise CsvError(f"{name}:{lineno}: column '{col}': missing from the "
-                                           f"header (have: {', '.join(header)})"
-                                           + (f"; {advice}" if advice else ""))
                     if len(set(header)) != len(header):
                         dup = next(c for c in header if header.count(c) > 1)
                         raise CsvError(f"{name}:{lineno}: column '{dup}': duplicate column "
@@ -323,7 +338,7 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
     except OSError as exc:
         raise CsvError(f"{name}: cannot read: {exc.strerror or exc}") from None
     if header is None:
-        raise CsvError(f"{name}:1: no header line")
+        raise CsvError(preamble[1] if preamble else f"{name}:1: no header line")
     skip_named = [c for c in skip_missing if c in header]
     if not rows and left_out:
         cols = "' or '".join(skip_named)
@@ -334,6 +349,15 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
     data = np.asarray(rows, dtype=np.float64)
     return Table(name, header, {c: data[:, i] for i, c in enumerate(header)}, lines, left_out,
                  skip_named, repeated, times.dated is not None, units_cells, units_line)
+
+
+def _is_data(cells: list[str], decimal_comma: bool) -> bool:
+    """Whether a record is a sample's, not a preamble's or a header's: two cells at least, each
+    a number or missing (is_missing), a number among them (C twin: csv_in.c is_data)."""
+    number = _NUMBER_DECIMAL_COMMA if decimal_comma else _NUMBER
+    numbers = [bool(number.fullmatch(cell.strip())) for cell in cells]
+    return (len(cells) >= 2 and any(numbers)
+            and all(n or is_missing(cell) for n, cell in zip(numbers, cells)))
 
 
 def _units_row(header: list[str], cells: list[str], named: Sequence[str],

@@ -137,6 +137,22 @@ EXTRA: list[tuple[str, bytes]] = [
     ("tabs after commas", b"t_s,\tdepth_mm,\tforce_n\n0,\t0.5,\t0\n"),
     ("no separator keeps the names", b"t_s;depth, mm;force_n\n0;0;0\n"),
     ("a semicolon in a comma file's name", b"t_s,depth_mm,force_n,a;b\n0,0.5,0,1\n"),
+    # a logger's preamble before the header: skipped when the header comes before the samples
+    ("a preamble", b'"Test date:","2026-11-30"\n"Rate (Hz):",100\nSpecimen,gel\n\n' + H
+                   + b"0,0,0\n0.01,0.1,0\n"),
+    ("a preamble and a units row", b"Rig 3\n" + H + b"s,mm,N\n0,0,0\n"),
+    ("a preamble line of one number", b"100\n" + H + b"0,0,0\n"),
+    ("a preamble line of two numbers", b"100,200\n" + H + b"0,0,0\n"),
+    ("a preamble line of numbers and nan", b"100,nan\n" + H + b"0,0,0\n"),
+    ("a preamble line of missing words", b"NA,n/a\n" + H + b"0,0,0\n"),
+    ("a preamble with a decimal comma", b"Rate;100,5\nt_s;depth_mm;force_n\n0;0,5;0\n"),
+    ("a preamble, no header", b"Rig 3\nx,y,z\n0,0,0\n"),
+    ("a preamble, the named header later", b"Rig 3\nTime [s],Position [mm],Force [N]\n"
+                                           b"0,0,0\n"),
+    ("a preamble, two named headers", b"Time [ms],Position [mm],Force [N]\n"
+                                      b"Time [s],Position [mm],Force [N]\n0,0,0\n"),
+    ("a preamble, no sample", b"Rig 3\nx,y,z\n"),
+    ("a preamble, the header after the samples", b"Rig 3\n0,0,0\n" + H),
     # a units row (units_row): no sample; held to the units the columns are read in
     ("a units row", H + b"(s),(mm),(N)\n0,0,0\n0.01,0.1,0\n"),
     ("a units row, bare and bracketed, another column's text",
