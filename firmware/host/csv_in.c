@@ -225,23 +225,49 @@ static int names_hold(const char* line, const size_t n, const char d, const char
 /* csvio.delimiter_of: the first of ',', ';', '\t' (csvio.DELIMITERS) outside double quotes in
  * the header's first line, ',' when none is; where it holds more than one, the first under
  * which the line's names include every one of `want` (names_hold). */
-static char delimiter_of(const char* line, const size_t n, const char* const* want,
-                         const size_t n_want)
+static const char separators[3] = {',', ';', '\t'};
+
+/* Which of the separators (csvio.DELIMITERS, in their order) the line holds outside double
+ * quotes. */
+static void separators_seen(const char* line, const size_t n, int seen[3])
 {
-    static const char order[3] = {',', ';', '\t'};
-    int seen[3] = {0, 0, 0};
     int quoted = 0;
+    seen[0] = 0;
+    seen[1] = 0;
+    seen[2] = 0;
     for (size_t i = 0U; i < n; i++) {
         if (line[i] == '"') {
             quoted = !quoted;
         } else if (!quoted) {
             for (size_t d = 0U; d < 3U; d++) {
-                seen[d] |= (line[i] == order[d]);
+                seen[d] |= (line[i] == separators[d]);
             }
         } else {
             /* a separator inside quotes is a name's */
         }
     }
+}
+
+/* csvio._holding: the first separator the line holds outside quotes under which its names
+ * include every one of `want`; 0 when none does. */
+static char holding(const char* line, const size_t n, const char* const* want, const size_t n_want)
+{
+    int seen[3];
+    separators_seen(line, n, seen);
+    for (size_t d = 0U; d < 3U; d++) {
+        if ((seen[d] != 0) && names_hold(line, n, separators[d], want, n_want)) {
+            return separators[d];
+        }
+    }
+    return 0;
+}
+
+static char delimiter_of(const char* line, const size_t n, const char* const* want,
+                         const size_t n_want)
+{
+    const char* const order = separators;
+    int seen[3];
+    separators_seen(line, n, seen);
     const int several = (seen[0] + seen[1] + seen[2]) > 1;
     for (size_t d = 0U; (d < 3U) && several && (n_want > 0U); d++) {
         if ((seen[d] != 0) && names_hold(line, n, order[d], want, n_want)) {
@@ -872,6 +898,37 @@ static int take(table_t* tb, record_t* r, const size_t lineno)
     return (tb->ncols == 0U) ? take_header(tb, r, lineno) : take_row(tb, r, lineno);
 }
 
+/* csvio.read_table's records: where the first line that is not blank does not hold the names
+ * read (a logger's preamble), the separator of the first later line that does (holding), if one
+ * does, into *delimiter.  The lines from text[pos] on (line numbers after `lineno`) are read
+ * as the reader reads them: one that is not UTF-8 is refused here (-1, as csvio's look-ahead
+ * decodes it), a comment skipped. */
+static int preamble_separator(const char* text, const size_t len, size_t pos, size_t lineno,
+                              const char* path, const char* const* want, const size_t n_want,
+                              char* delimiter, char* err, const size_t es)
+{
+    while (pos < len) {
+        const char* line = text + pos;
+        const char* nl = memchr(line, '\n', len - pos);
+        const size_t n = (nl != NULL) ? ((size_t)(nl - line) + 1U) : (len - pos);
+        pos += n;
+        lineno++;
+        if (!nte_py_utf8(line, n)) {
+            fail(err, es, "%s:%zu: not UTF-8 text", path, lineno);
+            return -1;
+        }
+        if ((n > 0U) && (line[0] == NTE_CSV_COMMENT)) {
+            continue;
+        }
+        const char d = holding(line, n, want, n_want);
+        if (d != 0) {
+            *delimiter = d;
+            return 0;
+        }
+    }
+    return 0;
+}
+
 int nte_trial_read(const char* path, nte_trial_t* tr, char* err, const size_t es)
 {
     nte_columns_t c;
@@ -943,6 +1000,12 @@ int nte_trial_read_columns(const char* path, const nte_columns_t* cols, nte_tria
         if ((decided == 0) && (nte_py_strip(&visible, n) > 0U)) {
             r.delimiter = delimiter_of(line, n, want, n_want);
             decided = 1;
+            if (!names_hold(line, n, r.delimiter, want, n_want) &&
+                (preamble_separator(text, len, pos, lineno, path, want, n_want, &r.delimiter, err,
+                                    es) != 0)) {
+                rc = -1;
+                break;
+            }
         }
         int e = 0;
         for (size_t i = 0U; (i < n) && (e == 0); i++) {

@@ -150,6 +150,19 @@ def delimiter_of(line: str, wanted: Sequence[str] = ()) -> str:
     return found[0] if found else ","
 
 
+def _holding(line: str, wanted: Sequence[str]) -> str:
+    """The first of DELIMITERS found in ``line`` outside double quotes under which its names
+    include every one of ``wanted``; "" when none does (C twin: csv_in.c holding)."""
+    outside, quoted = [], False
+    for ch in line:
+        if ch == '"':
+            quoted = not quoted
+        elif not quoted:
+            outside.append(ch)
+    return next((d for d in DELIMITERS if d in outside and set(wanted) <= set(_names(line, d))),
+                "")
+
+
 def _names(line: str, delimiter: str) -> list[str]:
     """The header line's names as ``delimiter`` would cut them: cut outside double quotes, the
     quotes dropped, each stripped (what :func:`delimiter_of` compares; C twin: csv_in.c
@@ -243,16 +256,31 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
 
     def records() -> Iterator[list[str]]:
         """The csv module's records, split at the separator the header's first line shows
-        (the blank lines before it are read with any: they hold no separator)."""
+        (the blank lines before it are read with any: they hold no separator); where the first
+        line that is not blank does not hold the names read (a logger's preamble), at the
+        separator of the first line that does (:func:`_holding`), if one does."""
+        nonlocal lineno, delimiter
         lines = numbered()
-        ahead: list[str] = []
+        ahead: list[tuple[int, str]] = []      # lines read ahead, with their numbers
         for text in lines:
-            ahead.append(text)
+            ahead.append((lineno, text))
             if text.strip():
                 break
-        nonlocal delimiter
-        delimiter = delimiter_of(ahead[-1], required) if ahead else ","
-        yield from csv.reader(itertools.chain(ahead, lines), delimiter=delimiter)
+        delimiter = delimiter_of(ahead[-1][1], required) if ahead else ","
+        if ahead and required and not set(required) <= set(_names(ahead[-1][1], delimiter)):
+            for text in lines:
+                ahead.append((lineno, text))
+                found = _holding(text, required)
+                if found:
+                    delimiter = found
+                    break
+
+        def replayed() -> Iterator[str]:
+            nonlocal lineno
+            for number, text in ahead:
+                lineno = number
+                yield text
+        yield from csv.reader(itertools.chain(replayed(), lines), delimiter=delimiter)
 
     header: list[str] | None = None
     header_line = 0

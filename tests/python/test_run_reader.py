@@ -146,6 +146,13 @@ EXTRA: list[tuple[str, bytes]] = [
     ("a preamble line of numbers and nan", b"100,nan\n" + H + b"0,0,0\n"),
     ("a preamble line of missing words", b"NA,n/a\n" + H + b"0,0,0\n"),
     ("a preamble with a decimal comma", b"Rate;100,5\nt_s;depth_mm;force_n\n0;0,5;0\n"),
+    ("a preamble without a separator, semicolons", b"Rig 3\n# c\nt_s;depth_mm;force_n\n"
+                                                   b"s;mm;N\n0;0,5;0\n0,01;0,6;0\n"),
+    ("a preamble of commas, tabs", b"Rig,3\nt_s\tdepth_mm\tforce_n\n0\t0,5\t0\n"),
+    ("a preamble, no line holds the names", b"Rig;3\nx,y,z\n0,0,0\n"),
+    ("a preamble, not UTF-8 after the header", b"Rig 3\n" + H + b"0,\xff,0\n"),
+    ("a preamble, not UTF-8 before the header", b"Rig 3\n\xff\n" + H + b"0,0,0\n"),
+    ("a wrong header, not UTF-8 later", b"x,y,z\n0,0,0\n\xff\n"),
     ("a preamble, no header", b"Rig 3\nx,y,z\n0,0,0\n"),
     ("a preamble, the named header later", b"Rig 3\nTime [s],Position [mm],Force [N]\n"
                                            b"0,0,0\n"),
