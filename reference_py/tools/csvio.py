@@ -137,13 +137,7 @@ def delimiter_of(line: str, wanted: Sequence[str] = ()) -> str:
     found outside double quotes, a comma when there is none (a one-column header).  Where the
     line holds more than one, the first under which its names include every one of ``wanted``
     (the columns to read): a semicolon file may have a name with a comma, "Temp, C"."""
-    outside, quoted = [], False
-    for ch in line:
-        if ch == '"':
-            quoted = not quoted
-        elif not quoted:
-            outside.append(ch)
-    found = [d for d in DELIMITERS if d in outside]
+    found = _separators(line)
     for d in found if len(found) > 1 and wanted else []:
         if set(wanted) <= set(_names(line, d)):
             return d
@@ -153,14 +147,19 @@ def delimiter_of(line: str, wanted: Sequence[str] = ()) -> str:
 def _holding(line: str, wanted: Sequence[str]) -> str:
     """The first of DELIMITERS found in ``line`` outside double quotes under which its names
     include every one of ``wanted``; "" when none does (C twin: csv_in.c holding)."""
+    return next((d for d in _separators(line) if set(wanted) <= set(_names(line, d))), "")
+
+
+def _separators(line: str) -> list[str]:
+    """The DELIMITERS ``line`` holds outside double quotes, in their order (C twin: csv_in.c
+    separators_seen)."""
     outside, quoted = [], False
     for ch in line:
         if ch == '"':
             quoted = not quoted
         elif not quoted:
             outside.append(ch)
-    return next((d for d in DELIMITERS if d in outside and set(wanted) <= set(_names(line, d))),
-                "")
+    return [d for d in DELIMITERS if d in outside]
 
 
 def _names(line: str, delimiter: str) -> list[str]:
