@@ -389,20 +389,6 @@ void nte_columns_standard(nte_columns_t* c)
     c->force_ignored = 0;
 }
 
-/* ASCII case-insensitive equality (a header's names are compared as csvio compares them
- * lowered). */
-static int same_ignoring_case(const char* a, const char* b)
-{
-    while ((*a != '\0') && (*b != '\0')) {
-        if (ascii_lower(*a) != ascii_lower(*b)) {
-            return 0;
-        }
-        a++;
-        b++;
-    }
-    return (*a == '\0') && (*b == '\0');
-}
-
 static const nte_unit_t force_units[NTE_FORCE_UNIT_COUNT] = NTE_FORCE_UNITS;
 static const nte_unit_t time_units[NTE_TIME_UNIT_COUNT] = NTE_TIME_UNITS;
 static const nte_unit_t depth_units[NTE_DEPTH_UNIT_COUNT] = NTE_DEPTH_UNITS;
@@ -437,7 +423,7 @@ static int named_with_unit(const char* column, const char* const* words, const s
                 char name[64];
                 (void)snprintf(name, sizeof name, "%s%s%s%s", words[w], forms[f].between, spelled,
                                forms[f].after);
-                if (same_ignoring_case(column, name) != 0) {
+                if (nte_py_ascii_same(column, strlen(column), name) != 0) {
                     return 1;
                 }
             }
@@ -503,7 +489,7 @@ static void unit_suffix_hint(char* const* header, const size_t nc, char* out, co
         for (size_t c = 0U; c < nc; c++) {
             /* a word alone: the tools' own unit (the first of the table) */
             for (size_t w = 0U; w < quantities[q].n_words; w++) {
-                if (same_ignoring_case(header[c], quantities[q].words[w]) != 0) {
+                if (nte_py_ascii_same(header[c], strlen(header[c]), quantities[q].words[w]) != 0) {
                     found++;
                     column = header[c];
                     unit = &quantities[q].units[0];

@@ -210,3 +210,18 @@ size_t nte_nv_split(const char* text, nte_nv_t* items, size_t max)
     }
     return count;
 }
+
+int nte_py_ascii_same(const char* s, const size_t n, const char* word)
+{
+    if (strlen(word) != n) {
+        return 0;
+    }
+    for (size_t i = 0U; i < n; i++) {
+        const int a = ((s[i] >= 'A') && (s[i] <= 'Z')) ? (s[i] + ('a' - 'A')) : s[i];
+        const int b = ((word[i] >= 'A') && (word[i] <= 'Z')) ? (word[i] + ('a' - 'A')) : word[i];
+        if (a != b) {
+            return 0;
+        }
+    }
+    return 1;
+}

@@ -42,6 +42,10 @@ void nte_py_repr_text(const char* s, char* buf, size_t cap);
  *  of s[0..n) without them at either end. */
 size_t nte_py_strip(const char** s, size_t n);
 
+/** 1 when s[0..n) and the terminated `word` are equal with A-Z lowered and every other byte
+ *  as it is (csvio.ascii_lower of both: the reader compares names and units so), else 0. */
+int nte_py_ascii_same(const char* s, size_t n, const char* word);
+
 /** 1 when s[0..n) is UTF-8 as Python's strict decoder reads it (no overlong form, no
  *  surrogate, nothing above U+10FFFF), else 0. */
 int nte_py_utf8(const char* s, size_t n);

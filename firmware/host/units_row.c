@@ -7,23 +7,6 @@
 #include <stdio.h>
 #include <string.h>
 
-/* ASCII case-insensitive equality of s[0..n) and the terminated word (units_row compares the
- * cell and the unit ASCII-lowered) */
-static int same_word(const char* s, const size_t n, const char* word)
-{
-    if (strlen(word) != n) {
-        return 0;
-    }
-    for (size_t i = 0U; i < n; i++) {
-        const int a = ((s[i] >= 'A') && (s[i] <= 'Z')) ? (s[i] + ('a' - 'A')) : s[i];
-        const int b = ((word[i] >= 'A') && (word[i] <= 'Z')) ? (word[i] + ('a' - 'A')) : word[i];
-        if (a != b) {
-            return 0;
-        }
-    }
-    return 1;
-}
-
 int nte_unit_of_token(const char* s, size_t n, const char** kind, const char** unit)
 {
     static const nte_unit_t time_units[NTE_TIME_UNIT_COUNT] = NTE_TIME_UNITS;
@@ -49,10 +32,10 @@ int nte_unit_of_token(const char* s, size_t n, const char** kind, const char** u
     for (size_t k = 0U; k < 3U; k++) {
         for (size_t u = 0U; u < tables[k].count; u++) {
             const char* name = tables[k].units[u].name;
-            int found = same_word(s, n, name);
+            int found = nte_py_ascii_same(s, n, name);
             for (size_t sp = 0U; (sp < NTE_UNIT_NAME_SPELLING_COUNT) && (found == 0); sp++) {
                 found = (strcmp(spellings[sp].unit, name) == 0) &&
-                        same_word(s, n, spellings[sp].spelled);
+                        nte_py_ascii_same(s, n, spellings[sp].spelled);
             }
             if (found != 0) {
                 *kind = tables[k].kind;
