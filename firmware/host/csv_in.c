@@ -700,9 +700,9 @@ static void count_left_out(size_t* count, size_t* lines, const size_t lineno)
     (*count)++;
 }
 
-/* The first record after the header as a units row (csvio._units_row): no cell a number, the
- * time's, depth's and force's cells each empty or a unit (nte_unit_of_token), one at least.  1:
- * it is one, its cells kept in the trial; 0: it is not; -1: out of memory. */
+/* The first record after the header as a units row (csvio._units_row): no cell a number, one
+ * of the time's, depth's and force's cells at least read as a unit (nte_unit_like).  1: it is
+ * one, those three cells kept in the trial where not empty; 0: it is not; -1: out of memory. */
 static int take_units_row(table_t* tb, const record_t* r, const size_t lineno)
 {
     const int decimal_comma = (r->delimiter != ',');
@@ -713,24 +713,15 @@ static int take_units_row(table_t* tb, const record_t* r, const size_t lineno)
             return 0;
         }
     }
-    size_t units = 0U;
-    for (size_t k = 0U; k < 3U; k++) {
+    int units = 0;
+    for (size_t k = 0U; (k < 3U) && (units == 0); k++) {
         size_t n = 0U;
-        const char* kind = NULL;
-        const char* unit = NULL;
-        if (tb->idx[k] < 0) {
-            continue;
+        if (tb->idx[k] >= 0) {
+            const char* cell = r->text + stripped_cell(r, (size_t)tb->idx[k], &n);
+            units = nte_unit_like(cell, n);
         }
-        const char* cell = r->text + stripped_cell(r, (size_t)tb->idx[k], &n);
-        if (n == 0U) {
-            continue;
-        }
-        if (nte_unit_of_token(cell, n, &kind, &unit) == 0) {
-            return 0;
-        }
-        units++;
     }
-    if (units == 0U) {
+    if (units == 0) {
         return 0;
     }
     for (size_t k = 0U; k < 3U; k++) {

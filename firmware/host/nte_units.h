@@ -43,8 +43,8 @@ typedef struct nte_unit_t {
 #define NTE_FORCE_UNIT_NAME_WORD_COUNT 5
 #define NTE_FORCE_UNIT_NAME_WORDS { "force", "f", "fz", "load", "axial force" }
 /* csvio.UNIT_NAME_SPELLINGS: (a unit, another spelling of it in a name; UTF-8) */
-#define NTE_UNIT_NAME_SPELLING_COUNT 4
-#define NTE_UNIT_NAME_SPELLINGS { { "us", "\xc2\xb5" "s" }, { "us", "\xce\xbc" "s" }, { "um", "\xc2\xb5" "m" }, { "um", "\xce\xbc" "m" } }
+#define NTE_UNIT_NAME_SPELLING_COUNT 6
+#define NTE_UNIT_NAME_SPELLINGS { { "us", "\xc2\xb5" "s" }, { "us", "\xce\xbc" "s" }, { "um", "\xc2\xb5" "m" }, { "um", "\xce\xbc" "m" }, { "s", "sec" }, { "ms", "msec" } }
 #define NTE_UNIT_NAME_FORM_COUNT 8
 #define NTE_UNIT_NAME_FORMS { { "_", "" }, { " [", "]" }, { "[", "]" }, { " (", ")" }, { "(", ")" }, { " / ", "" }, { "/", "" }, { " in ", "" } }
 #define NTE_UNIT_QUANTITY_COUNT 3

@@ -16,9 +16,14 @@
  *  "depth" or "force" and *unit its name (units_row.unit_of_token).  0 otherwise. */
 int nte_unit_of_token(const char* s, size_t n, const char** kind, const char** unit);
 
-/** Refuse a trial whose units row names, for a column read, another quantity's unit or
- *  another unit than `units` reads it in (units_row.units_row_check): -1 and the reason in
- *  err ("PATH:LINE: column 'NAME': ..."), else 0. */
+/** 1 when the stripped cell s[0..n) reads as a unit in a units row: it names one
+ *  (nte_unit_of_token) or it is text in one pair of () or [] (units_row.unit_like). */
+int nte_unit_like(const char* s, size_t n);
+
+/** Refuse a trial whose units row gives, for a column read, no unit of its quantity (the
+ *  message lists the units read) or another unit than `units` reads it in
+ *  (units_row.units_row_check): -1 and the reason in err ("PATH:LINE: column 'NAME': ..."),
+ *  else 0. */
 int nte_units_row_check(const char* path, const nte_trial_t* trial, const nte_units_t* units,
                         char* err, size_t err_size);
 

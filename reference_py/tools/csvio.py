@@ -67,7 +67,7 @@ from .read_options import (  # noqa: F401  (re-exported: the reader's options li
     ascii_lower, unit_suffix_hint)
 from .clock_time import ClockColumn, read_stamp
 from .safe_write import write_atomic  # noqa: F401  (re-exported)
-from .units_row import unit_of_token, units_row_check
+from .units_row import unit_like, units_row_check
 from .units_check import Limits, UnitsError, check_units  # noqa: F401  (re-exported)
 
 REQUIRED = ("t_s", "depth_mm", "force_n")
@@ -230,9 +230,9 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
     ``repeat_left_out``: a row whose ``increasing`` value equals the previous sample's is left
     out (listed in ``Table.repeated``) instead of refused.  ``units_row``: the columns whose
     cells name a unit in a units row: the first record after the header, when none of its
-    cells is a number and each of these columns' cells is empty or a unit
-    (units_row.unit_of_token), one at least, is no sample: ``Table.units_row`` keeps those
-    cells (for units_row.units_row_check)."""
+    cells is a number and one of these columns' cells at least reads as a unit
+    (units_row.unit_like), is no sample: ``Table.units_row`` keeps these columns' non-empty
+    cells (for units_row.units_row_check, which refuses what is not a unit)."""
     name = str(path)
     try:
         fh = open(path, "rb")
@@ -395,7 +395,7 @@ def _units_row(header: list[str], cells: list[str], named: Sequence[str],
     if any(number.fullmatch(cell.strip()) for cell in cells):
         return {}
     found = {col: cell for col, cell in zip(header, cells) if col in named and cell.strip()}
-    if not found or any(unit_of_token(cell) is None for cell in found.values()):
+    if not any(unit_like(cell) for cell in found.values()):
         return {}
     return found
 

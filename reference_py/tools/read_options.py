@@ -65,9 +65,11 @@ UNIT_SUFFIX_QUANTITIES = (
 #: after, for each (between, after)
 UNIT_NAME_FORMS = (("_", ""), (" [", "]"), ("[", "]"), (" (", ")"), ("(", ")"), (" / ", ""),
                    ("/", ""), (" in ", ""))
-#: a unit as a name may write it with the micro sign (U+00B5) or the Greek mu (U+03BC): each
-#: (the unit the options call it, the spelling)
-UNIT_NAME_SPELLINGS = (("us", "\u00b5s"), ("us", "\u03bcs"), ("um", "\u00b5m"), ("um", "\u03bcm"))
+#: a unit as a name or a units row may write it with the micro sign (U+00B5) or the Greek mu
+#: (U+03BC), or a second as loggers abbreviate it ("Time (sec)", "msec"): each (the unit the
+#: options call it, the spelling)
+UNIT_NAME_SPELLINGS = (("us", "\u00b5s"), ("us", "\u03bcs"), ("um", "\u00b5m"), ("um", "\u03bcm"),
+                       ("s", "sec"), ("ms", "msec"))
 def ascii_lower(text: str) -> str:
     """A-Z lowered, every other character as it is (the C twin compares so: str.lower would
     also lower a few letters beyond ASCII)."""

@@ -115,6 +115,31 @@ def test_a_materials_testers_export_reads_with_the_advice(files, tmp_path):
     np.testing.assert_allclose(b[:, 1], a[:, 1], rtol=1e-9, atol=1e-9)   # force_hat_n
 
 
+@pytest.mark.parametrize("units_row,column,message", [
+    ('"(s)","(mm)","(V)"', "Load", "'(V)' is not a unit of force the tools read "
+                                   "(N, mN, gf, kgf, lbf, kN)"),
+    ('"(s)","(mm)","kip"', "Load", "'kip' is not a unit of force the tools read "
+                                   "(N, mN, gf, kgf, lbf, kN)"),
+    ('"(min)","(mm)","(N)"', "Time", "'(min)' is not a unit of time the tools read "
+                                     "(s, ms, us, ns)"),
+    ('"(s)","(N)","(N)"', "Extension", "'(N)' is not a unit of depth the tools read "
+                                       "(mm, m, um, cm, in)")])
+def test_a_units_row_with_a_unit_not_read_names_the_units_that_are(tmp_path, units_row, column,
+                                                                  message):
+    """A units row whose unit the tools do not read (a load cell in volts, kips, minutes) or
+    of another quantity is refused by both programs for that cell, with the units that read,
+    not as "not a number"; the same row with a unit read is read."""
+    tester_map = "t=Time,depth=Extension,force=Load"
+    src = tmp_path / "tester.csv"
+    src.write_text(f'"Time","Extension","Load"\n{units_row}\n0,0,0\n0.01,0.01,0\n')
+    assert _refused_alike(src, tmp_path, "--columns", tester_map) == (
+        f"{src}:2: column '{column}': the units row's {message}: convert the column to one of "
+        f"them")
+    src.write_text('"Time","Extension","Load"\n"(sec)","(mm)","(N)"\n0,0,0\n0.01,0.01,0\n')
+    assert c_run("nte-run", src, tmp_path / "c.csv", "--model", "2", "--columns", tester_map,
+                 "--no-units-check").returncode == 0
+
+
 def test_velocity_only_when_the_map_names_it(files, tmp_path):
     """rig_v has a velocity column vz of zeros: without velocity= it is not read (central
     differences, the same as the file without it), with velocity=vz it is."""

@@ -176,6 +176,13 @@ EXTRA: list[tuple[str, bytes]] = [
     ("a units row alone", H + b"s,mm,N\n"),
     ("a units row, semicolons", b"t_s;depth_mm;force_n\n[s];[mm];[N]\n0;0,5;0\n"),
     ("a units row of empty brackets", H + b"(),mm,N\n0,0,0\n"),
+    ("a units row with a load cell's volts", H + b"(s),(mm),(V)\n0,0,0\n"),
+    ("a units row of volts only", H + b"(V),(V),(V)\n0,0,0\n"),
+    ("a units row with a bracket in another column", H[:-1] + b",temp\n,,,(degC)\n0,0,0,1\n"),
+    ("a units row in sec and msec", H + b"(sec),mm,N\n0,0,0\n"),
+    ("a units row in msec", H + b"msec,mm,N\n0,0,0\n"),
+    ("a names row repeated under the header", H + b"Time,Depth,Force\n0,0,0\n"),
+    ("names with sec", b"Time (sec),Depth (mm),Force (N)\n0,0,0\n"),
     # clock times (clock_time): a date and time, or a time of day, read in seconds
     ("dates and times, space", H + b"2026-11-30 12:00:00.000000,0,0\n"
                                b"2026-11-30 12:00:00.010267,0.1,0\n2026-11-30 12:00:01,0.2,0\n"),
