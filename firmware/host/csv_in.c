@@ -34,6 +34,9 @@ enum { start_record, start_field, in_field, in_quoted, quote_in_quoted, eat_crnl
 #define CSV_OUT_OF_MEMORY (-1)
 #define CSV_FIELD_LIMIT (-2)
 #define CSV_NEWLINE (-3)
+/* csvio.BLANKS: the separator of cells cut at runs of spaces (a header line holding none of
+ * ',', ';', '\t' whose names so cut are the ones read) */
+#define BLANKS ' '
 
 /* One record as it is read: the cells' bytes, each followed by '\0', and where each begins. */
 typedef struct record_t {
@@ -131,6 +134,8 @@ static int feed(record_t* r, const int c)
             r->state = (c == EOL) ? start_record : eat_crnl;
         } else if (c == '"') {
             r->state = in_quoted;
+        } else if ((c == ' ') && (r->delimiter == BLANKS)) {
+            /* skipinitialspace: a run of spaces is one separator */
         } else if (c == r->delimiter) {
             rc = save_field(r);
         } else {
@@ -223,8 +228,9 @@ static int names_hold(const char* line, const size_t n, const char d, const char
 }
 
 /* csvio.delimiter_of: the first of ',', ';', '\t' (csvio.DELIMITERS) outside double quotes in
- * the header's first line, ',' when none is; where it holds more than one, the first under
- * which the line's names include every one of `want` (names_hold). */
+ * the header's first line; where it holds more than one, the first under which the line's
+ * names include every one of `want` (names_hold); where it holds none, BLANKS if its names cut
+ * at spaces include them all, else ','. */
 static const char separators[3] = {',', ';', '\t'};
 
 /* Which of the separators (csvio.DELIMITERS, in their order) the line holds outside double
@@ -259,6 +265,9 @@ static char holding(const char* line, const size_t n, const char* const* want, c
             return separators[d];
         }
     }
+    if ((seen[0] + seen[1] + seen[2]) == 0) {
+        return names_hold(line, n, BLANKS, want, n_want) ? BLANKS : (char)0;
+    }
     return 0;
 }
 
@@ -279,7 +288,23 @@ static char delimiter_of(const char* line, const size_t n, const char* const* wa
             return order[d];
         }
     }
-    return ',';
+    return ((n_want > 0U) && names_hold(line, n, BLANKS, want, n_want)) ? BLANKS : ',';
+}
+
+/* csvio._trailing_blanks_dropped: the length of line[0..n) without the spaces and tabs before
+ * its line break; the break itself (the `brk` bytes from line + n - brk) is kept by the
+ * caller. */
+static size_t trailing_blanks(const char* line, const size_t n, size_t* brk)
+{
+    size_t end = n;
+    while ((end > 0U) && ((line[end - 1U] == '\n') || (line[end - 1U] == '\r'))) {
+        end--;
+    }
+    *brk = n - end;
+    while ((end > 0U) && ((line[end - 1U] == ' ') || (line[end - 1U] == '\t'))) {
+        end--;
+    }
+    return end;
 }
 
 /* csvio._NUMBER, [+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?, over the whole text; with
@@ -877,9 +902,9 @@ static int take(table_t* tb, record_t* r, const size_t lineno)
 
 /* csvio.read_table's records: where the first line that is not blank does not hold the names
  * read (a logger's preamble), the separator of the first later line that does (holding), if one
- * does, into *delimiter.  The lines from text[pos] on (line numbers after `lineno`) are read
- * as the reader reads them: one that is not UTF-8 is refused here (-1, as csvio's look-ahead
- * decodes it), a comment skipped. */
+ * does, into *delimiter: 1, else 0.  The lines from text[pos] on (line numbers after `lineno`)
+ * are read as the reader reads them: one that is not UTF-8 is refused here (-1, as csvio's
+ * look-ahead decodes it), a comment skipped. */
 static int preamble_separator(const char* text, const size_t len, size_t pos, size_t lineno,
                               const char* path, const char* const* want, const size_t n_want,
                               char* delimiter, char* err, const size_t es)
@@ -900,10 +925,91 @@ static int preamble_separator(const char* text, const size_t len, size_t pos, si
         const char d = holding(line, n, want, n_want);
         if (d != 0) {
             *delimiter = d;
-            return 0;
+            return 1;
         }
     }
     return 0;
+}
+
+/* A line of the file (a BOM on the first dropped): the bytes from text[*pos] to the next '\n'
+ * included; *pos moves past it. */
+static const char* next_line(const char* text, const size_t len, size_t* pos, const size_t lineno,
+                             size_t* n)
+{
+    const char* line = text + *pos;
+    const char* nl = memchr(line, '\n', len - *pos);
+    *n = (nl != NULL) ? ((size_t)(nl - line) + 1U) : (len - *pos);
+    *pos += *n;
+    if ((lineno == 1U) && (*n >= 3U) && (memcmp(line, "\xef\xbb\xbf", 3U) == 0)) {
+        line += 3;
+        *n -= 3U;
+    }
+    return line;
+}
+
+/* csvio.read_table's leading comments: the last comment line before text[upto] (the first line
+ * that is neither blank nor a comment) that, without its mark, holds the names read: 1, its
+ * text after the mark in *at, *n, its number in *number and its separator in *delimiter (a
+ * header as numpy.savetxt writes it, "# t_s depth_mm force_n"); 0 when none does. */
+static int header_comment(const char* text, const size_t upto, const char* const* want,
+                          const size_t n_want, const char** at, size_t* n, size_t* number,
+                          char* delimiter)
+{
+    int found = 0;
+    size_t lineno = 0U;
+    for (size_t pos = 0U; pos < upto;) {
+        size_t m = 0U;
+        lineno++;
+        const char* line = next_line(text, upto, &pos, lineno, &m);
+        char d = 0;
+        if ((m > 0U) && (line[0] == NTE_CSV_COMMENT)) {
+            d = holding(line + 1, m - 1U, want, n_want);
+        }
+        if (d != 0) {
+            *at = line + 1;
+            *n = m - 1U;
+            *number = lineno;
+            *delimiter = d;
+            found = 1;
+        }
+    }
+    return found;
+}
+
+/* One line into the csv state machine (as the csv module is fed a line, then its end), the
+ * spaces and tabs before its break dropped where cells are cut at BLANKS; the record is taken
+ * when the line completes it.  0, or -1 with the reason in the table's err. */
+static int feed_line(table_t* tb, record_t* r, const char* line, const size_t n,
+                     const size_t lineno)
+{
+    int e = 0;
+    size_t brk = 0U;
+    const size_t body = (r->delimiter == BLANKS) ? trailing_blanks(line, n, &brk) : n;
+    for (size_t i = 0U; (i < body) && (e == 0); i++) {
+        e = feed(r, (unsigned char)line[i]);
+    }
+    for (size_t i = n - brk; (i < n) && (e == 0); i++) {
+        e = feed(r, (unsigned char)line[i]);
+    }
+    e = (e == 0) ? feed(r, EOL) : e;
+    if (e == CSV_FIELD_LIMIT) {
+        fail(tb->err, tb->es, "%s:%zu: field larger than field limit (%u)", tb->path, lineno,
+             (unsigned)NTE_CSV_FIELD_LIMIT);
+        return -1;
+    }
+    if (e != 0) {
+        fail(tb->err, tb->es, "%s:%zu: %s", tb->path, lineno,
+             (e == CSV_NEWLINE) ? "new-line character seen in unquoted field - do you need "
+                                  "to open the file in universal-newline mode?"
+                                : "out of memory");
+        return -1;
+    }
+    if (r->state != start_record) {
+        return 0;
+    }
+    const int rc = take(tb, r, lineno);
+    record_reset(r);
+    return rc;
 }
 
 int nte_trial_read(const char* path, nte_trial_t* tr, char* err, const size_t es)
@@ -956,15 +1062,10 @@ int nte_trial_read_columns(const char* path, const nte_columns_t* cols, nte_tria
     /* csvio's lines: split after every '\n', decoded (the first without its BOM), a comment
      * skipped wherever it stands; each fed to the csv reader, character by character */
     for (size_t pos = 0U; (pos < len) && (rc == 0);) {
-        const char* line = text + pos;
-        const char* nl = memchr(line, '\n', len - pos);
-        size_t n = (nl != NULL) ? ((size_t)(nl - line) + 1U) : (len - pos);
-        pos += n;
+        const size_t start = pos;
+        size_t n = 0U;
         lineno++;
-        if ((lineno == 1U) && (n >= 3U) && (memcmp(line, "\xef\xbb\xbf", 3U) == 0)) {
-            line += 3;
-            n -= 3U;
-        }
+        const char* line = next_line(text, len, &pos, lineno, &n);
         if (!nte_py_utf8(line, n)) {
             fail(err, es, "%s:%zu: not UTF-8 text", path, lineno);
             rc = -1;
@@ -977,37 +1078,24 @@ int nte_trial_read_columns(const char* path, const nte_columns_t* cols, nte_tria
         if ((decided == 0) && (nte_py_strip(&visible, n) > 0U)) {
             r.delimiter = delimiter_of(line, n, want, n_want);
             decided = 1;
-            if (!names_hold(line, n, r.delimiter, want, n_want) &&
-                (preamble_separator(text, len, pos, lineno, path, want, n_want, &r.delimiter, err,
-                                    es) != 0)) {
-                rc = -1;
+            int held = names_hold(line, n, r.delimiter, want, n_want);
+            if (held == 0) {
+                held = preamble_separator(text, len, pos, lineno, path, want, n_want, &r.delimiter,
+                                          err, es);
+                rc = (held < 0) ? -1 : 0;
+            }
+            const char* comment = NULL;
+            size_t cn = 0U;
+            size_t cline = 0U;
+            if ((held == 0) &&
+                header_comment(text, start, want, n_want, &comment, &cn, &cline, &r.delimiter)) {
+                rc = feed_line(&tb, &r, comment, cn, cline);
+            }
+            if (rc != 0) {
                 break;
             }
         }
-        int e = 0;
-        for (size_t i = 0U; (i < n) && (e == 0); i++) {
-            e = feed(&r, (unsigned char)line[i]);
-        }
-        e = (e == 0) ? feed(&r, EOL) : e;
-        if (e == CSV_FIELD_LIMIT) {
-            fail(err, es, "%s:%zu: field larger than field limit (%u)", path, lineno,
-                 (unsigned)NTE_CSV_FIELD_LIMIT);
-        } else if (e != 0) {
-            fail(err, es, "%s:%zu: %s", path, lineno,
-                 (e == CSV_NEWLINE) ? "new-line character seen in unquoted field - do you need "
-                                      "to open the file in universal-newline mode?"
-                                    : "out of memory");
-        } else {
-            /* the line was read */
-        }
-        if (e != 0) {
-            rc = -1;
-            break;
-        }
-        if (r.state == start_record) {
-            rc = take(&tb, &r, lineno);
-            record_reset(&r);
-        }
+        rc = feed_line(&tb, &r, line, n, lineno);
     }
     /* the end of the file inside quotes (or a cell): that record is the last */
     if ((rc == 0) && ((r.chars != 0U) || (r.state == in_quoted))) {

@@ -3,9 +3,11 @@
  * reference_py/tools/csvio.py read_trial, with the rules of its docstring and the csv module's
  * excel dialect: UTF-8 with or without a BOM, '#' comments, blank lines and rows of empty cells
  * skipped, quoted cells, "" inside quotes, a quoted cell across lines; ',' ';' or a tab
- * between cells as the header's first line shows, a decimal comma where it is not ','; a row
- * whose depth, force or given velocity is missing left out, and one whose time repeats the
- * previous sample's; a preamble before the header skipped, a units row after it kept
+ * between cells as the header's first line shows, or runs of spaces where it holds none of
+ * them (numpy.savetxt's default), a decimal comma where it is not ','; a row whose depth, force
+ * or given velocity is missing left out, and one whose time repeats the previous sample's; a
+ * preamble before the header skipped, a header in a leading comment where no other line holds
+ * the names (numpy.savetxt's "# t_s depth_mm force_n"), a units row after it kept
  * (units_row.h), a time written as a clock read in seconds (clock_time.h); the same refusals
  * word for word).  The rules' constants are generated
  * from the Python reader into nte_units.h.  Host only: uses malloc and double.

@@ -125,8 +125,10 @@ def read_candump(path: Path) -> Trial:
     return Trial(path.stem, tf - t0, np.interp(tf, td, d), f, np.interp(tf, td, v))
 
 
+#: by suffix: .txt and .dat are what numpy.savetxt, MATLAB and plotting programs write
 READERS: dict[str, Callable[[Path], Trial]] = {".csv": read_csv, ".tsv": read_csv,
-                                               ".txt": read_csv, ".log": read_candump}
+                                               ".txt": read_csv, ".dat": read_csv,
+                                               ".log": read_candump}
 
 
 def read_trial(path: str | Path, units: Units | None = None) -> Trial:

@@ -7,12 +7,16 @@ Reading (:func:`read_table`, :func:`read_trial`)
     other line that holds every required name is the header (column names, surrounding spaces
     ignored, no duplicates); the lines before it are a logger's preamble, skipped -- unless a
     sample (:func:`_is_data`) comes first, when the first of them is refused as the header
-    (the first whose names ``missing_hint`` advises on, if any).  Every later line is one
-    sample with exactly as many cells as the header; the first may be a *units row*
-    (:mod:`reference_py.tools.units_row`).  A time written as a clock reads in seconds
+    (the first whose names ``missing_hint`` advises on, if any).  Where no line but a comment
+    holds the names, the last such comment before the first line that is neither blank nor a
+    comment, its ``#`` dropped, is the header (numpy.savetxt writes ``# t_s depth_mm
+    force_n``).  Every later
+    line is one sample with exactly as many cells as the header; the first may be a *units
+    row* (:mod:`reference_py.tools.units_row`).  A time written as a clock reads in seconds
     (:mod:`reference_py.tools.clock_time`).  Cells are separated by commas, or -- as loggers
-    and spreadsheets set to a decimal comma write -- by semicolons or tabs: the header's first
-    line decides (:func:`delimiter_of`).  Where the separator is not a comma, a number may
+    and spreadsheets set to a decimal comma write -- by semicolons or tabs, or by runs of
+    spaces (numpy.savetxt's default, a plotting program's .dat file): the header's first line
+    decides (:func:`delimiter_of`).  Where the separator is not a comma, a number may
     write its decimal mark as a comma (``2,5`` is 2.5).  Cells may be quoted.  Required columns
     for an insertion: ``t_s``, ``depth_mm``, ``force_n``; ``velocity_mm_s`` is optional (when it
     is absent it is computed by central differences of depth); other columns are kept in
@@ -82,6 +86,10 @@ _NUMBER_DECIMAL_COMMA = re.compile(r"[+-]?(\d+[.,]?\d*|[.,]\d+)([eE][+-]?\d+)?",
 #: the cell separators the reader knows, in the order the header's first line is searched
 #: for them (C twin: csv_in.c delimiter_of)
 DELIMITERS = (",", ";", "\t")
+#: ... and where a header's line holds none of them: cells separated by runs of spaces
+#: (numpy.savetxt's default, a plotting program's .dat file), when the line's names so cut
+#: include every one read; leading and trailing spaces and tabs of each line are then ignored
+BLANKS = " "
 _NOT_FINITE = re.compile(r"[+-]?(nan|inf|infinity)", re.IGNORECASE | re.ASCII)
 _NAN = re.compile(r"[+-]?nan", re.IGNORECASE | re.ASCII)
 #: a missing value: an empty cell or a dropout's word (C twin: csv_in.c is_missing)
@@ -134,10 +142,13 @@ class Trial:
 
 def delimiter_of(line: str, wanted: Sequence[str] = ()) -> str:
     """The cell separator of a file whose header starts with ``line``: the first of DELIMITERS
-    found outside double quotes, a comma when there is none (a one-column header).  Where the
-    line holds more than one, the first under which its names include every one of ``wanted``
-    (the columns to read): a semicolon file may have a name with a comma, "Temp, C"."""
+    found outside double quotes.  Where the line holds more than one, the first under which
+    its names include every one of ``wanted`` (the columns to read): a semicolon file may have
+    a name with a comma, "Temp, C".  Where it holds none, BLANKS if its names cut at spaces
+    include every one of ``wanted``, else a comma (a one-column header)."""
     found = _separators(line)
+    if not found:
+        return BLANKS if wanted and set(wanted) <= set(_names(line, BLANKS)) else ","
     for d in found if len(found) > 1 and wanted else []:
         if set(wanted) <= set(_names(line, d)):
             return d
@@ -145,9 +156,11 @@ def delimiter_of(line: str, wanted: Sequence[str] = ()) -> str:
 
 
 def _holding(line: str, wanted: Sequence[str]) -> str:
-    """The first of DELIMITERS found in ``line`` outside double quotes under which its names
-    include every one of ``wanted``; "" when none does (C twin: csv_in.c holding)."""
-    return next((d for d in _separators(line) if set(wanted) <= set(_names(line, d))), "")
+    """The first of DELIMITERS found in ``line`` outside double quotes (BLANKS where it holds
+    none of them) under which its names include every one of ``wanted``; "" when none does (C
+    twin: csv_in.c holding)."""
+    return next((d for d in _separators(line) or [BLANKS]
+                 if set(wanted) <= set(_names(line, d))), "")
 
 
 def _separators(line: str) -> list[str]:
@@ -160,6 +173,13 @@ def _separators(line: str) -> list[str]:
         elif not quoted:
             outside.append(ch)
     return [d for d in DELIMITERS if d in outside]
+
+
+def _trailing_blanks_dropped(text: str) -> str:
+    """A line without the spaces and tabs before its line break (C twin: csv_in.c
+    trailing_blanks)."""
+    body = text.rstrip("\r\n")
+    return body.rstrip(" \t") + text[len(body):]
 
 
 def _names(line: str, delimiter: str) -> list[str]:
@@ -239,10 +259,15 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
     except OSError as exc:
         raise CsvError(f"{name}: cannot read: {exc.strerror or exc}") from None
     lineno = 0
+    # the comments before the first line that is neither blank nor a comment, without their
+    # mark, with their numbers: where no other line holds the names read, the last of them
+    # that does is the header (numpy.savetxt writes its header so: "# t_s depth_mm force_n")
+    leading_comments: list[tuple[int, str]] = []
 
     def numbered() -> Iterator[str]:
         """Decoded lines, comments skipped; ``lineno`` is the physical line last read."""
         nonlocal lineno
+        started = False
         for raw in fh:
             lineno += 1
             try:
@@ -250,14 +275,18 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
             except UnicodeDecodeError:
                 raise CsvError(f"{name}:{lineno}: not UTF-8 text") from None
             if text.startswith(COMMENT):
+                if not started:
+                    leading_comments.append((lineno, text[len(COMMENT):]))
                 continue
+            started = started or bool(text.strip())
             yield text
 
     def records() -> Iterator[list[str]]:
         """The csv module's records, split at the separator the header's first line shows
         (the blank lines before it are read with any: they hold no separator); where the first
         line that is not blank does not hold the names read (a logger's preamble), at the
-        separator of the first line that does (:func:`_holding`), if one does."""
+        separator of the first line that does (:func:`_holding`), if one does; where none
+        does, the last leading comment that holds them is the header, at its separator."""
         nonlocal lineno, delimiter
         lines = numbered()
         ahead: list[tuple[int, str]] = []      # lines read ahead, with their numbers
@@ -265,21 +294,37 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
             ahead.append((lineno, text))
             if text.strip():
                 break
+        begun = bool(ahead) and bool(ahead[-1][1].strip())     # a line not blank was found
         delimiter = delimiter_of(ahead[-1][1], required) if ahead else ","
-        if ahead and required and not set(required) <= set(_names(ahead[-1][1], delimiter)):
+        held = not required or (bool(ahead)
+                                and set(required) <= set(_names(ahead[-1][1], delimiter)))
+        if ahead and not held:
             for text in lines:
                 ahead.append((lineno, text))
                 found = _holding(text, required)
                 if found:
-                    delimiter = found
+                    delimiter, held = found, True
                     break
+        for number, text in reversed(leading_comments) if begun and not held else []:
+            found = _holding(text, required)
+            if found:
+                delimiter = found
+                ahead.insert(sum(at < number for at, _ in ahead), (number, text))
+                break
 
         def replayed() -> Iterator[str]:
             nonlocal lineno
             for number, text in ahead:
                 lineno = number
                 yield text
-        yield from csv.reader(itertools.chain(replayed(), lines), delimiter=delimiter)
+        source = itertools.chain(replayed(), lines)
+        if delimiter == BLANKS:
+            # runs of spaces between cells (the csv module's skipinitialspace), none at a line's
+            # end, which would make an empty last cell
+            yield from csv.reader(map(_trailing_blanks_dropped, source), delimiter=BLANKS,
+                                  skipinitialspace=True)
+        else:
+            yield from csv.reader(source, delimiter=delimiter)
 
     header: list[str] | None = None
     header_line = 0

@@ -47,15 +47,18 @@ def records_fixture(extra: Callable[[Path, dict[str, Path]], dict[str, Path]]):
 
 
 def c_run(prog: str, csv: Path, out: Path, *flags: str) -> subprocess.CompletedProcess:
-    """nte-run or nte-run-double on `csv`, writing `out`."""
-    return subprocess.run([str(PROGS[prog]), str(csv), "--out", str(out), *flags],
-                          capture_output=True, text=True, timeout=120)
+    """nte-run or nte-run-double on `csv`, writing `out`.  Its output decoded as it is written:
+    text=True would turn a CR inside a quoted name the message repeats into a line break."""
+    r = subprocess.run([str(PROGS[prog]), str(csv), "--out", str(out), *flags],
+                       capture_output=True, timeout=120)
+    return subprocess.CompletedProcess(r.args, r.returncode, r.stdout.decode(), r.stderr.decode())
 
 
 def reference(csv: Path, out: Path, *flags: str) -> subprocess.CompletedProcess:
-    """`nte-ref estimate` on `csv`, writing `out`."""
-    return subprocess.run([sys.executable, "-m", "reference_py", "estimate", str(csv),
-                           "--out", str(out), *flags], capture_output=True, text=True, cwd=ROOT)
+    """`nte-ref estimate` on `csv`, writing `out` (its output decoded as c_run's)."""
+    r = subprocess.run([sys.executable, "-m", "reference_py", "estimate", str(csv),
+                        "--out", str(out), *flags], capture_output=True, cwd=ROOT)
+    return subprocess.CompletedProcess(r.args, r.returncode, r.stdout.decode(), r.stderr.decode())
 
 
 def body(stderr: str, prog: str) -> str:

@@ -157,6 +157,21 @@ def test_exports_with_a_decimal_comma_or_tabs(tmp_path: Path, suffix: str, separ
         assert np.array_equal(getattr(got, name), getattr(ref, name))
 
 
+@pytest.mark.parametrize("suffix", [".txt", ".dat"])
+def test_a_numpy_savetxt_file_reads_as_the_plain_file(tmp_path: Path, suffix: str) -> None:
+    """A trial saved by numpy.savetxt's defaults (spaces, '%.18e', the header in a comment), as
+    a researcher's script writes it, reads exactly as the plain file."""
+    from reference_py.discrepancy.io import read_trial
+    tr = make_case(("dwell_relaxation",), 5).trials[0]
+    plain, saved = tmp_path / "plain.csv", tmp_path / f"saved{suffix}"
+    write_csv(plain, tr)
+    np.savetxt(saved, np.column_stack((tr.t_s, tr.depth_mm, tr.force_n)),
+               header="t_s depth_mm force_n")
+    got, ref = read_trial(saved), read_trial(plain)
+    for name in ("t_s", "depth_mm", "force_n"):
+        assert np.array_equal(getattr(got, name), getattr(ref, name))
+
+
 def test_candump_log_decoded_with_the_dbc(tmp_path: Path) -> None:
     """A candump log of the bench's Depth and Force frames, written with python-can through the
     project's DBC, reads back as the trial (to the frames' scaling)."""

@@ -140,6 +140,29 @@ def test_a_units_row_with_a_unit_not_read_names_the_units_that_are(tmp_path, uni
                  "--no-units-check").returncode == 0
 
 
+@pytest.mark.parametrize("delimiter", [" ", ",", "\t"])
+def test_numpy_savetxt_files_read_as_the_standard_file(files, tmp_path, delimiter):
+    """A trial saved by numpy.savetxt as a researcher's script does (its header in a comment,
+    '%.18e', spaces by default): read by both programs and the reference, to the standard
+    file's estimates byte for byte (the digits round-trip float64)."""
+    data = np.loadtxt(files["std"], delimiter=",", skiprows=1)
+    src = tmp_path / "saved.txt"
+    np.savetxt(src, data, delimiter=delimiter, header=delimiter.join(("t_s", "depth_mm",
+                                                                      "force_n")))
+    assert src.read_text().startswith("# t_s")
+    py, want = tmp_path / "py.csv", tmp_path / "want.csv"
+    assert reference(files["std"], want, "--model", "2", "--precision", "float64").returncode == 0
+    r = reference(src, py, "--model", "2", "--precision", "float64")
+    assert r.returncode == 0, r.stderr
+    assert py.read_bytes() == want.read_bytes()
+    for prog in PROGS:
+        c, std = tmp_path / f"{prog}.csv", tmp_path / f"{prog}-std.csv"
+        assert c_run(prog, files["std"], std, "--model", "2").returncode == 0
+        r = c_run(prog, src, c, "--model", "2")
+        assert r.returncode == 0, (prog, r.stderr)
+        assert c.read_bytes() == std.read_bytes(), prog
+
+
 def test_velocity_only_when_the_map_names_it(files, tmp_path):
     """rig_v has a velocity column vz of zeros: without velocity= it is not read (central
     differences, the same as the file without it), with velocity=vz it is."""

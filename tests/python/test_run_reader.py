@@ -183,6 +183,44 @@ EXTRA: list[tuple[str, bytes]] = [
     ("a units row in msec", H + b"msec,mm,N\n0,0,0\n"),
     ("a names row repeated under the header", H + b"Time,Depth,Force\n0,0,0\n"),
     ("names with sec", b"Time (sec),Depth (mm),Force (N)\n0,0,0\n"),
+    # cells cut at runs of spaces (csvio.BLANKS): a header line with no other separator
+    ("spaces between cells", b"t_s depth_mm force_n\n0 0 0\n0.01 0.1 0\n"),
+    ("runs of spaces, leading and trailing, CRLF",
+     b"  t_s   depth_mm  force_n  \r\n  0.00   0.00  0.00   \r\n 0.01  0.10  0.00 \t\r\n"),
+    ("numpy.savetxt's digits", b"t_s depth_mm force_n\n0.000000000000000000e+00 "
+                               b"0.000000000000000000e+00 1.000000000000000021e-02\n"),
+    ("spaces and quoted names", b'"t_s" "depth_mm" "force_n" "temp C"\n0 0 0 21\n'),
+    ("spaces and a decimal comma", b"t_s depth_mm force_n\n0 0,5 0\n"),
+    ("spaces, a cell short", b"t_s depth_mm force_n\n0 0 0\n0.01 0.1\n"),
+    ("spaces, a tab inside a row", b"t_s depth_mm force_n\n0\t0 0\n"),
+    ("spaces, a blank line between samples", b"t_s depth_mm force_n\n0 0 0\n   \n0.01 0.1 0\n"),
+    ("spaces, an empty quoted cell", b't_s depth_mm force_n\n0 "" 0\n'),
+    ("a preamble, then a header with spaces", b"Rig 3\nt_s depth_mm force_n\n0 0 0\n"),
+    ("a header with spaces, then commas", b"t_s depth_mm force_n\n0,0,0\n"),
+    ("names with spaces that are not the names read", b"Time Depth Force\n0 0 0\n"),
+    ("a header with spaces, a comma in a name", b"t_s depth_mm force_n a,b\n0 0 0 1\n"),
+    # a header in a comment (the last leading comment that holds the names, where no other
+    # line does), as numpy.savetxt writes it
+    ("numpy.savetxt's header and cells", b"# t_s depth_mm force_n\n"
+                                         b"0.000000000000000000e+00 0.000000000000000000e+00 "
+                                         b"0.000000000000000000e+00\n1.000000000000000021e-02 "
+                                         b"1.000000000000000056e-01 0.000000000000000000e+00\n"),
+    ("a header in a comment, commas", b"#t_s,depth_mm,force_n\n0,0,0\n"),
+    ("two comments that hold the names", b"# t_s,depth_mm,force_n\n# t_s;depth_mm;force_n\n"
+                                         b"0;0,5;0\n"),
+    ("a header in a comment and a header", b"# t_s depth_mm force_n\n" + H + b"0,0,0\n"),
+    ("a header in a comment after a BOM", b"\xef\xbb\xbf# t_s,depth_mm,force_n\n0,0,0\n"),
+    ("a header in a comment among comments and blank lines",
+     b"# rig 3\n\n# t_s,depth_mm,force_n\n  \n# units: s, mm, N\n0,0,0\n0.01,0.1,0\n"),
+    ("a header in a comment after the first sample", b"0,0,0\n# t_s,depth_mm,force_n\n"
+                                                     b"0.01,0,0\n"),
+    ("a header in a comment, then a preamble line", b"# t_s,depth_mm,force_n\nRig 3\n0,0,0\n"),
+    ("a header in a comment, a preamble, a header", b"# t_s,depth_mm,force_n\nRig 3\n" + H
+                                                    + b"0,0,0\n"),
+    ("a header in a comment, no sample", b"# t_s,depth_mm,force_n\n"),
+    ("a header in a comment, blank lines only", b"# t_s,depth_mm,force_n\n\n  \n"),
+    ("a header in a comment, an open quote", b'# "t_s,depth_mm,force_n\n0,0,0\n'),
+    ("a header in a comment, not UTF-8 later", b"# t_s,depth_mm,force_n\n0,0,0\n\xff\n"),
     # clock times (clock_time): a date and time, or a time of day, read in seconds
     ("dates and times, space", H + b"2026-11-30 12:00:00.000000,0,0\n"
                                b"2026-11-30 12:00:00.010267,0.1,0\n2026-11-30 12:00:01,0.2,0\n"),
@@ -323,7 +361,9 @@ ATOMS = [b"0", b"1", b"2", b"5", b"9", b".", b"e", b"-", b"+", b",", b",", b",",
          b"\xc2\xa0", b"\xef\xbb\xbf", b"\xff", b"'", b"\\", b"x", b"\xe2\x80\x83", b"\xc3\xa9",
          b"\x1c", b";", b";", b"NA", b"NaN", b"n/a"]
 HEADS = [H, b'"t_s",depth_mm, force_n\r\n', b"\xef\xbb\xbf# c\nt_s,depth_mm,velocity_mm_s,force_n\n",
-         b"t_s,depth_mm\n", b"", b"t_s;depth_mm;force_n\n", b'\n"t_s"\tdepth_mm\t"force_n"\n']
+         b"t_s,depth_mm\n", b"", b"t_s;depth_mm;force_n\n", b'\n"t_s"\tdepth_mm\t"force_n"\n',
+         b"  t_s depth_mm   force_n \n", b"# t_s depth_mm force_n\n",
+         b"#t_s,depth_mm,force_n\n"]
 
 
 @pytest.mark.parametrize("seed", [1, 2])
@@ -336,7 +376,7 @@ def test_random_files_read_alike(tmp_path, capsys, seed):
         for _ in range(rng.randint(0, 4)):
             if rng.random() < 0.6:
                 t += rng.choice([1, 1, 0, -1])
-                sep = rng.choice([b",", b",", b";", b"\t"])
+                sep = rng.choice([b",", b",", b";", b"\t", b" ", b"  "])
                 data += sep.join([b"%d" % t, rng.choice([b"1", b"2.5", b" 3 ", b'"4"', b"1e2",
                                                           b"2,5", b'"0,5"', b""]),
                                   rng.choice([b"0", b"-1", b".5", b",5", b"nan", b""])]) + b"\n"
