@@ -947,33 +947,91 @@ static const char* next_line(const char* text, const size_t len, size_t* pos, co
     return line;
 }
 
-/* csvio.read_table's leading comments: the last comment line before text[upto] (the first line
- * that is neither blank nor a comment) that, without its mark, holds the names read: 1, its
- * text after the mark in *at, *n, its number in *number and its separator in *delimiter (a
- * header as numpy.savetxt writes it, "# t_s depth_mm force_n"); 0 when none does. */
-static int header_comment(const char* text, const size_t upto, const char* const* want,
-                          const size_t n_want, const char** at, size_t* n, size_t* number,
-                          char* delimiter)
+/* csvio._advising: the separator a leading comment's names are cut at (its first of ',', ';',
+ * '\t', else BLANKS) when unit_suffix_hint advises on those names (cut as names_hold cuts
+ * them); 0 when it does not, or out of memory. */
+static char advising(const char* line, const size_t n)
 {
-    int found = 0;
-    size_t lineno = 0U;
-    for (size_t pos = 0U; pos < upto;) {
-        size_t m = 0U;
-        lineno++;
-        const char* line = next_line(text, upto, &pos, lineno, &m);
-        char d = 0;
-        if ((m > 0U) && (line[0] == NTE_CSV_COMMENT)) {
-            d = holding(line + 1, m - 1U, want, n_want);
-        }
-        if (d != 0) {
-            *at = line + 1;
-            *n = m - 1U;
-            *number = lineno;
-            *delimiter = d;
-            found = 1;
+    int seen[3];
+    separators_seen(line, n, seen);
+    char d = BLANKS;
+    for (size_t k = 3U; k > 0U; k--) {
+        if (seen[k - 1U] != 0) {
+            d = separators[k - 1U];
         }
     }
-    return found;
+    char* text = malloc(n + 1U);
+    char** names = malloc((n + 1U) * sizeof *names);
+    char advice[1024] = "";
+    if ((text != NULL) && (names != NULL)) {
+        size_t count = 0U;
+        size_t from = 0U;
+        size_t len = 0U;
+        int quoted = 0;
+        for (size_t i = 0U; i <= n; i++) {
+            if ((i < n) && (quoted || (line[i] != d))) {
+                if (line[i] == '"') {
+                    quoted = !quoted;
+                } else {
+                    text[len++] = line[i];
+                }
+                continue;
+            }
+            const char* name = text + from;
+            const size_t m = nte_py_strip(&name, len - from);
+            names[count] = (char*)name;
+            names[count][m] = '\0';
+            count++;
+            len++; /* the stripped name's end, or its last blank, holds the '\0' */
+            from = len;
+        }
+        unit_suffix_hint(names, count, advice, sizeof advice);
+    }
+    free(text);
+    free(names);
+    if (advice[0] == '\0') {
+        d = 0;
+    }
+    return d;
+}
+
+/* csvio.read_table's leading comments: the last comment line before text[upto] (the first line
+ * that is neither blank nor a comment) that, without its mark, holds the names read -- else,
+ * with `advise`, the last whose names unit_suffix_hint advises on (advising) -- 1, its text
+ * after the mark in *at, *n, its number in *number and its separator in *delimiter (a header
+ * as numpy.savetxt writes it, "# t_s depth_mm force_n"); 0 when none does. */
+static int header_comment(const char* text, const size_t upto, const char* const* want,
+                          const size_t n_want, const int advise, const char** at, size_t* n,
+                          size_t* number, char* delimiter)
+{
+    for (int pass = 0; pass < (advise ? 2 : 1); pass++) {
+        int found = 0;
+        size_t lineno = 0U;
+        for (size_t pos = 0U; pos < upto;) {
+            size_t m = 0U;
+            lineno++;
+            const char* line = next_line(text, upto, &pos, lineno, &m);
+            char d = 0;
+            if ((m > 0U) && (line[0] == NTE_CSV_COMMENT)) {
+                if (pass == 0) {
+                    d = holding(line + 1, m - 1U, want, n_want);
+                } else {
+                    d = advising(line + 1, m - 1U);
+                }
+            }
+            if (d != 0) {
+                *at = line + 1;
+                *n = m - 1U;
+                *number = lineno;
+                *delimiter = d;
+                found = 1;
+            }
+        }
+        if (found != 0) {
+            return 1;
+        }
+    }
+    return 0;
 }
 
 /* One line into the csv state machine (as the csv module is fed a line, then its end), the
@@ -1009,6 +1067,30 @@ static int feed_line(table_t* tb, record_t* r, const char* line, const size_t n,
     }
     const int rc = take(tb, r, lineno);
     record_reset(r);
+    return rc;
+}
+
+/* csvio.read_table's read-ahead replayed: the lines before text[upto] -- blank lines and
+ * comments only, as the first other line is there -- fed in order once the separator is known:
+ * the blank ones, and the comment on line `cline` (0: none) as the header, its text after the
+ * mark comment[0..cn). */
+static int feed_leading(table_t* tb, record_t* r, const char* text, const size_t upto,
+                        const size_t cline, const char* comment, const size_t cn)
+{
+    int rc = 0;
+    size_t lineno = 0U;
+    for (size_t pos = 0U; (pos < upto) && (rc == 0);) {
+        size_t n = 0U;
+        lineno++;
+        const char* line = next_line(text, upto, &pos, lineno, &n);
+        if (lineno == cline) {
+            rc = feed_line(tb, r, comment, cn, lineno);
+        } else if ((n == 0U) || (line[0] != NTE_CSV_COMMENT)) {
+            rc = feed_line(tb, r, line, n, lineno);
+        } else {
+            /* a comment */
+        }
+    }
     return rc;
 }
 
@@ -1075,7 +1157,10 @@ int nte_trial_read_columns(const char* path, const nte_columns_t* cols, nte_tria
             continue;
         }
         const char* visible = line;
-        if ((decided == 0) && (nte_py_strip(&visible, n) > 0U)) {
+        if ((decided == 0) && (nte_py_strip(&visible, n) == 0U)) {
+            continue; /* a blank line before the first other: read once the separator is known */
+        }
+        if (decided == 0) {
             r.delimiter = delimiter_of(line, n, want, n_want);
             decided = 1;
             int held = names_hold(line, n, r.delimiter, want, n_want);
@@ -1084,18 +1169,22 @@ int nte_trial_read_columns(const char* path, const nte_columns_t* cols, nte_tria
                                           err, es);
                 rc = (held < 0) ? -1 : 0;
             }
+            size_t cline = 0U;
             const char* comment = NULL;
             size_t cn = 0U;
-            size_t cline = 0U;
-            if ((held == 0) &&
-                header_comment(text, start, want, n_want, &comment, &cn, &cline, &r.delimiter)) {
-                rc = feed_line(&tb, &r, comment, cn, cline);
+            if ((held == 0) && !header_comment(text, start, want, n_want, cols->mapped == 0,
+                                               &comment, &cn, &cline, &r.delimiter)) {
+                cline = 0U;
             }
+            rc = (rc == 0) ? feed_leading(&tb, &r, text, start, cline, comment, cn) : rc;
             if (rc != 0) {
                 break;
             }
         }
         rc = feed_line(&tb, &r, line, n, lineno);
+    }
+    if ((rc == 0) && (decided == 0)) {
+        rc = feed_leading(&tb, &r, text, len, 0U, NULL, 0U); /* a file of blank lines */
     }
     /* the end of the file inside quotes (or a cell): that record is the last */
     if ((rc == 0) && ((r.chars != 0U) || (r.state == in_quoted))) {

@@ -10,7 +10,8 @@ Reading (:func:`read_table`, :func:`read_trial`)
     (the first whose names ``missing_hint`` advises on, if any).  Where no line but a comment
     holds the names, the last such comment before the first line that is neither blank nor a
     comment, its ``#`` dropped, is the header (numpy.savetxt writes ``# t_s depth_mm
-    force_n``).  Every later
+    force_n``); where none does, the last whose names ``missing_hint`` advises on is refused
+    as the header, with that advice (``# time depth force``).  Every later
     line is one sample with exactly as many cells as the header; the first may be a *units
     row* (:mod:`reference_py.tools.units_row`).  A time written as a clock reads in seconds
     (:mod:`reference_py.tools.clock_time`).  Cells are separated by commas, or -- as loggers
@@ -163,6 +164,13 @@ def _holding(line: str, wanted: Sequence[str]) -> str:
                  if set(wanted) <= set(_names(line, d))), "")
 
 
+def _advising(line: str, hint: Callable[[list[str]], str]) -> str:
+    """The separator ``line``'s names are cut at -- its first of DELIMITERS, else BLANKS --
+    when ``hint`` advises on those names; "" when it does not (C twin: csv_in.c advising)."""
+    cut = (_separators(line) or [BLANKS])[0]
+    return cut if hint(_names(line, cut)) else ""
+
+
 def _separators(line: str) -> list[str]:
     """The DELIMITERS ``line`` holds outside double quotes, in their order (C twin: csv_in.c
     separators_seen)."""
@@ -286,7 +294,9 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
         (the blank lines before it are read with any: they hold no separator); where the first
         line that is not blank does not hold the names read (a logger's preamble), at the
         separator of the first line that does (:func:`_holding`), if one does; where none
-        does, the last leading comment that holds them is the header, at its separator."""
+        does, the last leading comment that holds them is the header, at its separator (or,
+        where none does either, the last that missing_hint advises on, to be refused with
+        that advice)."""
         nonlocal lineno, delimiter
         lines = numbered()
         ahead: list[tuple[int, str]] = []      # lines read ahead, with their numbers
@@ -305,12 +315,17 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
                 if found:
                     delimiter, held = found, True
                     break
-        for number, text in reversed(leading_comments) if begun and not held else []:
-            found = _holding(text, required)
-            if found:
-                delimiter = found
+        if begun and not held:
+            # the last leading comment that holds the names; else, for the refusal's advice,
+            # the last whose names missing_hint advises on ("# time depth force")
+            chosen = [(number, text, found) for number, text in leading_comments
+                      if (found := _holding(text, required))]
+            if not chosen and missing_hint is not None:
+                chosen = [(number, text, found) for number, text in leading_comments
+                          if (found := _advising(text, missing_hint))]
+            if chosen:
+                number, text, delimiter = chosen[-1]
                 ahead.insert(sum(at < number for at, _ in ahead), (number, text))
-                break
 
         def replayed() -> Iterator[str]:
             nonlocal lineno

@@ -163,6 +163,23 @@ def test_numpy_savetxt_files_read_as_the_standard_file(files, tmp_path, delimite
         assert c.read_bytes() == std.read_bytes(), prog
 
 
+def test_a_numpy_savetxt_file_under_its_own_names_reads_with_the_advice(files, tmp_path):
+    """numpy.savetxt under the script's own names ("# time depth force"): refused by both
+    programs with the map that reads it, naming the comment's line; read with it as the
+    standard file."""
+    src = tmp_path / "saved.txt"
+    np.savetxt(src, np.loadtxt(files["std"], delimiter=",", skiprows=1),
+               header="time depth force")
+    advised = "t=time,depth=depth,force=force"
+    assert _refused_alike(src, tmp_path) == (
+        f"{src}:1: column 't_s': missing from the header (have: time, depth, force); read it "
+        f"with --columns {advised}")
+    std, c = tmp_path / "std.csv", tmp_path / "c.csv"
+    assert c_run("nte-run-double", files["std"], std, "--model", "2").returncode == 0
+    assert c_run("nte-run-double", src, c, "--model", "2", "--columns", advised).returncode == 0
+    assert c.read_bytes() == std.read_bytes()
+
+
 def test_velocity_only_when_the_map_names_it(files, tmp_path):
     """rig_v has a velocity column vz of zeros: without velocity= it is not read (central
     differences, the same as the file without it), with velocity=vz it is."""

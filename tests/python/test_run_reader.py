@@ -217,6 +217,16 @@ EXTRA: list[tuple[str, bytes]] = [
     ("a header in a comment, then a preamble line", b"# t_s,depth_mm,force_n\nRig 3\n0,0,0\n"),
     ("a header in a comment, a preamble, a header", b"# t_s,depth_mm,force_n\nRig 3\n" + H
                                                     + b"0,0,0\n"),
+    ("a comment's names advised on", b"# time depth force\n0 0 0\n"),
+    ("a comment's names with units advised on", b"# Time [s], Depth [mm], Force [mN]\n0,0,0\n"),
+    ("a comment that holds the names before one advised on",
+     b"# t_s depth_mm force_n\n# time depth force\n0 0 0\n"),
+    ("a comment advised on, then a header", b"# time depth force\nRig 3\n" + H + b"0,0,0\n"),
+    ("a comment of one name", b"# time\n0 0 0\n"),
+    ("a CR in a blank line before a preamble, then not UTF-8",
+     b"\r\x1c\n11+;\r\n\xef\xbb\xbf+\n\xffx5;0\n"),
+    ("a CR in a blank line, then a header", b"\r\x1c\n" + H + b"0,0,0\n"),
+    ("blank lines only, one with a CR", b"\n\r\x1c\n  \n"),
     ("a header in a comment, no sample", b"# t_s,depth_mm,force_n\n"),
     ("a header in a comment, blank lines only", b"# t_s,depth_mm,force_n\n\n  \n"),
     ("a header in a comment, an open quote", b'# "t_s,depth_mm,force_n\n0,0,0\n'),
@@ -363,7 +373,7 @@ ATOMS = [b"0", b"1", b"2", b"5", b"9", b".", b"e", b"-", b"+", b",", b",", b",",
 HEADS = [H, b'"t_s",depth_mm, force_n\r\n', b"\xef\xbb\xbf# c\nt_s,depth_mm,velocity_mm_s,force_n\n",
          b"t_s,depth_mm\n", b"", b"t_s;depth_mm;force_n\n", b'\n"t_s"\tdepth_mm\t"force_n"\n',
          b"  t_s depth_mm   force_n \n", b"# t_s depth_mm force_n\n",
-         b"#t_s,depth_mm,force_n\n"]
+         b"#t_s,depth_mm,force_n\n", b"# Time [s] depth force\n"]
 
 
 @pytest.mark.parametrize("seed", [1, 2])
