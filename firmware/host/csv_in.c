@@ -629,8 +629,66 @@ static int preamble_line(table_t* tb, const record_t* r, const int advised, cons
     return 0;
 }
 
+/* csvio._positions: a name that is a column's position, from 1, in at most 9 ASCII digits. */
+static int is_position(const char* name)
+{
+    const size_t n = strlen(name);
+    int digits = (n > 0U) && (n <= 9U) && (name[0] != '0');
+    for (size_t i = 0U; (i < n) && (digits != 0); i++) {
+        digits = (name[i] >= '0') && (name[i] <= '9');
+    }
+    return digits;
+}
+
+/* Whether column k (0 time, 1 depth, 2 force, 3 velocity) must be in the header
+ * (csvio.read_trial's `named`): the force unless ignored, the velocity where the map names
+ * it. */
+static int is_required(const nte_columns_t* cols, const size_t k)
+{
+    return (k < 2U) || ((k == 2U) && (cols->force_ignored == 0)) ||
+           ((k == 3U) && (cols->velocity_required != 0));
+}
+
+/* A file without a header, its columns given by their positions (csvio.read_table's
+ * by_position): the names "1".."N" for the first sample's N cells.  1: the record is that
+ * sample, to be taken as a row; -1: a position beyond its cells, or out of memory. */
+static int numbered_header(table_t* tb, const record_t* r, const size_t lineno,
+                           const char* const* want, const size_t n_req)
+{
+    for (size_t k = 0U; k < n_req; k++) {
+        if (is_required(tb->cols, k) && (strtoul(want[k], NULL, 10) > r->n)) {
+            fail(tb->err, tb->es,
+                 "%s:%zu: column '%s': no such position: the first sample has %zu cells", tb->path,
+                 lineno, want[k], r->n);
+            return -1;
+        }
+    }
+    enum { width = 24 }; /* a size_t in decimal, and its '\0' */
+    free(tb->names);
+    tb->names = malloc(r->n * width);
+    if (tb->names == NULL) {
+        fail(tb->err, tb->es, "%s:%zu: out of memory", tb->path, lineno);
+        return -1;
+    }
+    for (size_t k = 0U; k < 4U; k++) {
+        tb->idx[k] = -1;
+    }
+    for (size_t c = 0U; c < r->n; c++) {
+        tb->header[c] = tb->names + (c * width);
+        (void)snprintf(tb->header[c], width, "%zu", c + 1U);
+        for (size_t k = 0U; k < 4U; k++) {
+            if ((tb->idx[k] < 0) && (strcmp(tb->header[c], want[k]) == 0)) {
+                tb->idx[k] = (int)c;
+            }
+        }
+    }
+    tb->header_line = 0U;
+    return 1;
+}
+
 /* The header: names stripped, the required columns there (else the file's names and, for the
- * standard names, how to read a unit in a name), no name twice. */
+ * standard names, how to read a unit in a name), no name twice.  A sample where the names
+ * read are positions: numbered_header. */
 static int take_header(table_t* tb, const record_t* r, const size_t lineno)
 {
     const nte_columns_t* cols = tb->cols;
@@ -658,8 +716,20 @@ static int take_header(table_t* tb, const record_t* r, const size_t lineno)
     tb->header_line = lineno;
     tb->first_record = 1;
     const size_t n_req = (cols->velocity_required != 0) ? 4U : 3U;
+    const int sample = is_data(r);
+    int absent = 0;
+    int by_position = sample;
     for (size_t k = 0U; k < n_req; k++) {
-        if ((tb->idx[k] < 0) && !((k == 2U) && (cols->force_ignored != 0))) {
+        if (is_required(cols, k)) {
+            absent |= (tb->idx[k] < 0);
+            by_position &= is_position(want[k]);
+        }
+    }
+    if ((absent != 0) && (by_position != 0)) {
+        return numbered_header(tb, r, lineno, want, n_req);
+    }
+    for (size_t k = 0U; k < n_req; k++) {
+        if ((tb->idx[k] < 0) && is_required(cols, k)) {
             int o = snprintf(tb->err, tb->es,
                              "%s:%zu: column '%s': missing from the header (have: ", tb->path,
                              lineno, want[k]);
@@ -670,6 +740,9 @@ static int take_header(table_t* tb, const record_t* r, const size_t lineno)
             char advice[1024] = "";
             if (cols->mapped == 0) {
                 unit_suffix_hint(tb->header, r->n, advice, sizeof advice);
+            }
+            if ((cols->mapped == 0) && (advice[0] == '\0') && (sample != 0)) {
+                (void)snprintf(advice, sizeof advice, "; %s", NTE_CSV_NO_HEADER_ADVICE);
             }
             if ((o >= 0) && ((size_t)o < tb->es)) {
                 (void)snprintf(tb->err + o, tb->es - (size_t)o, ")%s", advice);
@@ -897,7 +970,11 @@ static int take(table_t* tb, record_t* r, const size_t lineno)
     if (blank != 0) {
         return 0;
     }
-    return (tb->ncols == 0U) ? take_header(tb, r, lineno) : take_row(tb, r, lineno);
+    if (tb->ncols == 0U) {
+        const int header = take_header(tb, r, lineno);
+        return (header == 1) ? take_row(tb, r, lineno) : header;
+    }
+    return take_row(tb, r, lineno);
 }
 
 /* csvio.read_table's records: where the first line that is not blank does not hold the names

@@ -7,7 +7,8 @@
  * them (numpy.savetxt's default), a decimal comma where it is not ','; a row whose depth, force
  * or given velocity is missing left out, and one whose time repeats the previous sample's; a
  * preamble before the header skipped, a header in a leading comment where no other line holds
- * the names (numpy.savetxt's "# t_s depth_mm force_n"), a units row after it kept
+ * the names (numpy.savetxt's "# t_s depth_mm force_n"), no header where every name read is a
+ * column's position (--columns t=1,depth=2,force=3), a units row after the header kept
  * (units_row.h), a time written as a clock read in seconds (clock_time.h); the same refusals
  * word for word).  The rules' constants are generated
  * from the Python reader into nte_units.h.  Host only: uses malloc and double.

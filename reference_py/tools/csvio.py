@@ -11,7 +11,9 @@ Reading (:func:`read_table`, :func:`read_trial`)
     holds the names, the last such comment before the first line that is neither blank nor a
     comment, its ``#`` dropped, is the header (numpy.savetxt writes ``# t_s depth_mm
     force_n``); where none does, the last whose names ``missing_hint`` advises on is refused
-    as the header, with that advice (``# time depth force``).  Every later
+    as the header, with that advice (``# time depth force``).  A file without a header: where
+    every name read is a position (:func:`_positions`), the first sample's cells are named
+    "1".."N" and it is read as a sample; without a map, its refusal says so.  Every later
     line is one sample with exactly as many cells as the header; the first may be a *units
     row* (:mod:`reference_py.tools.units_row`).  A time written as a clock reads in seconds
     (:mod:`reference_py.tools.clock_time`).  Cells are separated by commas, or -- as loggers
@@ -95,6 +97,10 @@ _NOT_FINITE = re.compile(r"[+-]?(nan|inf|infinity)", re.IGNORECASE | re.ASCII)
 _NAN = re.compile(r"[+-]?nan", re.IGNORECASE | re.ASCII)
 #: a missing value: an empty cell or a dropout's word (C twin: csv_in.c is_missing)
 MISSING_WORDS = ("nan", "+nan", "-nan", "na", "n/a")
+#: the refusal's advice for a file whose first record is a sample (no header) and whose
+#: columns the tool was not told
+NO_HEADER_ADVICE = ("no header line: name the columns by their positions, from 1: --columns "
+                    "t=N,depth=N,force=N")
 #: at most this many left-out lines are listed by left_out_note
 LEFT_OUT_LISTED = 5
 
@@ -367,20 +373,31 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
                 if header is None:
                     names = [c.strip() for c in cells]
                     absent = next((col for col in required if col not in names), None)
-                    if absent is not None:
+                    sample = _is_data(cells, delimiter != ",")
+                    by_position = absent is not None and sample and _positions(required)
+                    beyond = [c for c in required if by_position and int(c) > len(cells)]
+                    if beyond:
+                        raise CsvError(f"{name}:{lineno}: column '{beyond[0]}': no such "
+                                       f"position: the first sample has {len(cells)} cells")
+                    if by_position:
+                        # no header, the columns named by their positions: this is a sample
+                        names = [str(k) for k in range(1, len(cells) + 1)]
+                    elif absent is not None:
                         # a logger's preamble line, or a header without the names: refused
                         # when the samples begin (or the file ends) before the names come
                         advice = missing_hint(names) if missing_hint else ""
+                        if sample and missing_hint and not advice:
+                            advice = NO_HEADER_ADVICE
                         refusal = (f"{name}:{lineno}: column '{absent}': missing from the "
                                    f"header (have: {', '.join(names)})"
                                    + (f"; {advice}" if advice else ""))
-                        if _is_data(cells, delimiter != ","):
+                        if sample:
                             raise CsvError(preamble[1] if preamble else refusal)
                         if not preamble or (advice and not preamble[0]):
                             preamble = (bool(advice), refusal)
                         continue
                     header = names
-                    header_line = lineno
+                    header_line = 0 if by_position else lineno
                     if len(set(header)) != len(header):
                         dup = next(c for c in header if header.count(c) > 1)
                         raise CsvError(f"{name}:{lineno}: column '{dup}': duplicate column "
@@ -389,7 +406,8 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
                     sparse_idx = {header.index(c) for c in sparse if c in header}
                     skip_idx = {header.index(c) for c in skip_missing if c in header}
                     nan_idx = {header.index(c) for c in nan_ok if c in header}
-                    continue
+                    if not by_position:
+                        continue
                 if len(cells) != len(header):
                     raise CsvError(f"{name}:{lineno}: expected {len(header)} cells, found "
                                    f"{len(cells)}")
@@ -436,6 +454,13 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
     data = np.asarray(rows, dtype=np.float64)
     return Table(name, header, {c: data[:, i] for i, c in enumerate(header)}, lines, left_out,
                  skip_named, repeated, times.dated is not None, units_cells, units_line)
+
+
+def _positions(names: Sequence[str]) -> bool:
+    """Whether every one of ``names`` is a column's position, from 1, in ASCII digits
+    (``--columns t=1,depth=2,force=3``: a file without a header; C twin: csv_in.c
+    positions)."""
+    return all(re.fullmatch(r"[1-9][0-9]{0,8}", n, re.ASCII) for n in names)
 
 
 def _is_data(cells: list[str], decimal_comma: bool) -> bool:

@@ -4,7 +4,9 @@ Column map (:class:`ColumnMap`, ``--columns t=NAME,depth=NAME,force=NAME[,veloci
     A logger's file is read as it is: the map names the file's columns that hold the time,
     the depth and the force (and the velocity; without ``velocity=`` it is computed from the
     depth, whatever other columns the file has).  Every rule of the reader (csvio) then
-    applies to the mapped columns, and every message names them as the file does.  With
+    applies to the mapped columns, and every message names them as the file does.  A map
+    whose every name is a position, from 1 (``t=2,depth=3,force=1``), reads a file without a
+    header (csvio.read_table: the names "1".."N" given to the first sample's cells).  With
     ``--time-unit us`` (and the other unit options) a time in microseconds, a depth in
     metres... are converted.
 

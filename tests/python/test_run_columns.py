@@ -180,6 +180,44 @@ def test_a_numpy_savetxt_file_under_its_own_names_reads_with_the_advice(files, t
     assert c.read_bytes() == std.read_bytes()
 
 
+def test_a_file_without_a_header_reads_by_column_positions(files, tmp_path):
+    """MATLAB's writematrix and many loggers write no header: refused with the advice, then
+    read with the columns' positions (from 1) by both programs and the reference, to the
+    standard file's bytes -- also with the columns in another order, after a preamble line
+    (the separator is still the first line's: here a comma), and with a header the positions
+    pass over."""
+    rows = np.loadtxt(files["std"], delimiter=",", skiprows=1)
+    bare = tmp_path / "bare.csv"
+    np.savetxt(bare, rows[:, [2, 0, 1]], delimiter=";", fmt="%.17g")   # force, time, depth
+    assert _refused_alike(bare, tmp_path).endswith(
+        "missing from the header (have: " + ", ".join(
+            bare.read_text().splitlines()[0].split(";")) + "); no header line: name the "
+        "columns by their positions, from 1: --columns t=N,depth=N,force=N")
+    positions = ["--columns", "t=2,depth=3,force=1"]
+    preamble = tmp_path / "preamble.csv"
+    preamble.write_text("Rig 3\n" + bare.read_text().replace(";", ","))
+    headed = tmp_path / "headed.csv"
+    headed.write_text("force_n;t_s;depth_mm\n" + bare.read_text())
+    want = tmp_path / "want.csv"
+    assert c_run("nte-run-double", files["std"], want, "--model", "2").returncode == 0
+    for src in (bare, preamble, headed):
+        py, c = tmp_path / "py.csv", tmp_path / "c.csv"
+        r = reference(src, py, "--model", "2", "--precision", "float64", *positions)
+        assert r.returncode == 0, r.stderr
+        assert py.read_bytes() == want.read_bytes(), src.name
+        for prog in PROGS:
+            std = tmp_path / f"{prog}-std.csv"
+            assert c_run(prog, files["std"], std, "--model", "2").returncode == 0
+            r = c_run(prog, src, c, "--model", "2", *positions)
+            assert r.returncode == 0, (prog, r.stderr)
+            assert c.read_bytes() == std.read_bytes(), (prog, src.name)
+    assert _refused_alike(bare, tmp_path, "--columns", "t=2,depth=3,force=4") == (
+        f"{bare}:1: column '4': no such position: the first sample has 3 cells")
+    # a position written otherwise ("01") is a name, as before: no column is found by position
+    assert "column '2': missing from the header" in _refused_alike(
+        bare, tmp_path, "--columns", "t=2,depth=3,force=01")
+
+
 def test_velocity_only_when_the_map_names_it(files, tmp_path):
     """rig_v has a velocity column vz of zeros: without velocity= it is not read (central
     differences, the same as the file without it), with velocity=vz it is."""

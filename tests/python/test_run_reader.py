@@ -227,6 +227,12 @@ EXTRA: list[tuple[str, bytes]] = [
      b"\r\x1c\n11+;\r\n\xef\xbb\xbf+\n\xffx5;0\n"),
     ("a CR in a blank line, then a header", b"\r\x1c\n" + H + b"0,0,0\n"),
     ("blank lines only, one with a CR", b"\n\r\x1c\n  \n"),
+    # no header at all (MATLAB's writematrix): the refusal says how to name the columns
+    ("no header, a sample first", b"0,0,0\n0.01,0.1,0\n"),
+    ("no header, semicolons", b"0;0,5;0\n"),
+    ("no header, one column", b"5\n6\n"),
+    ("a preamble, then samples without a header", b"Rig 3\n0,0,0\n"),
+    ("numbers that hold a unit's advice", b"time_ms,0,0\n0,0,0\n"),
     ("a header in a comment, no sample", b"# t_s,depth_mm,force_n\n"),
     ("a header in a comment, blank lines only", b"# t_s,depth_mm,force_n\n\n  \n"),
     ("a header in a comment, an open quote", b'# "t_s,depth_mm,force_n\n0,0,0\n'),
