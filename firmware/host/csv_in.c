@@ -193,16 +193,15 @@ static int feed(record_t* r, const int c)
 
 /* ---- csvio.read_table: the header, then one sample a record ------------------------------ */
 
-/* csvio._names: whether the header line cut at `d` (outside double quotes, the quotes dropped,
- * each name stripped) has every one of the `n_want` names `want`. */
-static int names_hold(const char* line, const size_t n, const char d, const char* const* want,
-                      const size_t n_want)
+/* csvio._names: the header line line[0..n) cut at `d` (outside double quotes, the quotes
+ * dropped, each name stripped), into the caller's text (n + 1 bytes), names (n + 1 pointers
+ * into it, each name ended by '\0') and lengths (n + 1: a name may hold a NUL); returns how many
+ * names. */
+static size_t cut_names(const char* line, const size_t n, const char d, char* text, char** names,
+                        size_t* lengths)
 {
-    char* cell = malloc(n + 1U);
-    if (cell == NULL) {
-        return 0; /* out of memory: the first separator stands */
-    }
-    unsigned found = 0U;
+    size_t count = 0U;
+    size_t from = 0U;
     size_t len = 0U;
     int quoted = 0;
     for (size_t i = 0U; i <= n; i++) {
@@ -210,20 +209,46 @@ static int names_hold(const char* line, const size_t n, const char d, const char
             if (line[i] == '"') {
                 quoted = !quoted;
             } else {
-                cell[len++] = line[i];
+                text[len++] = line[i];
             }
             continue;
         }
-        const char* name = cell;
-        const size_t m = nte_py_strip(&name, len);
-        for (size_t k = 0U; k < n_want; k++) {
-            if ((strlen(want[k]) == m) && (memcmp(name, want[k], m) == 0)) {
-                found |= 1U << k;
+        const char* name = text + from;
+        const size_t m = nte_py_strip(&name, len - from);
+        names[count] = text + (name - text);
+        names[count][m] = '\0';
+        lengths[count] = m;
+        count++;
+        len++; /* the byte after the name's text (the separator's place) holds its '\0' */
+        from = len;
+    }
+    return count;
+}
+
+/* Whether the header line cut at `d` (cut_names) has every one of the `n_want` names
+ * `want`. */
+static int names_hold(const char* line, const size_t n, const char d, const char* const* want,
+                      const size_t n_want)
+{
+    char* text = malloc(n + 1U);
+    char** names = malloc((n + 1U) * sizeof *names);
+    size_t* lengths = malloc((n + 1U) * sizeof *lengths);
+    unsigned found = 0U;
+    if ((text != NULL) && (names != NULL) && (lengths != NULL)) {
+        const size_t count = cut_names(line, n, d, text, names, lengths);
+        for (size_t c = 0U; c < count; c++) {
+            for (size_t k = 0U; k < n_want; k++) {
+                if ((strlen(want[k]) == lengths[c]) &&
+                    (memcmp(names[c], want[k], lengths[c]) == 0)) {
+                    found |= 1U << k;
+                }
             }
         }
-        len = 0U;
     }
-    free(cell);
+    free(text);
+    free(names);
+    free(lengths);
+    /* out of memory: no name held, so the first separator stands */
     return found == ((1U << n_want) - 1U);
 }
 
@@ -1025,8 +1050,8 @@ static const char* next_line(const char* text, const size_t len, size_t* pos, co
 }
 
 /* csvio._advising: the separator a leading comment's names are cut at (its first of ',', ';',
- * '\t', else BLANKS) when unit_suffix_hint advises on those names (cut as names_hold cuts
- * them); 0 when it does not, or out of memory. */
+ * '\t', else BLANKS) when unit_suffix_hint advises on those names (cut_names); 0 when it does
+ * not, or out of memory. */
 static char advising(const char* line, const size_t n)
 {
     int seen[3];
@@ -1040,32 +1065,13 @@ static char advising(const char* line, const size_t n)
     char* text = malloc(n + 1U);
     char** names = malloc((n + 1U) * sizeof *names);
     char advice[1024] = "";
-    if ((text != NULL) && (names != NULL)) {
-        size_t count = 0U;
-        size_t from = 0U;
-        size_t len = 0U;
-        int quoted = 0;
-        for (size_t i = 0U; i <= n; i++) {
-            if ((i < n) && (quoted || (line[i] != d))) {
-                if (line[i] == '"') {
-                    quoted = !quoted;
-                } else {
-                    text[len++] = line[i];
-                }
-                continue;
-            }
-            const char* name = text + from;
-            const size_t m = nte_py_strip(&name, len - from);
-            names[count] = (char*)name;
-            names[count][m] = '\0';
-            count++;
-            len++; /* the stripped name's end, or its last blank, holds the '\0' */
-            from = len;
-        }
-        unit_suffix_hint(names, count, advice, sizeof advice);
+    size_t* lengths = malloc((n + 1U) * sizeof *lengths);
+    if ((text != NULL) && (names != NULL) && (lengths != NULL)) {
+        unit_suffix_hint(names, cut_names(line, n, d, text, names, lengths), advice, sizeof advice);
     }
     free(text);
     free(names);
+    free(lengths);
     if (advice[0] == '\0') {
         d = 0;
     }
