@@ -179,7 +179,7 @@ EXTRA: list[tuple[str, bytes]] = [
     ("a units row with a load cell's volts", H + b"(s),(mm),(V)\n0,0,0\n"),
     ("a units row of volts only", H + b"(V),(V),(V)\n0,0,0\n"),
     ("a units row with a bracket in another column", H[:-1] + b",temp\n,,,(degC)\n0,0,0,1\n"),
-    ("a units row in sec and msec", H + b"(sec),mm,N\n0,0,0\n"),
+    ("a units row in sec", H + b"(sec),mm,N\n0,0,0\n"),
     ("a units row in msec", H + b"msec,mm,N\n0,0,0\n"),
     ("a names row repeated under the header", H + b"Time,Depth,Force\n0,0,0\n"),
     ("names with sec", b"Time (sec),Depth (mm),Force (N)\n0,0,0\n"),
