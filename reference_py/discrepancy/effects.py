@@ -40,7 +40,10 @@ parameters):
     for the first time), 0 afterwards.  Parameters: d_layer (mm below the surface), w (mm) in
     [0.2, 10], F_layer = drop (N).
 ``sensor_drift`` (sensor bias that changes slowly after tare)
-    f += c_drift (t - t_mid,i).  Parameter: c_drift in N/s (the per-trial offset absorbs bias).
+    f += c_drift,i (t - t_ref,i), t_ref,i where trial i's tare is taken.  Parameter: c_drift,i
+    in N/s, one per trial: a sensor's drift differs from trial to trial (thermal state, time
+    since the tare), and one slope for all of them cannot follow a warm-up or a random walk
+    whose levels in the air part differently in each trial.
 ``tissue_motion`` (periodic tissue displacement, e.g. breathing, not tied to commanded motion)
     l -> l - m_i(t), v -> v - m_i'(t), m_i(t) = a_i sin(2 pi f t) + b_i cos(2 pi f t).
     Parameters: motion_freq_hz in [0.1, 0.6] Hz, a_i, b_i in mm (per trial: phase differs).
@@ -384,7 +387,7 @@ def design_parts(trials: list[TrialGrid], effects: tuple[str, ...], nl: dict[str
     if "layer_puncture" in effects:
         labels.append("layer_drop")
     if "sensor_drift" in effects:
-        labels.append("drift")
+        labels += [f"drift[{i}]" for i in range(n_tr)]
     if "reversal_presliding" in effects:
         labels += [f"presliding_carry[{i}]" for i in range(n_tr)]
     if "dwell_relaxation" in effects:
@@ -439,7 +442,7 @@ def design_parts(trials: list[TrialGrid], effects: tuple[str, ...], nl: dict[str
             m[:, col["layer_drop"]] = np.where(intact & (tr.v_mm_s > V_REST_MM_S) & (l > 0),
                                                ramp, 0.0)
         if "sensor_drift" in effects:
-            m[:, col["drift"]] = tr.t_s - (tr.t_ref if tr.t_ref is not None else tr.t_mid)
+            m[:, col[f"drift[{i}]"]] = tr.t_s - (tr.t_ref if tr.t_ref is not None else tr.t_mid)
         if "dwell_relaxation" in effects:
             hold = np.zeros(n)
             for i0, i1 in tr.dwells:

@@ -396,5 +396,40 @@ def residual_memory(dwells: list[tuple[Array, Array, float]]) -> tuple[int, int,
     return hits, len(dwells), float(np.median(amps)) if amps else 0.0
 
 
+#: the force in the air after the exit shows a drift when its level departs from the tare before
+#: contact by at least this many standard errors ...
+AIR_DRIFT_MIN_Z = 5.0
+#: ... and by at least this many noise standard deviations (a level the fit can see)
+AIR_DRIFT_MIN_NOISE = 1.0
+#: ... and shows none when every trial's level is within this many standard errors of its tare
+AIR_DRIFT_NONE_Z = 3.0
+
+
+def drift_verdict(ev: dict[str, object]) -> tuple[bool | None, str]:
+    """A sensor drift seen in the air (True: the level after the exit departs from the tare in at
+    least half of the trials that have both), absent (False: every such trial's level is its
+    tare's within AIR_DRIFT_NONE_Z standard errors) or not told (None: no trial has air on both
+    sides, or the trials disagree).  In the air the needle feels no tissue, so a level that moved
+    is the sensor's whatever form its drift takes in time (a warm-up, a random walk), and a
+    record that returns to its tare shows none (model notes section 9)."""
+    air = [t["air_drift"] for t in ev["per_trial"]  # type: ignore[index,union-attr]
+           if t["air_drift"]["available"] > 0]
+    if not air:
+        return None, "no trial has air before the contact and after the exit"
+    noise = [float(t["noise_n"]) for t in ev["per_trial"]  # type: ignore[index,union-attr]
+             if t["air_drift"]["available"] > 0]
+    moved = [a["z"] >= AIR_DRIFT_MIN_Z and abs(a["level_n"]) >= AIR_DRIFT_MIN_NOISE * n
+             for a, n in zip(air, noise)]
+    zs = ", ".join(f"{a['z']:.0f}" for a in air)
+    if 2 * sum(moved) >= len(air):
+        return True, (f"the level in the air after the exit departs from the tare in "
+                      f"{sum(moved)}/{len(air)} trials ({zs} standard errors)")
+    if all(a["z"] < AIR_DRIFT_NONE_Z for a in air):
+        return False, (f"the level in the air after the exit is the tare's in every trial "
+                       f"({zs} standard errors)")
+    return None, (f"the level in the air after the exit departs from the tare in "
+                  f"{sum(moved)}/{len(air)} trials ({zs} standard errors)")
+
+
 def rupture_count(ev: dict[str, object]) -> list[int]:
     return [len(t["ruptures"]) for t in ev["per_trial"]]  # type: ignore[index,union-attr]

@@ -329,6 +329,8 @@ def _local_gate(cand: str, ev: dict[str, object]) -> tuple[bool | None, str]:
     if cand == "velocity_friction":
         n = int(ev["distinct_speeds"])              # type: ignore[call-overload]
         return (None if n >= 2 else False), f"{n} distinct insertion speed(s)"
+    if cand == "sensor_drift":
+        return evmod.drift_verdict(ev)
     return None, ""
 
 

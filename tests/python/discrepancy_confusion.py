@@ -10,8 +10,9 @@ held-out forms (rows: hidden, columns: first effect named); the pair and 'none' 
 "unexplained" verdict on stick-slip and on the vocabulary's own cases; parameters outside their
 documented bounds; the median gap shrink; the run time per trial.
 
-usage: .venv/bin/python tests/python/discrepancy_confusion.py [--full | --cases N] [--workers W]
-                                                              [--results FILE] [--regrade FILE]
+usage: .venv/bin/python tests/python/discrepancy_confusion.py [--full | --cases N] [--first K]
+                                                              [--workers W] [--results FILE]
+                                                              [--regrade FILE]
   --full      20 cases per effect form (and per none / pair / stick-slip kind), ~460 cases
   --cases N   N cases per kind (default 4: the CI subset of tests/python/test_discrepancy_blind.py)
 
@@ -145,6 +146,9 @@ def main(argv: list[str] | None = None) -> int:
                       help=f"{FULL_CASES} cases per effect form and per other kind")
     size.add_argument("--cases", type=int, default=CI_CASES, metavar="N",
                       help=f"cases per kind (default {CI_CASES}, the CI subset)")
+    ap.add_argument("--first", type=int, default=0, metavar="K",
+                    help="run cases K .. K + N - 1 of each kind (default 0; a K beyond the "
+                         "cases any figure was tuned on draws held-out cases)")
     ap.add_argument("--workers", type=int, default=2, metavar="W")
     ap.add_argument("--results", metavar="FILE", help="also write the per-case rows as JSON")
     ap.add_argument("--regrade", metavar="FILE",
@@ -152,6 +156,8 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if args.cases < 1 or args.workers < 1:
         ap.error("--cases and --workers must be at least 1")
+    if args.first < 0:
+        ap.error("--first must be at least 0")
     if args.regrade:
         try:
             with open(args.regrade) as fh:
@@ -171,7 +177,7 @@ def main(argv: list[str] | None = None) -> int:
                   "writable", file=sys.stderr)
             return 2
     cases = FULL_CASES if args.full else args.cases
-    rows = discrepancy_generator.run_all(discrepancy_generator.jobs_for(cases),
+    rows = discrepancy_generator.run_all(discrepancy_generator.jobs_for(cases, first=args.first),
                                          workers=args.workers, progress=sys.stderr.isatty())
     if args.results:
         with open(args.results, "w") as fh:
