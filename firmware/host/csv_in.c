@@ -583,6 +583,7 @@ typedef struct table_t {
     size_t ncols;  /* 0: no header yet */
     size_t header_line;
     int idx[4]; /* t, depth, force, velocity: the column, or -1 */
+    int truth;  /* the NTE_CSV_TRUTH_COLUMN column, or -1 */
     double* row;
     double prev_t;
     int time_form; /* the time column's: -1 numbers, 0 times of day, 1 dates and times, 2 not
@@ -651,6 +652,7 @@ static int preamble_line(table_t* tb, const record_t* r, const int advised, cons
     for (size_t k = 0U; k < 4U; k++) {
         tb->idx[k] = -1;
     }
+    tb->truth = -1;
     return 0;
 }
 
@@ -698,6 +700,7 @@ static int numbered_header(table_t* tb, const record_t* r, const size_t lineno,
     for (size_t k = 0U; k < 4U; k++) {
         tb->idx[k] = -1;
     }
+    tb->truth = -1;
     for (size_t c = 0U; c < r->n; c++) {
         tb->header[c] = tb->names + (c * width);
         (void)snprintf(tb->header[c], width, "%zu", c + 1U);
@@ -735,6 +738,9 @@ static int take_header(table_t* tb, const record_t* r, const size_t lineno)
             if ((tb->idx[k] < 0) && (want[k][0] != '\0') && (strcmp(name, want[k]) == 0)) {
                 tb->idx[k] = (int)c;
             }
+        }
+        if ((tb->truth < 0) && (strcmp(name, NTE_CSV_TRUTH_COLUMN) == 0)) {
+            tb->truth = (int)c;
         }
     }
     tb->ncols = r->n;
@@ -892,6 +898,18 @@ static int time_cell(table_t* tb, const char* cell, const size_t n, const int de
     return 0;
 }
 
+/* Whether column c is one the reader reads (csvio.read_table's `read`): the time, depth,
+ * force, velocity and truth (NTE_CSV_TRUTH_COLUMN) columns.  The others' cells are not looked
+ * at: a logger's state word or a note does not make a sample refused. */
+static int is_read(const table_t* tb, const size_t c)
+{
+    int found = ((int)c == tb->truth);
+    for (size_t k = 0U; k < 4U; k++) {
+        found = found || ((int)c == tb->idx[k]);
+    }
+    return found;
+}
+
 /* A sample: as many cells as the header, each a finite decimal number, the time increasing;
  * or a dropout: a depth, force or velocity missing, the row left out (its line counted), its
  * other cells numbers or missing, its time not compared; or a repeat: the time equal to the
@@ -911,6 +929,15 @@ static int take_row(table_t* tb, record_t* r, const size_t lineno)
             return (units > 0) ? 0 : -1;
         }
     }
+    int nothing_read = 1;
+    for (size_t c = 0U; (c < r->n) && (nothing_read != 0); c++) {
+        size_t n = 0U;
+        (void)stripped_cell(r, c, &n);
+        nothing_read = !is_read(tb, c) || (n == 0U);
+    }
+    if (nothing_read != 0) {
+        return 0; /* nothing in the columns read: another sensor's line, not a sample */
+    }
     int skip = 0;
     for (size_t c = 0U; (c < r->n) && (skip == 0); c++) {
         size_t n = 0U;
@@ -918,6 +945,10 @@ static int take_row(table_t* tb, record_t* r, const size_t lineno)
         skip = is_skip_column(tb, c) && is_missing(r->text + at, n);
     }
     for (size_t c = 0U; c < r->n; c++) {
+        if (!is_read(tb, c)) {
+            tb->row[c] = (double)NAN;
+            continue;
+        }
         size_t n = 0U;
         char* cell = r->text + stripped_cell(r, c, &n);
         if (((skip != 0) || (((int)c == tb->idx[2]) && (tb->cols->force_ignored != 0))) &&
@@ -1208,6 +1239,7 @@ int nte_trial_read_columns(const char* path, const nte_columns_t* cols, nte_tria
     for (size_t k = 0U; k < 4U; k++) {
         tb.idx[k] = -1;
     }
+    tb.truth = -1;
     record_t r;
     (void)memset(&r, 0, sizeof r);
     record_reset(&r);

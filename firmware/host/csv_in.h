@@ -9,8 +9,10 @@
  * preamble before the header skipped, a header in a leading comment where no other line holds
  * the names (numpy.savetxt's "# t_s depth_mm force_n"), no header where every name read is a
  * column's position (--columns t=1,depth=2,force=3), a units row after the header kept
- * (units_row.h), a time written as a clock read in seconds (clock_time.h); the same refusals
- * word for word).  The rules' constants are generated
+ * (units_row.h), a time written as a clock read in seconds (clock_time.h); the columns not
+ * read -- all but the time, depth, force, velocity and NTE_CSV_TRUTH_COLUMN -- not looked at,
+ * and a row with nothing in the columns read skipped; the same refusals word for word).  The
+ * rules' constants are generated
  * from the Python reader into nte_units.h.  Host only: uses malloc and double.
  */
 #ifndef NTE_CSV_IN_H

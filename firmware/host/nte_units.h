@@ -14,6 +14,8 @@
 #define NTE_CSV_LEFT_OUT_LISTED 5U
 /* The advice for a file whose first record is a sample, its columns not given */
 #define NTE_CSV_NO_HEADER_ADVICE "no header line: name the columns by their positions, from 1: --columns t=N,depth=N,force=N"
+/* The simulator's noise-free force, read with an insertion when the file has it */
+#define NTE_CSV_TRUTH_COLUMN "force_true_n"
 #define NTE_TEXT_SPACE_COUNT 29
 #define NTE_TEXT_SPACES { 0x9U, 0xaU, 0xbU, 0xcU, 0xdU, 0x1cU, 0x1dU, 0x1eU, 0x1fU, 0x20U, 0x85U, 0xa0U, 0x1680U, 0x2000U, 0x2001U, 0x2002U, 0x2003U, 0x2004U, 0x2005U, 0x2006U, 0x2007U, 0x2008U, 0x2009U, 0x200aU, 0x2028U, 0x2029U, 0x202fU, 0x205fU, 0x3000U }
 /* The characters of the Basic Multilingual Plane above U+007F that Python's repr */

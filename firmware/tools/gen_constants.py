@@ -247,7 +247,9 @@ def units_header() -> str:
            + ", ".join(f'"{w}"' for w in csvio.MISSING_WORDS) + " }",
            f"#define NTE_CSV_LEFT_OUT_LISTED {csvio.LEFT_OUT_LISTED}U",
            "/* The advice for a file whose first record is a sample, its columns not given */",
-           f'#define NTE_CSV_NO_HEADER_ADVICE "{csvio.NO_HEADER_ADVICE}"']
+           f'#define NTE_CSV_NO_HEADER_ADVICE "{csvio.NO_HEADER_ADVICE}"',
+           "/* The simulator's noise-free force, read with an insertion when the file has it */",
+           f'#define NTE_CSV_TRUTH_COLUMN "{csvio.TRUTH_COLUMN}"']
     spaces = [c for c in range(0x110000) if chr(c).isspace()]
     out.append(f"#define NTE_TEXT_SPACE_COUNT {len(spaces)}")
     out.append("#define NTE_TEXT_SPACES { " + ", ".join(f"0x{c:x}U" for c in spaces) + " }")

@@ -22,8 +22,12 @@ Reading (:func:`read_table`, :func:`read_trial`)
     decides (:func:`delimiter_of`).  Where the separator is not a comma, a number may
     write its decimal mark as a comma (``2,5`` is 2.5).  Cells may be quoted.  Required columns
     for an insertion: ``t_s``, ``depth_mm``, ``force_n``; ``velocity_mm_s`` is optional (when it
-    is absent it is computed by central differences of depth); other columns are kept in
-    ``Trial.columns`` and otherwise ignored.  Every cell must be a decimal number (``1``,
+    is absent it is computed by central differences of depth); the simulator's noise-free
+    force ``force_true_n`` (TRUTH_COLUMN) is read too where there is one, for the plots, and
+    these are the columns of ``Trial.columns``.  Other columns are not read: their cells may
+    hold anything (a logger's state word, a note, a second clock), and a row with nothing in
+    the columns read (another sensor's line) is skipped like a blank one.  Every cell of a
+    column read must be a decimal number (``1``,
     ``-0.5``, ``2.5e-3``; no hex, no ``_``), finite (``inf`` and overflowing values are
     refused, and ``nan`` but where a value may be missing), and ``t_s`` must increase -- but
     in an insertion (:func:`read_trial`) a row whose time *equals* the previous sample's (a
@@ -258,7 +262,8 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
                sparse: Sequence[str] = (), increasing: str | None = "t_s",
                nan_ok: Sequence[str] = (), skip_missing: Sequence[str] = (),
                missing_hint: Callable[[list[str]], str] | None = None,
-               repeat_left_out: bool = False, units_row: Sequence[str] = ()) -> Table:
+               repeat_left_out: bool = False, units_row: Sequence[str] = (),
+               read: Sequence[str] | None = None) -> Table:
     """Read a numeric CSV by the rules of this module (see the module's docstring).
     ``missing_hint(header)``: advice appended to the refusal of a missing column ("" none).
     ``repeat_left_out``: a row whose ``increasing`` value equals the previous sample's is left
@@ -266,7 +271,10 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
     cells name a unit in a units row: the first record after the header, when none of its
     cells is a number and one of these columns' cells at least reads as a unit
     (units_row.unit_like), is no sample: ``Table.units_row`` keeps these columns' non-empty
-    cells (for units_row.units_row_check, which refuses what is not a unit)."""
+    cells (for units_row.units_row_check, which refuses what is not a unit).  ``read``: the
+    columns read (None: every one); the others' cells are not looked at (a logger's state
+    word, a note), a row with nothing in the columns read is no sample (skipped like a blank
+    line), and ``Table.columns`` holds the columns read only."""
     name = str(path)
     try:
         fh = open(path, "rb")
@@ -362,6 +370,8 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
     times = _TimeColumn()
     units_cells: dict[str, str] = {}
     units_line = 0
+    read_idx: set[int] | None = None      # the columns read (None: every one)
+    first_record = True                   # the record after the header: a units row?
     # the lines before the header (a logger's preamble) that were refused as one: the refusal
     # to give if no header comes, the first that advises how to read the file, else the first
     preamble: tuple[bool, str] | None = None
@@ -406,19 +416,25 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
                     sparse_idx = {header.index(c) for c in sparse if c in header}
                     skip_idx = {header.index(c) for c in skip_missing if c in header}
                     nan_idx = {header.index(c) for c in nan_ok if c in header}
+                    if read is not None:
+                        read_idx = {i for i, c in enumerate(header) if c in read}
                     if not by_position:
                         continue
                 if len(cells) != len(header):
                     raise CsvError(f"{name}:{lineno}: expected {len(header)} cells, found "
                                    f"{len(cells)}")
-                if not rows and not units_line and not left_out and not repeated:
+                if first_record:
+                    first_record = False
                     units_cells = _units_row(header, cells, units_row, delimiter != ",")
                     if units_cells:
                         units_line = lineno
                         continue
+                if read_idx is not None and all(cells[i].strip() == "" for i in read_idx):
+                    continue        # nothing in the columns read: another sensor's line
                 missing = [is_missing(cell) for cell in cells]
                 skip = any(missing[i] for i in skip_idx)
-                row = [math.nan if ((missing[i] and (skip or i in sparse_idx))
+                row = [math.nan if ((read_idx is not None and i not in read_idx)
+                                    or (missing[i] and (skip or i in sparse_idx))
                                     or (i in nan_idx and _NAN.fullmatch(cell.strip())))
                        else times.read(name, lineno, col, cell, delimiter != ",")
                        if i == t_index
@@ -452,7 +468,8 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
     if not rows:
         raise CsvError(f"{name}:{header_line + 1}: no samples after the header")
     data = np.asarray(rows, dtype=np.float64)
-    return Table(name, header, {c: data[:, i] for i, c in enumerate(header)}, lines, left_out,
+    return Table(name, header, {c: data[:, i] for i, c in enumerate(header)
+                                if read_idx is None or i in read_idx}, lines, left_out,
                  skip_named, repeated, times.dated is not None, units_cells, units_line)
 
 
@@ -485,6 +502,11 @@ def _units_row(header: list[str], cells: list[str], named: Sequence[str],
     return found
 
 
+#: the simulator's noise-free force, read with an insertion when the file has it (the plots
+#: draw it; C twin: csv_in.c TRUTH_COLUMN, read and checked alike)
+TRUTH_COLUMN = "force_true_n"
+
+
 def read_trial(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
                sparse: Sequence[str] = (), units: Units | None = None,
                limits: Limits = Limits(), force_ignored: bool = False) -> Trial:
@@ -512,7 +534,9 @@ def read_trial(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
     table = read_table(path, named, sparse_named, increasing=cmap.t,
                        skip_missing=tuple(c for c in data_named if c not in sparse_named),
                        missing_hint=None if cmap.text else unit_suffix_hint,
-                       repeat_left_out=True, units_row=(cmap.t, cmap.depth, cmap.force))
+                       repeat_left_out=True, units_row=(cmap.t, cmap.depth, cmap.force),
+                       read=named + sparse_named + (TRUTH_COLUMN,) + (
+                           (cmap.velocity,) if cmap.velocity else ()))
     cols = table.columns
     t, depth = cols[cmap.t], cols[cmap.depth]
     force = cols[cmap.force] if cmap.force in cols else np.full(len(t), math.nan)

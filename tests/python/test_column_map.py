@@ -79,7 +79,9 @@ def test_the_map_reads_a_named_velocity_and_otherwise_computes_it(rows, tmp_path
     with_v = read_trial(rig, units=Units(time="us",
                                          columns=ColumnMap.parse(RIG_MAP + ",velocity=vz")))
     assert with_v.velocity_given and not with_v.velocity_mm_s.any()
-    assert list(tr.columns)[:4] == ["time_us", "fx", "fy", "fz"]     # the file's own names
+    # the columns read, under the file's own names (fx, fy and vz, not read, are not kept)
+    assert list(tr.columns) == ["time_us", "fz", "pz"]
+    assert list(with_v.columns) == ["time_us", "fz", "pz", "vz"]
 
 
 def test_microseconds_read_as_seconds_name_the_unit(rows, tmp_path, capsys):
