@@ -593,6 +593,7 @@ typedef struct table_t {
     char* preamble;   /* the refusal of a line before the header (a logger's preamble) as one,
                        * to give if no header comes: the first that advises, else the first */
     int preamble_advised;
+    size_t preamble_last_width; /* the cells of the last line refused as the header */
     size_t cap;
     char* err;
     size_t es;
@@ -618,14 +619,20 @@ static int is_data(const record_t* r)
 }
 
 /* A record refused as the header, its refusal in tb->err (csvio.read_table's preamble): a
- * sample's ends the search (-1, the preamble's refusal if one was kept); any other is a line of
- * a logger's preamble, skipped (0), its refusal kept if it is the first, or the first that
- * advises. */
-static int preamble_line(table_t* tb, const record_t* r, const int advised, const size_t lineno)
+ * sample's ends the search (-1, the preamble's refusal if one was kept, with the advice for a
+ * file without a header where the sample's refusal gives it (`no_header`), the preamble's gives
+ * none and the line just before the sample has another number of cells: one with as many is
+ * the samples' header under other names); any other is a line of a logger's preamble, skipped
+ * (0), its refusal kept if it is the first, or the first that advises. */
+static int preamble_line(table_t* tb, const record_t* r, const int advised, const int no_header,
+                         const size_t lineno)
 {
     if (is_data(r)) {
         if (tb->preamble != NULL) {
-            (void)snprintf(tb->err, tb->es, "%s", tb->preamble);
+            const int add = (no_header != 0) && (tb->preamble_advised == 0) &&
+                            (tb->preamble_last_width != r->n);
+            (void)snprintf(tb->err, tb->es, "%s%s%s", tb->preamble, add ? "; " : "",
+                           add ? NTE_CSV_NO_HEADER_ADVICE : "");
         }
         return -1;
     }
@@ -641,6 +648,7 @@ static int preamble_line(table_t* tb, const record_t* r, const int advised, cons
         tb->preamble = kept;
         tb->preamble_advised = advised;
     }
+    tb->preamble_last_width = r->n;
     tb->err[0] = '\0';
     tb->ncols = 0U;
     free(tb->names);
@@ -772,13 +780,14 @@ static int take_header(table_t* tb, const record_t* r, const size_t lineno)
             if (cols->mapped == 0) {
                 unit_suffix_hint(tb->header, r->n, advice, sizeof advice);
             }
-            if ((cols->mapped == 0) && (advice[0] == '\0') && (sample != 0)) {
+            const int no_header = (cols->mapped == 0) && (advice[0] == '\0') && (sample != 0);
+            if (no_header != 0) {
                 (void)snprintf(advice, sizeof advice, "; %s", NTE_CSV_NO_HEADER_ADVICE);
             }
             if ((o >= 0) && ((size_t)o < tb->es)) {
                 (void)snprintf(tb->err + o, tb->es - (size_t)o, ")%s", advice);
             }
-            return preamble_line(tb, r, advice[0] != '\0', lineno);
+            return preamble_line(tb, r, advice[0] != '\0', no_header, lineno);
         }
     }
     for (size_t a = 0U; a < r->n; a++) {

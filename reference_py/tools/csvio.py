@@ -13,7 +13,8 @@ Reading (:func:`read_table`, :func:`read_trial`)
     force_n``); where none does, the last whose names ``missing_hint`` advises on is refused
     as the header, with that advice (``# time depth force``).  A file without a header: where
     every name read is a position (:func:`_positions`), the first sample's cells are named
-    "1".."N" and it is read as a sample; without a map, its refusal says so.  Every later
+    "1".."N" and it is read as a sample; without a map, its refusal says so (after a
+    preamble line too, whose refusal it then is).  Every later
     line is one sample with exactly as many cells as the header; the first may be a *units
     row* (:mod:`reference_py.tools.units_row`).  A time written as a clock reads in seconds
     (:mod:`reference_py.tools.clock_time`).  Cells are separated by commas, or -- as loggers
@@ -375,6 +376,7 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
     # the lines before the header (a logger's preamble) that were refused as one: the refusal
     # to give if no header comes, the first that advises how to read the file, else the first
     preamble: tuple[bool, str] | None = None
+    preamble_last_width = 0     # the cells of the last line refused so (a header's: a sample's)
     try:
         with fh:
             for cells in records():
@@ -401,10 +403,17 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
                         refusal = (f"{name}:{lineno}: column '{absent}': missing from the "
                                    f"header (have: {', '.join(names)})"
                                    + (f"; {advice}" if advice else ""))
+                        if sample and preamble and not preamble[0] and \
+                                advice == NO_HEADER_ADVICE and preamble_last_width != len(cells):
+                            # a preamble, then samples: no header line ("Rig 3" before
+                            # MATLAB's numbers).  A line just before them with as many cells
+                            # is their header under other names: no such advice
+                            raise CsvError(f"{preamble[1]}; {advice}")
                         if sample:
                             raise CsvError(preamble[1] if preamble else refusal)
                         if not preamble or (advice and not preamble[0]):
                             preamble = (bool(advice), refusal)
+                        preamble_last_width = len(cells)
                         continue
                     header = names
                     header_line = 0 if by_position else lineno

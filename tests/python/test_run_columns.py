@@ -196,6 +196,10 @@ def test_a_file_without_a_header_reads_by_column_positions(files, tmp_path):
     positions = ["--columns", "t=2,depth=3,force=1"]
     preamble = tmp_path / "preamble.csv"
     preamble.write_text("Rig 3\n" + bare.read_text().replace(";", ","))
+    # the preamble before the samples is refused with the same advice (its line, its names)
+    assert _refused_alike(preamble, tmp_path) == (
+        f"{preamble}:1: column 't_s': missing from the header (have: Rig 3); no header line: "
+        "name the columns by their positions, from 1: --columns t=N,depth=N,force=N")
     headed = tmp_path / "headed.csv"
     headed.write_text("force_n;t_s;depth_mm\n" + bare.read_text())
     want = tmp_path / "want.csv"

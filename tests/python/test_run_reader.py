@@ -191,6 +191,12 @@ EXTRA: list[tuple[str, bytes]] = [
     ("text in the velocity column", b"t_s,depth_mm,velocity_mm_s,force_n\n0,0,x,0\n"),
     ("text in the truth column", H[:-1] + b",force_true_n\n0,0,0,x\n"),
     ("nothing read first, then a units row", H[:-1] + b",temp\n,,,21\ns,mm,N,C\n0,0,0,21\n"),
+    # a preamble before samples: no header (the positions advice), unless the line just
+    # before them has as many cells (their header under other names)
+    ("a preamble line before samples", b"Rig 3 run 7\n0,0,0\n0.01,0.1,0\n"),
+    ("a header under other names before samples", b"t,d,f\n0,0,0\n"),
+    ("a preamble, then a header under other names", b"Rig 3\nt,d,f\n0,0,0\n"),
+    ("a header under other names, then a preamble", b"t,d,f\nRig 3\n0,0,0\n"),
     ("a units row in sec", H + b"(sec),mm,N\n0,0,0\n"),
     ("a units row in msec", H + b"msec,mm,N\n0,0,0\n"),
     ("a names row repeated under the header", H + b"Time,Depth,Force\n0,0,0\n"),
