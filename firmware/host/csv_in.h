@@ -12,8 +12,8 @@
  * (units_row.h), a time written as a clock read in seconds (clock_time.h); the columns not
  * read -- all but the time, depth, force, velocity and NTE_CSV_TRUTH_COLUMN -- not looked at,
  * and a row with nothing in the columns read skipped; the same refusals word for word).  The
- * rules' constants are generated
- * from the Python reader into nte_units.h.  Host only: uses malloc and double.
+ * rules' constants are generated from the Python reader into nte_units.h.  Host only: uses
+ * malloc and double.
  */
 #ifndef NTE_CSV_IN_H
 #define NTE_CSV_IN_H
