@@ -412,23 +412,20 @@ def drift_verdict(ev: dict[str, object]) -> tuple[bool | None, str]:
     sides, or the trials disagree).  In the air the needle feels no tissue, so a level that moved
     is the sensor's whatever form its drift takes in time (a warm-up, a random walk), and a
     record that returns to its tare shows none (model notes section 9)."""
-    air = [t["air_drift"] for t in ev["per_trial"]  # type: ignore[index,union-attr]
-           if t["air_drift"]["available"] > 0]
-    if not air:
+    trials = [t for t in ev["per_trial"]  # type: ignore[union-attr]
+              if t["air_drift"]["available"] > 0]  # type: ignore[index]
+    if not trials:
         return None, "no trial has air before the contact and after the exit"
-    noise = [float(t["noise_n"]) for t in ev["per_trial"]  # type: ignore[index,union-attr]
-             if t["air_drift"]["available"] > 0]
-    moved = [a["z"] >= AIR_DRIFT_MIN_Z and abs(a["level_n"]) >= AIR_DRIFT_MIN_NOISE * n
-             for a, n in zip(air, noise)]
+    air = [t["air_drift"] for t in trials]
+    moved = sum(a["z"] >= AIR_DRIFT_MIN_Z and abs(a["level_n"]) >= AIR_DRIFT_MIN_NOISE *
+                float(t["noise_n"]) for a, t in zip(air, trials))
     zs = ", ".join(f"{a['z']:.0f}" for a in air)
-    if 2 * sum(moved) >= len(air):
-        return True, (f"the level in the air after the exit departs from the tare in "
-                      f"{sum(moved)}/{len(air)} trials ({zs} standard errors)")
     if all(a["z"] < AIR_DRIFT_NONE_Z for a in air):
         return False, (f"the level in the air after the exit is the tare's in every trial "
                        f"({zs} standard errors)")
-    return None, (f"the level in the air after the exit departs from the tare in "
-                  f"{sum(moved)}/{len(air)} trials ({zs} standard errors)")
+    return (True if 2 * moved >= len(air) else None), (
+        f"the level in the air after the exit departs from the tare in {moved}/{len(air)} "
+        f"trials ({zs} standard errors)")
 
 
 def rupture_count(ev: dict[str, object]) -> list[int]:
