@@ -47,7 +47,10 @@ build: deps
 
 # the Cortex-M4F board image (build/m4/bin/nte-board.elf, .bin, .hex) and the self-test (the
 # self-test's host twin, nte-selftest-host, is part of build/host)
+# a build tree configured before the images were linked with -flto keeps its cached flags
 board: deps
+	if [ -f build/m4/CMakeCache.txt ] && ! grep -q -- -flto build/m4/CMakeCache.txt; then \
+	  rm -rf build/m4; fi
 	cmake -S . -B build/m4 -DCMAKE_TOOLCHAIN_FILE=cmake/arm-none-eabi.cmake > /dev/null
 	cmake --build build/m4 -j2
 

@@ -154,11 +154,12 @@ NTE_SPECIALISE nte_ekf_update_t joseph(const size_t n, nte_real_t* x, nte_mat3_t
     return res;
 }
 
-nte_ekf_update_t nte_ekf_joseph_update(const size_t n, nte_real_t* x, nte_mat3_t P,
-                                       nte_mat3_t P_out, const nte_real_t* h,
-                                       const nte_real_t innovation, const nte_real_t r,
-                                       const nte_real_t gate2, const bool open_gate,
-                                       const bool apply, const nte_real_t step, const bool hold)
+NTE_OUT_OF_LINE nte_ekf_update_t nte_ekf_joseph_update(const size_t n, nte_real_t* x, nte_mat3_t P,
+                                                       nte_mat3_t P_out, const nte_real_t* h,
+                                                       const nte_real_t innovation,
+                                                       const nte_real_t r, const nte_real_t gate2,
+                                                       const bool open_gate, const bool apply,
+                                                       const nte_real_t step, const bool hold)
 {
     switch (n) {
     case 2U: return joseph(2U, x, P, P_out, h, innovation, r, gate2, open_gate, apply, step, hold);

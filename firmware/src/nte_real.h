@@ -50,13 +50,18 @@ static inline bool nte_isfinite(const nte_real_t x) { return isfinite(x) != 0; }
  * compare and taken branch cost more than the multiply-add they guard; written out, the same
  * operations run in the same order, so with the same bits.  GCC and Clang do it when asked
  * (the board build keeps -fno-inline-functions for flash); another compiler keeps the loops.
+ * NTE_OUT_OF_LINE: a kernel the board's cycle model reports as its own row (cycles.py
+ * --functions), kept out of its one caller, where the board's link-time optimisation would
+ * inline it (a call: a few cycles of the hundreds it costs).
  */
 #if defined(__GNUC__)
 #define NTE_UNROLL _Pragma("GCC unroll 16")
 #define NTE_SPECIALISE static inline __attribute__((always_inline))
+#define NTE_OUT_OF_LINE __attribute__((noinline))
 #else
 #define NTE_UNROLL
 #define NTE_SPECIALISE static inline
+#define NTE_OUT_OF_LINE
 #endif
 
 /**

@@ -57,21 +57,36 @@ IMAGES = {
 }
 
 
-def call_graph(build: pathlib.Path, dirs: list[str], indirect: list[str]
+def graph_files(build: pathlib.Path, name: str, dirs: list[str]) -> list[pathlib.Path]:
+    """The call graphs of one image: the link's, bin/<name>.elf.ltrans*.ci (the code
+    link-time optimisation generated), and those of its objects compiled without -flto.  An
+    object that holds link-time bytecode (.gnu.lto_ sections) generated no code of its own,
+    so a .ci beside it is left from an earlier build (the link's graph covers it)."""
+    files = sorted((build / "bin").glob(f"{name}.elf.ltrans*.ci"))
+    for ci in sorted(build.rglob("*.ci")):
+        if not any(part in dirs for part in ci.relative_to(build).parts):
+            continue
+        obj = ci.with_suffix(".obj")
+        if obj.exists() and b".gnu.lto_" in obj.read_bytes():
+            continue
+        files.append(ci)
+    return files
+
+
+def call_graph(build: pathlib.Path, name: str, dirs: list[str], indirect: list[str]
                ) -> tuple[dict[str, int], dict[str, set[str]]]:
     frame: dict[str, int] = {}
     calls: dict[str, set[str]] = {}
     node_re = re.compile(r'node: \{ title: "([^"]+)" label: "[^"]*?\\n[^"]*?\\n(\d+) bytes')
     edge_re = re.compile(r'edge: \{ sourcename: "([^"]+)" targetname: "([^"]+)"')
-    cis = [ci for ci in sorted(build.rglob("*.ci"))
-           if any(part in dirs for part in ci.relative_to(build).parts)]
-    for ci in cis:
+    for ci in graph_files(build, name, dirs):
         text = ci.read_text()
-        for name, nbytes in node_re.findall(text):
-            frame[name] = max(frame.get(name, 0), int(nbytes))
+        for fn, nbytes in node_re.findall(text):
+            frame[fn] = max(frame.get(fn, 0), int(nbytes))
         for src, dst in edge_re.findall(text):
             calls.setdefault(src, set()).add(dst)
-    # calls through pointers: every known target (static functions carry "file:" prefixes)
+    # calls through pointers: every known target (static functions carry "file:" prefixes,
+    # those link-time optimisation made local "<image>.elf.ltrans0.o:")
     calls["__indirect_call"] = {f for f in frame if f.split(":")[-1] in indirect}
     return frame, calls
 
@@ -132,7 +147,7 @@ def image_figures(build: pathlib.Path, name: str) -> dict:
     sec = size(elf)
     b_text, b_data, b_bss = size_berkeley(elf)
     sym = symbols(elf)
-    frame, calls = call_graph(build, *IMAGES[name])
+    frame, calls = call_graph(build, name, *IMAGES[name])
     main_b, path, unknown = worst_path("main", frame, calls)
     handler_b = max(worst_path(h, frame, calls)[0] for h in HANDLERS)
     text = sec.get(".text", 0) + sec.get(".ARM.exidx", 0)
@@ -151,7 +166,9 @@ def main() -> int:
     a = ap.parse_args()
     build = pathlib.Path(a.build)
     bindir = build / "bin"
-    print("# Board image figures (mps2-an386, Cortex-M4F, arm-none-eabi-gcc: -O2 on the step path, -Os for the node, CAN layer, board support and the configuration check; newlib-nano)")
+    print("# Board image figures (mps2-an386, Cortex-M4F, arm-none-eabi-gcc -flto: -O2 on the step "
+          "path, -Os for the node, CAN layer, board support and the configuration check; "
+          "newlib-nano)")
     for name in ("nte-selftest", "nte-board"):
         f = image_figures(build, name)
         print(f"{name}.elf (arm-none-eabi-size): flash {f['flash']} B (text {f['text']}, "
