@@ -599,13 +599,28 @@ typedef struct table_t {
     size_t es;
 } table_t;
 
+/* Whether position c + 1 is one of the n positions `at` (from 1). */
+static int among(const unsigned long* at, const size_t n, const size_t c)
+{
+    int found = 0;
+    for (size_t k = 0U; k < n; k++) {
+        found |= (at[k] == c + 1U);
+    }
+    return found;
+}
+
 /* Whether a record is a sample's, not a preamble's or a header's (csvio._is_data): two cells
- * at least, each a number or missing, a number among them. */
-static int is_data(const record_t* r)
+ * at least, each a number or missing, a number among them.  at: NULL, every cell is judged;
+ * else only the cells at these n_at positions (from 1): a file read by positions, whose other
+ * columns are not read (a logger's state word beside its numbers). */
+static int is_data(const record_t* r, const unsigned long* at, const size_t n_at)
 {
     const int decimal_comma = (r->delimiter != ',');
     int numbers = 0;
     for (size_t c = 0U; c < r->n; c++) {
+        if ((at != NULL) && !among(at, n_at, c)) {
+            continue;
+        }
         const char* cell = r->text + r->start[c];
         const size_t full = ((c + 1U < r->n) ? r->start[c + 1U] : r->len) - r->start[c] - 1U;
         const size_t n = nte_py_strip(&cell, full);
@@ -619,15 +634,15 @@ static int is_data(const record_t* r)
 }
 
 /* A record refused as the header, its refusal in tb->err (csvio.read_table's preamble): a
- * sample's ends the search (-1, the preamble's refusal if one was kept, with the advice for a
+ * sample's (`sample`: is_data) ends the search (-1, the preamble's refusal if one was kept, with the advice for a
  * file without a header where the sample's refusal gives it (`no_header`), the preamble's gives
  * none and the line just before the sample has another number of cells: one with as many is
  * the samples' header under other names); any other is a line of a logger's preamble, skipped
  * (0), its refusal kept if it is the first, or the first that advises. */
-static int preamble_line(table_t* tb, const record_t* r, const int advised, const int no_header,
-                         const size_t lineno)
+static int preamble_line(table_t* tb, const record_t* r, const int sample, const int advised,
+                         const int no_header, const size_t lineno)
 {
-    if (is_data(r)) {
+    if (sample != 0) {
         if (tb->preamble != NULL) {
             const int add = (no_header != 0) && (tb->preamble_advised == 0) &&
                             (tb->preamble_last_width != r->n);
@@ -755,15 +770,19 @@ static int take_header(table_t* tb, const record_t* r, const size_t lineno)
     tb->header_line = lineno;
     tb->first_record = 1;
     const size_t n_req = (cols->velocity_required != 0) ? 4U : 3U;
-    const int sample = is_data(r);
     int absent = 0;
-    int by_position = sample;
+    int positional = 1;
+    unsigned long at[4] = {0U, 0U, 0U, 0U}; /* the positions read, where they are positions */
     for (size_t k = 0U; k < n_req; k++) {
         if (is_required(cols, k)) {
             absent |= (tb->idx[k] < 0);
-            by_position &= is_position(want[k]);
+            positional &= is_position(want[k]);
+            at[k] = is_position(want[k]) ? strtoul(want[k], NULL, 10) : 0U;
         }
     }
+    /* where every name read is a position, the cells at them decide whether this is a sample */
+    const int sample = is_data(r, (positional != 0) ? at : NULL, n_req);
+    const int by_position = sample && positional;
     if ((absent != 0) && (by_position != 0)) {
         return numbered_header(tb, r, lineno, want, n_req);
     }
@@ -787,7 +806,7 @@ static int take_header(table_t* tb, const record_t* r, const size_t lineno)
             if ((o >= 0) && ((size_t)o < tb->es)) {
                 (void)snprintf(tb->err + o, tb->es - (size_t)o, ")%s", advice);
             }
-            return preamble_line(tb, r, advice[0] != '\0', no_header, lineno);
+            return preamble_line(tb, r, sample, advice[0] != '\0', no_header, lineno);
         }
     }
     for (size_t a = 0U; a < r->n; a++) {

@@ -12,8 +12,9 @@ Reading (:func:`read_table`, :func:`read_trial`)
     comment, its ``#`` dropped, is the header (numpy.savetxt writes ``# t_s depth_mm
     force_n``); where none does, the last whose names ``missing_hint`` advises on is refused
     as the header, with that advice (``# time depth force``).  A file without a header: where
-    every name read is a position (:func:`_positions`), the first sample's cells are named
-    "1".."N" and it is read as a sample; without a map, its refusal says so (after a
+    every name read is a position (:func:`_positions`), the first sample (judged by the cells
+    at those positions: the others are not read) has its cells named "1".."N" and is read as
+    a sample; without a map, its refusal says so (after a
     preamble line too, whose refusal it then is).  Every later line is one sample with
     exactly as many cells as the header; the first may be a *units row*
     (:mod:`reference_py.tools.units_row`).  A time written as a clock reads in seconds
@@ -385,8 +386,10 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str] = REQUIRED,
                 if header is None:
                     names = [c.strip() for c in cells]
                     absent = next((col for col in required if col not in names), None)
-                    sample = _is_data(cells, delimiter != ",")
-                    by_position = absent is not None and sample and _positions(required)
+                    positional = _positions(required)
+                    sample = _is_data(cells, delimiter != ",",
+                                      [int(c) - 1 for c in required] if positional else None)
+                    by_position = absent is not None and sample and positional
                     beyond = [c for c in required if by_position and int(c) > len(cells)]
                     if beyond:
                         raise CsvError(f"{name}:{lineno}: column '{beyond[0]}': no such "
@@ -489,13 +492,16 @@ def _positions(names: Sequence[str]) -> bool:
     return all(re.fullmatch(r"[1-9][0-9]{0,8}", n, re.ASCII) for n in names)
 
 
-def _is_data(cells: list[str], decimal_comma: bool) -> bool:
+def _is_data(cells: list[str], decimal_comma: bool, at: list[int] | None = None) -> bool:
     """Whether a record is a sample's, not a preamble's or a header's: two cells at least, each
-    a number or missing (is_missing), a number among them (C twin: csv_in.c is_data)."""
+    a number or missing (is_missing), a number among them (C twin: csv_in.c is_data).  ``at``:
+    only the cells at these indices that the record has are judged (a file read by positions,
+    whose other columns are not read: a logger's state word beside its numbers)."""
     number = _NUMBER_DECIMAL_COMMA if decimal_comma else _NUMBER
-    numbers = [bool(number.fullmatch(cell.strip())) for cell in cells]
+    judged = cells if at is None else [cells[i] for i in at if i < len(cells)]
+    numbers = [bool(number.fullmatch(cell.strip())) for cell in judged]
     return (len(cells) >= 2 and any(numbers)
-            and all(n or is_missing(cell) for n, cell in zip(numbers, cells)))
+            and all(n or is_missing(cell) for n, cell in zip(numbers, judged)))
 
 
 def _units_row(header: list[str], cells: list[str], named: Sequence[str],

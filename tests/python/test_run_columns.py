@@ -222,6 +222,38 @@ def test_a_file_without_a_header_reads_by_column_positions(files, tmp_path):
         bare, tmp_path, "--columns", "t=2,depth=3,force=01")
 
 
+def test_a_file_without_a_header_and_a_text_column_reads_by_positions(files, tmp_path):
+    """A logger without a header that writes its state word beside the numbers
+    (``0.01,0.1,0.5,INSERT``): the columns not read may hold anything, so read by positions
+    it gives the standard file's bytes in both programs and the reference -- after a preamble
+    line too, and with a line of the state word alone (nothing in the columns read: skipped).
+    A text word at a position read is refused alike."""
+    rows = np.loadtxt(files["std"], delimiter=",", skiprows=1)
+    lines = [f"{t!r},{d!r},{f!r},{'INSERT' if k % 3 else 'HOLD'},note {k}"
+             for k, (t, d, f) in enumerate(rows.tolist())]
+    logger = tmp_path / "logger.csv"
+    logger.write_text("\n".join(lines[:5] + [",,,PAUSE,"] + lines[5:]) + "\n")
+    preamble = tmp_path / "preamble.csv"
+    preamble.write_text("Rig 3 run 7\n,,,IDLE,\n" + logger.read_text())
+    positions = ["--columns", "t=1,depth=2,force=3"]
+    want = tmp_path / "want.csv"
+    assert c_run("nte-run-double", files["std"], want, "--model", "2").returncode == 0
+    for src in (logger, preamble):
+        py, c = tmp_path / "py.csv", tmp_path / "c.csv"
+        r = reference(src, py, "--model", "2", "--precision", "float64", *positions)
+        assert r.returncode == 0, r.stderr
+        assert py.read_bytes() == want.read_bytes(), src.name
+        for prog in PROGS:
+            std = tmp_path / f"{prog}-std.csv"
+            assert c_run(prog, files["std"], std, "--model", "2").returncode == 0
+            r = c_run(prog, src, c, "--model", "2", *positions)
+            assert r.returncode == 0, (prog, r.stderr)
+            assert c.read_bytes() == std.read_bytes(), (prog, src.name)
+    # the state word at a position read: no line is a sample, so none is the header
+    assert _refused_alike(logger, tmp_path, "--columns", "t=1,depth=2,force=4").startswith(
+        f"{logger}:1: column '1': missing from the header (have: {lines[0].replace(',', ', ')}")
+
+
 def test_velocity_only_when_the_map_names_it(files, tmp_path):
     """rig_v has a velocity column vz of zeros: without velocity= it is not read (central
     differences, the same as the file without it), with velocity=vz it is."""
