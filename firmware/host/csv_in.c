@@ -634,11 +634,12 @@ static int is_data(const record_t* r, const unsigned long* at, const size_t n_at
 }
 
 /* A record refused as the header, its refusal in tb->err (csvio.read_table's preamble): a
- * sample's (`sample`: is_data) ends the search (-1, the preamble's refusal if one was kept, with the advice for a
- * file without a header where the sample's refusal gives it (`no_header`), the preamble's gives
- * none and the line just before the sample has another number of cells: one with as many is
- * the samples' header under other names); any other is a line of a logger's preamble, skipped
- * (0), its refusal kept if it is the first, or the first that advises. */
+ * sample's (`sample`: is_data) ends the search (-1, the preamble's refusal if one was kept,
+ * with the advice for a file without a header where the sample's refusal gives it
+ * (`no_header`), the preamble's gives none and the line just before the sample has another
+ * number of cells: one with as many is the samples' header under other names); any other is a
+ * line of a logger's preamble, skipped (0), its refusal kept if it is the first, or the first
+ * that advises. */
 static int preamble_line(table_t* tb, const record_t* r, const int sample, const int advised,
                          const int no_header, const size_t lineno)
 {
