@@ -4,11 +4,11 @@
  */
 #include "nte_ekf.h"
 
-/* The bank's filters have n = 2, 3 or 4 states: the Joseph update, their costliest kernel, is
- * inlined once for each n (NTE_SPECIALISE, NTE_UNROLL in nte_real.h), so its loops and those
- * of the sums below run written out.  The covariance prediction and check keep one body:
- * written out too, the prediction would leave the board 32 B of flash (README, the cycle
- * model). */
+/* The bank's filters have n = 2, 3 or 4 states: the Joseph update, their costliest kernel,
+ * and the covariance prediction are inlined once for each n (NTE_SPECIALISE, NTE_UNROLL in
+ * nte_real.h), so their loops and those of the sums below run written out (the prediction so
+ * since the board is linked with -flto, which left the flash for it: README, the cycle
+ * model).  The covariance check keeps one body: it is straight-line code already. */
 
 /* The Joseph update's sums of n products, accumulated left to right as ekf._dot does (with n
  * a constant where they are inlined, written out) */
@@ -40,33 +40,39 @@ static inline nte_real_t dot_column(const size_t n, const nte_real_t* a, nte_mat
  * out[0][0] = sum_k (F P)[0][k] f[k] + q[0], out[0][b] = (F P)[0][b] and out[a][b] = P[a][b]
  * (+ q[a] on the diagonal) for a, b >= 1; the dense product's other terms are products by 0
  * (derivation: ekf.predict_covariance) */
-void nte_ekf_predict(const size_t n, nte_mat3_t P, const nte_real_t* f, const nte_real_t* q,
-                     nte_mat3_t out)
+NTE_SPECIALISE void predict(const size_t n, nte_mat3_t P, const nte_real_t* f, const nte_real_t* q,
+                            nte_mat3_t out)
 {
-    /* cleared only because GCC cannot see that n >= 1 (fp[0] is read below the loop) */
-    nte_real_t fp[NTE_EKF_N_MAX] = {NTE_C(0.0)};
+    nte_real_t fp[NTE_EKF_N_MAX];
+    NTE_UNROLL
     for (size_t j = 0U; j < n; j++) {
-        nte_real_t acc = f[0] * P[0][j];
-        for (size_t k = 1U; k < n; k++) {
-            acc = acc + (f[k] * P[k][j]);
-        }
-        fp[j] = acc;
+        fp[j] = dot_column(n, f, P, j);
     }
-    nte_real_t v = fp[0] * f[0];
-    for (size_t k = 1U; k < n; k++) {
-        v = v + (fp[k] * f[k]);
-    }
-    out[0][0] = v + q[0];
+    out[0][0] = dot_rows(n, fp, f) + q[0];
+    NTE_UNROLL
     for (size_t b = 1U; b < n; b++) {
         out[0][b] = fp[b];
         out[b][0] = fp[b];
     }
+    NTE_UNROLL
     for (size_t a = 1U; a < n; a++) {
         out[a][a] = P[a][a] + q[a];
+        NTE_UNROLL
         for (size_t b = a + 1U; b < n; b++) {
             out[a][b] = P[a][b];
             out[b][a] = P[a][b];
         }
+    }
+}
+
+void nte_ekf_predict(const size_t n, nte_mat3_t P, const nte_real_t* f, const nte_real_t* q,
+                     nte_mat3_t out)
+{
+    switch (n) {
+    case 2U: predict(2U, P, f, q, out); break;
+    case 3U: predict(3U, P, f, q, out); break;
+    case 4U: predict(4U, P, f, q, out); break;
+    default: break; /* not a filter of the bank: nothing written */
     }
 }
 

@@ -13,8 +13,9 @@
 typedef nte_real_t nte_mat3_t[NTE_EKF_N_MAX][NTE_EKF_N_MAX];
 
 /** out = F P F^T + diag(q) for the bank's transition F = [[f], [0, I]]: z's row f (dz/dz0,
- *  dz/du) and the parameters a random walk (ekf.predict_covariance).  P is read only (not
- *  const: C99 array qualifiers); out must not alias P. */
+ *  dz/du) and the parameters a random walk (ekf.predict_covariance), for the bank's filters,
+ *  2 <= n <= NTE_EKF_N_MAX (any other n: out not written).  P is read only (not const: C99
+ *  array qualifiers); out must not alias P. */
 void nte_ekf_predict(size_t n, nte_mat3_t P, const nte_real_t* f, const nte_real_t* q,
                      nte_mat3_t out);
 
