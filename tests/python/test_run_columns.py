@@ -180,6 +180,25 @@ def test_a_numpy_savetxt_file_under_its_own_names_reads_with_the_advice(files, t
     assert c.read_bytes() == std.read_bytes()
 
 
+def _read_as_the_standard_file(files, tmp_path: Path, sources, flags: list[str]) -> None:
+    """Each of ``sources`` read with ``flags`` gives the standard file's estimates: the
+    reference's float64 bytes are nte-run-double's of the standard file, and each program's
+    its own of the standard file."""
+    want = tmp_path / "want.csv"
+    assert c_run("nte-run-double", files["std"], want, "--model", "2").returncode == 0
+    for src in sources:
+        py, c = tmp_path / "py.csv", tmp_path / "c.csv"
+        r = reference(src, py, "--model", "2", "--precision", "float64", *flags)
+        assert r.returncode == 0, r.stderr
+        assert py.read_bytes() == want.read_bytes(), src.name
+        for prog in PROGS:
+            std = tmp_path / f"{prog}-std.csv"
+            assert c_run(prog, files["std"], std, "--model", "2").returncode == 0
+            r = c_run(prog, src, c, "--model", "2", *flags)
+            assert r.returncode == 0, (prog, r.stderr)
+            assert c.read_bytes() == std.read_bytes(), (prog, src.name)
+
+
 def test_a_file_without_a_header_reads_by_column_positions(files, tmp_path):
     """MATLAB's writematrix and many loggers write no header: refused with the advice, then
     read with the columns' positions (from 1) by both programs and the reference, to the
@@ -202,19 +221,7 @@ def test_a_file_without_a_header_reads_by_column_positions(files, tmp_path):
         "name the columns by their positions, from 1: --columns t=N,depth=N,force=N")
     headed = tmp_path / "headed.csv"
     headed.write_text("force_n;t_s;depth_mm\n" + bare.read_text())
-    want = tmp_path / "want.csv"
-    assert c_run("nte-run-double", files["std"], want, "--model", "2").returncode == 0
-    for src in (bare, preamble, headed):
-        py, c = tmp_path / "py.csv", tmp_path / "c.csv"
-        r = reference(src, py, "--model", "2", "--precision", "float64", *positions)
-        assert r.returncode == 0, r.stderr
-        assert py.read_bytes() == want.read_bytes(), src.name
-        for prog in PROGS:
-            std = tmp_path / f"{prog}-std.csv"
-            assert c_run(prog, files["std"], std, "--model", "2").returncode == 0
-            r = c_run(prog, src, c, "--model", "2", *positions)
-            assert r.returncode == 0, (prog, r.stderr)
-            assert c.read_bytes() == std.read_bytes(), (prog, src.name)
+    _read_as_the_standard_file(files, tmp_path, (bare, preamble, headed), positions)
     assert _refused_alike(bare, tmp_path, "--columns", "t=2,depth=3,force=4") == (
         f"{bare}:1: column '4': no such position: the first sample has 3 cells")
     # a position written otherwise ("01") is a name, as before: no column is found by position
@@ -236,19 +243,7 @@ def test_a_file_without_a_header_and_a_text_column_reads_by_positions(files, tmp
     preamble = tmp_path / "preamble.csv"
     preamble.write_text("Rig 3 run 7\n,,,IDLE,\n" + logger.read_text())
     positions = ["--columns", "t=1,depth=2,force=3"]
-    want = tmp_path / "want.csv"
-    assert c_run("nte-run-double", files["std"], want, "--model", "2").returncode == 0
-    for src in (logger, preamble):
-        py, c = tmp_path / "py.csv", tmp_path / "c.csv"
-        r = reference(src, py, "--model", "2", "--precision", "float64", *positions)
-        assert r.returncode == 0, r.stderr
-        assert py.read_bytes() == want.read_bytes(), src.name
-        for prog in PROGS:
-            std = tmp_path / f"{prog}-std.csv"
-            assert c_run(prog, files["std"], std, "--model", "2").returncode == 0
-            r = c_run(prog, src, c, "--model", "2", *positions)
-            assert r.returncode == 0, (prog, r.stderr)
-            assert c.read_bytes() == std.read_bytes(), (prog, src.name)
+    _read_as_the_standard_file(files, tmp_path, (logger, preamble), positions)
     # the state word at a position read: no line is a sample, so none is the header
     assert _refused_alike(logger, tmp_path, "--columns", "t=1,depth=2,force=4").startswith(
         f"{logger}:1: column '1': missing from the header (have: {lines[0].replace(',', ', ')}")
