@@ -6,9 +6,9 @@
 
 /* The bank's filters have n = 2, 3 or 4 states: the Joseph update, their costliest kernel,
  * and the covariance prediction are inlined once for each n (NTE_SPECIALISE, NTE_UNROLL in
- * nte_real.h), so their loops and those of the sums below run written out (the prediction so
- * since the board is linked with -flto, which left the flash for it: README, the cycle
- * model).  The covariance check keeps one body: it is straight-line code already. */
+ * nte_real.h), so their loops and those of the sums below run written out.  The prediction's
+ * copies take 288 B of the board's flash, which it has since the images are linked with -flto
+ * (README, the cycle model).  The covariance check keeps one body: straight-line code. */
 
 /* The Joseph update's sums of n products, accumulated left to right as ekf._dot does (with n
  * a constant where they are inlined, written out) */
