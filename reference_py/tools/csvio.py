@@ -14,8 +14,8 @@ Reading (:func:`read_table`, :func:`read_trial`)
     as the header, with that advice (``# time depth force``).  A file without a header: where
     every name read is a position (:func:`_positions`), the first sample (judged by the cells
     at those positions: the others are not read) has its cells named "1".."N" and is read as
-    a sample; without a map, its refusal says so (after a
-    preamble line too, whose refusal it then is).  Every later line is one sample with
+    a sample; without a map, its refusal says so (after a preamble line too, whose refusal it
+    then is).  Every later line is one sample with
     exactly as many cells as the header; the first may be a *units row*
     (:mod:`reference_py.tools.units_row`).  A time written as a clock reads in seconds
     (:mod:`reference_py.tools.clock_time`).  Cells are separated by commas, or -- as loggers
