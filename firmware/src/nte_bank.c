@@ -364,6 +364,7 @@ typedef struct filter_out_t {
 typedef struct filter_work_t {
     size_t n;                    /* 1 + the number of parameters of the filter */
     const uint8_t* names;        /* its parameters (Table I) */
+    size_t nd;                   /* the leading ones that enter the state equation */
     nte_real_t x[NTE_EKF_N_MAX]; /* prior state */
     nte_mat3_t P;                /* predicted covariance */
     nte_real_t h[NTE_EKF_N_MAX]; /* measurement Jacobian at the prior */
@@ -410,7 +411,7 @@ static uint32_t measure(const nte_t* self, const step_ctx_t* c, const nte_depth_
     nte_output_terms_t o;
     nte_model_output(&o, &self->th, d, w->x[0], c->s);
     w->h[0] = nte_model_output_dz(&self->th, d, &o);
-    const size_t nd = dynamic_count(w->names, na);
+    const size_t nd = w->nd;
     for (size_t a = 0U; a < nd; a++) {
         w->h[a + 1U] = nte_model_output_du(&self->th, d, w->x[0], &o, w->names[a]);
     }
@@ -603,6 +604,7 @@ static uint32_t run_filter(nte_t* self, step_ctx_t* c, const size_t i,
     filter_work_t w;
     w.n = subset_count(self, i) + 1U;
     w.names = subsets[mi][i];
+    w.nd = dynamic_count(w.names, w.n - 1U);
     for (size_t a = 0U; a < NTE_EKF_N_MAX; a++) {
         w.x[a] = NTE_C(0.0);
         w.h[a] = NTE_C(0.0);
@@ -618,7 +620,7 @@ static uint32_t run_filter(nte_t* self, step_ctx_t* c, const size_t i,
         fo->active = (self->k_mod3 == (uint8_t)i);
     } else {
         nte_model_rk3(&own, &self->th, c->z_prev, c->l_prev, c->l, c->dt, self->cfg.substeps,
-                      w.names, dynamic_count(w.names, w.n - 1U), c->stage);
+                      w.names, w.nd, c->stage);
         pred = &own;
         fo->active = true;
     }
