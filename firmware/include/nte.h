@@ -134,7 +134,7 @@
  *   bank goes on publishing, and the sample whose slice finishes it adopts the result:
  *   NTE_STATUS_REFINED there, NTE_STATUS_REFINING on every sample a slice ran,
  *   nte_output_t.confidence the fit's confidence from then on.  Default: one buffer entry a
- *   sample, so no nte_step exceeds 20 000 cycles on a Cortex-M4F (17 568 at worst, README:
+ *   sample, so no nte_step exceeds 20 000 cycles on a Cortex-M4F (17 521 at worst, README:
  *   the cycle model) and the fit is adopted 1 710 samples after the insertion ends (8.55 s at
  *   200 Hz, 1.7 s at 1 kHz); 96 entries a sample take 18 samples at up to 0.39 M cycles each;
  *   slice_entries 0 fits within the step that ends the insertion.  An insertion that begins

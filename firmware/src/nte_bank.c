@@ -25,6 +25,10 @@ static const uint8_t subsets[3][NTE_FILTER_COUNT][3] = {
     {{nte_param_sigma0, nte_param_g_fast, nte_param_g_slow},
      {nte_param_f1, nte_param_sigma1, nte_param_delta},
      {nte_param_beta, nte_param_sigma2, 0U}}};
+/* The leading entries of each subset that enter the state equation (bank._dynamic, identified.
+ * dynamic): the relaxation strengths and delta come after them and every configuration keeps
+ * these, so the count is the table's, not a walk of the list each sample. */
+static const uint8_t dynamic_len[3][NTE_FILTER_COUNT] = {{2U, 2U, 2U}, {1U, 2U, 2U}, {1U, 2U, 2U}};
 /* reference MODEL_PARAMS: the identified parameters in output order; Model III's by its
  * relaxation branches in use (0, 1, 2), delta last (identified.identified_names) */
 static const uint8_t identified_len[3] = {6U, 5U, 5U};
@@ -604,7 +608,7 @@ static uint32_t run_filter(nte_t* self, step_ctx_t* c, const size_t i,
     filter_work_t w;
     w.n = subset_count(self, i) + 1U;
     w.names = subsets[mi][i];
-    w.nd = dynamic_count(w.names, w.n - 1U);
+    w.nd = (size_t)dynamic_len[mi][i];
     for (size_t a = 0U; a < NTE_EKF_N_MAX; a++) {
         w.x[a] = NTE_C(0.0);
         w.h[a] = NTE_C(0.0);
