@@ -133,20 +133,22 @@ case_burst() {
 }
 
 case_enobufs() {
-    # send() fails with ENOBUFS (LD_PRELOAD shim) while OUT/enobufs.flag exists: 1 s mid-replay
-    local flag="$OUT/enobufs.flag"
+    # the node's next 200 send() calls fail with ENOBUFS (LD_PRELOAD shim) once OUT/enobufs.flag
+    # exists, 3 s into the replay: about 0.8 s of its frames, a count whatever the machine's
+    # speed (the replay has some 3 500 sends left then)
+    local flag="$OUT/enobufs.flag" sends=200
     rm -f "$flag"
+    echo "$sends" >"$OUT/nobuf.sends"
     # what went out is taken from the node's own record of its successful sends (a candump
     # under TCG writing to the shared filesystem dropped frames)
-    LD_PRELOAD="$NTE_ENOBUFS_SHIM" NTE_ENOBUFS_FILE="$flag" start_node nobuf \
-        --record "$OUT/nobuf.sent.log" || return 1
+    LD_PRELOAD="$NTE_ENOBUFS_SHIM" NTE_ENOBUFS_FILE="$flag" NTE_ENOBUFS_SENDS="$sends" \
+        start_node nobuf --record "$OUT/nobuf.sent.log" || return 1
     canplayer -I "$OUT/nobuf_in.log" &
     local p=$!; started "$p"
     sleep 3.0
     echo 1 >"$flag"
-    sleep 1.0
-    rm -f "$flag"
     wait "$p" || return 1
+    rm -f "$flag"
     sleep 0.5
     if kill -0 "$node_pid" 2>/dev/null; then echo 1; else echo 0; fi >"$OUT/nobuf.alive"
     stop "$node_pid" >/dev/null

@@ -311,11 +311,12 @@ def burst_case(out: Path) -> dict:
 
 
 def enobufs(out: Path) -> dict:
-    """send() failed with ENOBUFS (LD_PRELOAD shim) for 1 s in the middle of a replay."""
+    """send() failed with ENOBUFS (LD_PRELOAD shim) for a fixed count of sends mid-replay."""
     frames = paper_frames(out)
     cap = capture(out / "nobuf.sent.log")
     res = _result(out, cap, "nobuf", [m for _, m in frames])
     res["alive_after"] = (out / "nobuf.alive").read_text().strip() == "1"
+    res["enobufs_sends"] = int((out / "nobuf.sends").read_text())
     # every Estimate frame the node recorded, whether or not it passes the receiver's E2E check:
     # the counter counts modulo 15, so when the outage took a multiple of 15 frames the first
     # one after it carries the counter of the last one before and the receiver refuses it as a

@@ -182,7 +182,8 @@ def test_enobufs_on_send_counted(results: dict) -> None:
     r = _ok(results, "enobufs")
     assert r["alive_after"]
     st = r["stats"]
-    assert st["events"]["send_failed"] > 100
+    # exact: every send the shim failed was counted once (a count, not a time: machines differ)
+    assert st["events"]["send_failed"] == r["enobufs_sends"] == 200
     assert st["send_enobufs"] == st["events"]["send_failed"]
     assert r["estimates_reference"] - r["estimates_node"] > 0     # those were lost
     assert st["tx"]["estimate"] == r["estimate_frames_recorded"]  # the record is the node's
