@@ -28,6 +28,7 @@ import numpy as np
 from reference_py.bus.candump import write_candump
 from reference_py.bus.dbc import TICK_S, NteDatabase
 
+from .one_cpu import pin_to_one_cpu
 from .replay import FrameEncoder, ScheduledFrame, scenario_frames
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -65,6 +66,7 @@ class Node:
 
 
 def _play(log: Path) -> None:
+    pin_to_one_cpu()   # the frames' order on vcan (one_cpu.py); canplayer inherits it
     subprocess.run(["canplayer", "-I", str(log)], check=True)
 
 

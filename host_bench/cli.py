@@ -71,6 +71,7 @@ from reference_py.tools.safe_write import Outputs
 
 from .node_mirror import NODE, NodeMirror
 from .node_outputs import compare, contact_outputs, health_outputs, node_outputs
+from .one_cpu import pin_to_one_cpu
 from .replay import paced, read_scenario, scenario_frames, send_retrying
 
 if TYPE_CHECKING:
@@ -299,6 +300,7 @@ def cmd_replay(a: argparse.Namespace) -> int:
             notifier = can.Notifier(bus, [collector])
             t_start = time.monotonic()
             try:
+                pin_to_one_cpu()   # the frames' order on vcan (one_cpu.py); canplayer inherits it
                 if a.player == "canplayer":
                     _send_canplayer(tmp["input.log"], (frames[-1][0] - frames[0][0]) / a.speed,
                                     not a.no_progress)

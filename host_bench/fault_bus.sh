@@ -30,6 +30,8 @@
 # started costs some 0.15 s of the guest.
 set -uo pipefail
 NODE="$1"; DIR="$2"; KEEP="${3:-}"
+# shellcheck source=host_bench/one_cpu.sh
+source "$(dirname "${BASH_SOURCE[0]}")/one_cpu.sh"
 READY_S=60        # a kernel under TCG on a loaded host starts a process slowly
 DRAIN_S=600       # and may read a flooded log slowly: a limit, not a measure
 
@@ -98,7 +100,8 @@ run() {           # TAG END
         echo "nte-node did not start: $(<"$base.node.err")" >&2; return 1
     fi
     t_ready=${EPOCHREALTIME/[.,]/}
-    canplayer -I "$DIR/$tag.in.log" || { echo "canplayer failed on $tag.in.log" >&2; return 1; }
+    one_cpu canplayer -I "$DIR/$tag.in.log" ||
+        { echo "canplayer failed on $tag.in.log" >&2; return 1; }
     t_played=${EPOCHREALTIME/[.,]/}
     stats_show "$pid" "$base.stats.json" '"commands_applied": 1,' || return 1
     t_read=${EPOCHREALTIME/[.,]/}

@@ -10,6 +10,8 @@
 set -uo pipefail
 NODE="$1"; OUT="$2"; shift 2
 BENCH="$(cd "$(dirname "$0")/../.." && pwd)/.venv/bin/nte-bench"
+# shellcheck source=host_bench/one_cpu.sh
+source "$(dirname "$0")/../../host_bench/one_cpu.sh"
 FRAME_DEPTH=$(cat "$OUT/ids/depth")
 
 pids=()
@@ -77,7 +79,7 @@ start_node() {
     return 1
 }
 
-play() { canplayer -I "$1"; }
+play() { one_cpu canplayer -I "$1"; }
 
 case_full_rate() {
     # the outputs from the node's own record of what it sent (a candump of the outputs in a
@@ -143,7 +145,7 @@ case_enobufs() {
     # under TCG writing to the shared filesystem dropped frames)
     LD_PRELOAD="$NTE_ENOBUFS_SHIM" NTE_ENOBUFS_FILE="$flag" NTE_ENOBUFS_SENDS="$sends" \
         start_node nobuf --record "$OUT/nobuf.sent.log" || return 1
-    canplayer -I "$OUT/nobuf_in.log" &
+    one_cpu canplayer -I "$OUT/nobuf_in.log" &
     local p=$!; started "$p"
     sleep 3.0
     echo 1 >"$flag"
