@@ -242,6 +242,9 @@ def _stretch_effect(w: dict[str, Any], named: list[str], layers: bool
     effects involved; None for "no simple shape"."""
     ph, shape = str(w.get("phase")), str(w.get("looks_like"))
     freq = _num(w.get("frequency_hz"))
+    if shape == "periodic drops":
+        return (f"stick-slip: drops of one size every {_fmt(_num(w.get('period_mm')))} mm, which "
+                "the base model counts as layers (not in the vocabulary)", [])
     if shape == "oscillation":
         if MOTION_F_LO <= freq <= MOTION_F_HI and "tissue_motion" not in named:
             return f"tissue_motion (a line at {_fmt(freq)} Hz)", ["tissue_motion"]

@@ -391,7 +391,10 @@ def render_md(rep: dict[str, Any], figures: list[str]) -> str:
          f"**Verdict: {rep['verdict']['text']}**", ""]
     described = [w for w in rep["verdict"]["where"] if "looks_like" in w]
     if described:
-        L += ["Where the residual stays above the threshold (largest first):", "",
+        head = ("A stick-slip series, then where the residual stays above the threshold "
+                "(largest first):" if described[0]["looks_like"] == "periodic drops" else
+                "Where the residual stays above the threshold (largest first):")
+        L += [head, "",
               "| trial | phase | time (s) | depth (mm) | x noise | looks like |",
               "|---|---|---|---|---|---|"]
         L += [f"| {w['trial']} | {w['phase']} | {w['t_from_s']:.1f}-{w['t_to_s']:.1f} | "

@@ -18,7 +18,7 @@ from .pool import FitPool
 from .prep import PHASES, Prepared, TooShort, prepare
 from .score import delta_bic_local, folds, heldout_sse, lag1
 from .stats import phase_stats, speed_direction
-from .unexplained import UNEXPLAINED_X, unexplained
+from .unexplained import UNEXPLAINED_X, periodic_drops, unexplained
 
 #: at most this many samples per trial enter the fits (evenly strided); reports use all samples
 FIT_ROWS = 400
@@ -665,7 +665,10 @@ def run(trials: list[Trial], max_effects: int = len(VOCABULARY), force_sign: flo
                      "apart from the base model's friction (not a candidate).")
     notes.append(f"lag-1 autocorrelation of the final residual: {lag1(fits[-1].resid, bnd):.2f}")
     notes += [p.note for p in preps if getattr(p, "note", "")]
-    unexpl = unexplained(preps, preds[-1])
+    # a stick-slip series first: the multi-layer base takes its drops in as layers, so the
+    # residual alone would not show it
+    unexpl = periodic_drops(preps, [t["ruptures"] for t in ev["per_trial"]]) + \
+        unexplained(preps, preds[-1])  # type: ignore[index]
     try:
         val = _validate(grids, y, bnd, fits[-1], base_fit)
     except (np.linalg.LinAlgError, ValueError) as exc:
