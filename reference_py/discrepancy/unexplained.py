@@ -21,7 +21,7 @@ UNEXPLAINED_SHAPES = 10
 #: them have about one size (within PERIODIC_SIZE_RATIO of their median, either way) and fall
 #: about evenly along the travel: every gap between them within PERIODIC_GAP_TOL of a whole
 #: number (1 to PERIODIC_GAP_MAX: a drop the detector missed) of the series' period.  Tissue
-#: can look like that over a few layers: 2 of 21 records of the phantom's lab tissue (seeds
+#: can look like that over a few layers: 2 of 23 records of the phantom's lab tissue (seeds
 #: 311-333) tore four layers of one size about evenly (2.2 and 4.5 mm apart), so a series
 #: needs six; the tests' stick-slip makes 5-40 drops of one size per insertion.
 PERIODIC_DROPS_MIN = 6
