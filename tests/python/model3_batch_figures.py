@@ -10,7 +10,8 @@ bank batched over the records (one FilterBank, one element per record; a shorter
 padded with repeats of its last sample, which the bank rejects as not later: its figures end
 with it).  Per record: the one-step innovation RMS over the sensor noise in the insertion, the
 dwell and the retraction, the reversal peak (config_loop_figures.py's phases and windows) and
-the insertion without the samples the rupture detector flagged as tears; printed as the median
+the insertion without the samples the rupture detector flagged as tears, and the reversal peak
+without the first samples after a gap (config_loop_figures.reversal_peaks); printed as the median
 (90th percentile, or the largest for a group of ten or fewer) per group and over all records.
 
 Sets (seeds nothing else in the repository chose anything on):
@@ -52,7 +53,8 @@ SETS = {
 }
 #: the step bound's choices (config.U_STEP_MAX; README "Model III's step bound")
 DEFAULT_VARIANTS = {f"u_step_max {v:g}": {"u_step_max": v} for v in (0.0, 0.1, 0.3, 1.0)}
-COLUMNS = ("insertion", "dwell", "retraction", "reversal peak", "insertion without tears")
+COLUMNS = ("insertion", "dwell", "retraction", "reversal peak", "insertion without tears",
+           "reversal away from gaps")
 
 
 def record(d: Path, kind: str, seed: int, **form: object) -> tuple[Path, np.ndarray, float]:
@@ -98,13 +100,11 @@ def run_batch(recs: list[tuple[Path, np.ndarray, float]], fields: dict[str, obje
         m = len(trials[b].t_s)
         inn, st, t = innovation[:m, b], status[:m, b], trials[b].t_s
         row = [float(np.sqrt(np.mean(inn[phase == name] ** 2))) / noise for name in PHASES]
-        back = phase == "retraction"
-        starts = t[1:][back[1:] & ~back[:-1]]
-        window = clf.REVERSAL_WINDOW_S
-        row.append(max((float(np.max(np.abs(inn[(t >= t0) & (t < t0 + window)])))
-                        for t0 in starts), default=0.0) / noise)
+        peak, away = clf.reversal_peaks(t, inn, phase)
+        row.append(peak / noise)
         kept = (phase == "insertion") & ((st & STATUS_TEAR) == 0)
         row.append(float(np.sqrt(np.mean(inn[kept] ** 2))) / noise)
+        row.append(away / noise)
         rows.append(row)
     return np.asarray(rows)
 

@@ -667,3 +667,28 @@ def test_atlas_on_held_out_records_within_15_percent(tmp_path):
     rel = float(np.sqrt(np.mean(err ** 2))) / float(np.max(np.abs(target)))
     print(f"measured-like seed 22, trial 1 predicted: {100 * rel:.1f} % of the peak")
     assert rel <= 0.15
+
+
+def test_reversal_peaks_set_aside_the_samples_after_a_gap() -> None:
+    """config_loop_figures.reversal_peaks (README "Where the measured-like reversal peaks come
+    from"): the peak counts every sample within 1 s of each retraction's start; the peak away
+    from gaps drops the GAP_SKIP samples from the end of a gap (an interval over GAP_FACTOR
+    times the median) and keeps the sixth; a record without a gap gives both the same."""
+    sys.path.insert(0, str(Path(__file__).parent))
+    import config_loop_figures as figures
+    t = np.arange(400) * 0.01
+    phase = np.array(["insertion"] * 200 + ["retraction"] * 200, dtype=object)
+    innovation = np.full(400, 0.001)
+    innovation[150] = 0.5                       # before the retraction: in neither figure
+    innovation[230] = -0.004                    # the turn-over's own largest, away from gaps
+    assert figures.reversal_peaks(t, innovation, phase) == pytest.approx((0.004, 0.004))
+    t_gap = t.copy()
+    t_gap[260:] += 0.3                          # 0.3 s of frames lost 0.6 s after the start
+    innovation[260:260 + figures.GAP_SKIP] = -0.03
+    innovation[260 + figures.GAP_SKIP] = 0.006  # the first sample kept after the gap
+    peak, away = figures.reversal_peaks(t_gap, innovation, phase)
+    assert peak == pytest.approx(0.03) and away == pytest.approx(0.006)
+    # the window is 1 s of time, not 100 samples: with the gap it ends at sample 269
+    innovation[280] = 0.1
+    assert figures.reversal_peaks(t_gap, innovation, phase)[0] == pytest.approx(0.03)
+    assert figures.reversal_peaks(t, innovation, phase)[0] == pytest.approx(0.1)
