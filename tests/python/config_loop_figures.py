@@ -23,8 +23,8 @@
    median and 90th percentile over records, and the insertion again without the samples
    Model III's rupture detector flagged as tears, and the reversal's peak again without the
    first samples after a gap in the record (reversal_peaks)
-   (`config_loop_figures.py --phases PRESET...` prints this part alone): the phantom presets and `lab` on seeds 301-310, and the
-   measured-like generator on seeds 31-50.  Model III's gate (config.GATE_REOPEN_AFTER) was
+   (`config_loop_figures.py --phases PRESET...` prints this part alone): the phantom presets
+   and `lab` on seeds 301-310, and the measured-like generator on seeds 31-50.  Model III's gate (config.GATE_REOPEN_AFTER) was
    chosen on skin-on-muscle seeds 101-102 and compared on seeds 201-210 and measured-like
    seeds 11-30; these seeds were not looked at.
 5. The atlas of part 3 under other forms of the measured-like generator (rates, noise, a tear
