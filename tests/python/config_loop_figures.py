@@ -24,9 +24,9 @@
    Model III's rupture detector flagged as tears, and the reversal's peak again without the
    first samples after a gap in the record (reversal_peaks)
    (`config_loop_figures.py --phases PRESET...` prints this part alone): the phantom presets
-   and `lab` on seeds 301-310, and the measured-like generator on seeds 31-50.  Model III's gate (config.GATE_REOPEN_AFTER) was
-   chosen on skin-on-muscle seeds 101-102 and compared on seeds 201-210 and measured-like
-   seeds 11-30; these seeds were not looked at.
+   and `lab` on seeds 301-310, and the measured-like generator on seeds 31-50.  Model III's
+   gate (config.GATE_REOPEN_AFTER) was chosen on skin-on-muscle seeds 101-102 and compared on
+   seeds 201-210 and measured-like seeds 11-30; these seeds were not looked at.
 5. The atlas of part 3 under other forms of the measured-like generator (rates, noise, a tear
    that runs on, a stage that backs off, stick-slip, no membrane; held-out seeds 41-50):
    `config_loop_figures.py --forms` prints this part alone.
