@@ -21,6 +21,11 @@ The variable fits 32 bits when that format still resolves its small values: its 
 of the non-zero |x| (exact zeros are representable) keeps at least SIG significant bits
 (``--sig-bits``, default 12), i.e. I + SIG - floor(log2(p1)) <= 31.  Values below the 1st
 percentile (crossings through zero) are not counted against the format.
+
+Scaled forms (SCALED_FORMS).  f1's two sensitivities (the transition's dz/du and the
+measurement row's H[u]) carry the factor z: at the surface, where z starts from 0, their small
+values are z's.  They are recorded again over z as well; a variable whose scaled form fits is
+reported as held in that form (times z, whose own format resolves it) instead of as a misfit.
 """
 from __future__ import annotations
 
@@ -140,6 +145,13 @@ class RecordingBank(FilterBank):
         p["H[z]"] = output_dz(self.th, d, o)
         for nm in names:
             p[f"H[u.{nm}]"] = output_du(self.th, d, zp, o, nm)
+        # the scaled forms (SCALED_FORMS): a sensitivity over the prior z, 0 where z is 0 (the
+        # sensitivity is 0 there too: the factor b z / g is)
+        nonzero = zp != 0.0
+        safe_z = np.where(nonzero, zp, 1.0)
+        for raw, scaled in SCALED_FORMS.items():
+            if raw in p:
+                p[scaled] = np.where(nonzero, p[raw] / safe_z, 0.0)
         return res
 
     def _update_and_guard(self, i: int, names: tuple[str, ...], x: list[Array], P_pred: Matrix,
@@ -259,6 +271,26 @@ def gate_format(y2: Range, threshold: Range, sig_bits: int) -> tuple[int, int, b
     return I, WORD_BITS - 1 - I, fits
 
 
+#: sensitivities a port holds as multiples of the prior z.  sigma0 and f1 act on the state
+#: rate and on the force only through b z / g (model.state_rate_du: -l z / g sigma0 and
+#: l b z / g ex; model.output_du: (z l - s l sigma1 e z / g) sigma0 and s l sigma1 e b z / g ex),
+#: so their sensitivities vanish with z at the surface, where z starts from 0, and their small
+#: values there are z's, which z's own format already resolves (Q2.29).  Over z they keep the
+#: rest of the product: raw -> scaled (recorded where z != 0; raw = z * scaled)
+SCALED_FORMS = {f"{kind}{name}{end}": f"{kind}{name}{end} / z"
+                for name in ("sigma0", "f1")
+                for kind, end in (("rk3 dz/du.", ""), ("H[u.", "]"))}
+
+def log_parameter_format(r: Range, sig_bits: int) -> tuple[int, int, bool]:
+    """(I, F, fits) of a log-parameter u (theta = nominal e^u): the format holding max|u|, which
+    fits when its step 2^-F is at most 2^-sig_bits.  An error in u is theta's relative error
+    (e^(u + du) = e^u (1 + du)), so u needs absolute resolution; its values near 0 (theta near
+    its nominal value) need no more than the others.  Judged by its small values instead, u.f1,
+    which wanders through 0, needed 35 bits."""
+    I, F, _ = q_format(r, sig_bits)
+    return I, F, F >= sig_bits
+
+
 #: variables the bank publishes but does not compute with: a port can saturate them or send
 #: them in floating point (the NIS: the gate decides on y^2 and gate2 S)
 PUBLISHED_ONLY = ("NIS",)
@@ -267,20 +299,28 @@ PUBLISHED_ONLY = ("NIS",)
 def format_table(ranges: dict[str, Range], sig_bits: int
                  ) -> tuple[list[str], list[str], list[str]]:
     """The markdown table, the names of the variables on the update path that do not fit 32
-    bits, and the published-only ones that do not."""
+    bits, and the published-only ones that do not.  A variable of SCALED_FORMS whose scaled
+    form fits is held in that form (its row says so) and is not a misfit; its scaled form's
+    row is judged like any other."""
     lines = ["| variable | min | max | p1 of non-zero abs (2^k) | Q-format (32 bit) | fits |",
              "|---|---|---|---|---|---|"]
     misfits: list[str] = []
     published: list[str] = []
     for name in sorted(ranges, key=_order):
         r = ranges[name]
-        if name.startswith("gate") and name.endswith(" y^2"):
+        if name.startswith("u."):
+            I, F, fits = log_parameter_format(r, sig_bits)
+            verdict = "yes (as θ's relative error)" if fits else "**no**"
+        elif name.startswith("gate") and name.endswith(" y^2"):
             I, F, fits = gate_format(r, ranges[name[:-len("y^2")] + "gate^2 S"], sig_bits)
             verdict = "yes (as the gate's comparison)" if fits else "**no**"
         else:
             I, F, fits = q_format(r, sig_bits)
             verdict = "yes" if fits else "**no**"
-        if not fits and name.startswith(PUBLISHED_ONLY):
+        scaled = SCALED_FORMS.get(name)
+        if not fits and scaled in ranges and q_format(ranges[scaled], sig_bits)[2]:
+            verdict = f"as `{scaled}` (times z)"
+        elif not fits and name.startswith(PUBLISHED_ONLY):
             published.append(name)
             verdict = "no (published only)"
         elif not fits:
@@ -325,6 +365,9 @@ def run(a: argparse.Namespace) -> int:
         print(f"## Model {'I' if model == 1 else 'II'}: {len(scen)} scenarios "
               f"({len(PRESETS)} paper, {a.random} random), {a.sig_bits} significant bits")
         print("\n".join(lines))
+        held = [f"{n} as {sc}" for n, sc in SCALED_FORMS.items() if n in ranges
+                and not q_format(ranges[n], a.sig_bits)[2] and q_format(ranges[sc], a.sig_bits)[2]]
+        print(f"held in a scaled form ({len(held)}): " + (", ".join(held) or "none"))
         print(f"on the update path, do not fit 32 bits ({len(misfits)}): "
               + (", ".join(misfits) or "none"))
         print(f"published only, do not fit 32 bits ({len(published)}): "

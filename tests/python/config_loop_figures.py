@@ -36,6 +36,10 @@
    predict trial 1 from its depth alone, once with `--surface` (its true surface, a robot
    registered to the tissue) and once with the surface the config carries;
    `config_loop_figures.py --trials` prints this part alone.
+7. Part 4's measured-like figures with force and noise scaled together by 0.1, 0.03 and 0.01
+   (the same insertions on a smaller force range and a quieter sensor, down to the 0.05-0.5 N
+   and 0.3 mN of relaxation-test rigs): `config_loop_figures.py --scaled` prints this part
+   alone.
 
 The estimator runs are nte-run-double's (bit for bit the reference's: test_config_loop.py), for
 speed.  Tuning seeds 1-5, held-out seeds 101-110.
@@ -322,6 +326,33 @@ def atlas_other_trial(d: Path) -> None:
             for m in (2, 3)))
 
 
+#: part 7: force and noise scaled together, as the same insertions would read on a smaller
+#: force range and a quieter sensor (the second protocol of MODEL.md §9: 0.05-0.5 N, 0.3 mN)
+FORCE_SCALES = (1.0, 0.1, 0.03, 0.01)
+
+
+def innovation_by_scale(d: Path) -> None:
+    """Part 7 (``--scaled``): part 4's measured-like figures with each record's force (and so
+    its noise and tare) multiplied by each of FORCE_SCALES.  Model III's tuning has absolute
+    numbers in it (R = (2 mN)^2, the front end's noise floor sqrt(R) and its 10 mN threshold
+    floor, the nominal starts), so its figures are not the same at every scale."""
+    from discrepancy_measured_like import make_trial
+    print(f"7. part 4 with force and noise scaled together, measured-like seeds "
+          f"{FIGURE_MEASURED_LIKE[0]}-{FIGURE_MEASURED_LIKE[-1]}")
+    for scale in FORCE_SCALES:
+        rows: dict[int, list[list[float]]] = {2: [], 3: []}
+        for seed in FIGURE_MEASURED_LIKE:
+            tr, force_true, sigma, _ = make_trial(seed)
+            f = d / f"mls{seed}.csv"
+            write_record(f, tr.t_s, tr.depth_mm, tr.force_n * scale)
+            phase = phase_of(tr.t_s, spans_from_motion(read_input(str(f))))
+            in_air = force_true - force_true[0] <= 2.0 * sigma
+            phase[in_air & (phase != "retraction")] = ""
+            for model, row in phase_rms_by_model(d, f, phase, sigma * scale).items():
+                rows[model].append(row)
+        print_phase_rows(f"x{scale:g}", rows)
+
+
 def main(presets: list[str]) -> None:
     if not C.exists():
         raise SystemExit(f"{C} missing: make build")
@@ -336,6 +367,9 @@ def main(presets: list[str]) -> None:
             return
         if presets[:1] == ["--trials"]:
             atlas_other_trial(d)     # part 6 alone
+            return
+        if presets[:1] == ["--scaled"]:
+            innovation_by_scale(d)   # part 7 alone
             return
         workflow_only = presets[:1] == ["--workflow"]
         if workflow_only:
@@ -381,15 +415,18 @@ def main(presets: list[str]) -> None:
         measured_like_atlas(d, range(11, 22))
         innovation_by_phase(d, presets)
         atlas_other_trial(d)
+        innovation_by_scale(d)
 
 
 if __name__ == "__main__":
     args = sys.argv[1:] or ["skin-on-muscle"]
     from reference_py.sim.calibration import PRESETS as TISSUES
-    unknown = [a for a in args if a not in ("--phases", "--forms", "--trials", "--workflow")
+    unknown = [a for a in args if a not in ("--phases", "--forms", "--trials", "--workflow",
+                                            "--scaled")
                and a not in TISSUES]
     if unknown:
-        print(f"usage: config_loop_figures.py [--workflow | --phases | --forms | --trials] "
+        print(f"usage: config_loop_figures.py [--workflow | --phases | --forms | --trials | "
+              f"--scaled] "
               f"[PRESET...] "
               f"(presets: {', '.join(TISSUES)}); not one: {unknown[0]}", file=sys.stderr)
         raise SystemExit(2)

@@ -147,3 +147,82 @@ def test_cli_rejects_bad_flags():
     assert res.returncode == 2
     assert res.stderr.strip() == "nte-ref: error: --seeds must be >= 1 (got 0)"
     assert "Traceback" not in res.stderr
+
+
+def test_z_carrying_sensitivities_are_recorded_over_z():
+    """The scaled forms are the raw sensitivities over the prior z, recorded from the same
+    filter and sample: raw == z * scaled wherever z != 0, 0 where z is 0; sigma0's output
+    sensitivity over z is H[z] itself."""
+    seen = []
+
+    class Capture(fp.RecordingBank):
+        def _measure(self, names, d, zp, s, s_du, v, y, active):
+            res = super()._measure(names, d, zp, s, s_du, v, y, active)
+            seen.append({k: np.array(v) for k, v in self._pending.items()
+                         if k in ("z prior", "H[z]") or k in fp.SCALED_FORMS
+                         or k in fp.SCALED_FORMS.values()})
+            return res
+
+    p = PRESETS["paper-6mms"]
+    sc = fp.paper_scenarios(2, 1, SHORT)[1]
+    assert sc.label == "paper paper-6mms"
+    cfg = replace(profile_config("default", 2), beta0=p.params.beta)
+    rec = Capture(F64, cfg, sc.starts, ranges={})
+    from reference_py.sim.trajectory import lspb_profile
+    t, l, v, _ = lspb_profile(sc.spec)
+    for k in range(0, len(t), 4):
+        y = np.full(2, 0.01 * l[k])
+        rec.step(np.full(2, int(t[k] * 1e6)), np.full(2, l[k]), np.full(2, v[k]), y)
+    checked = dict.fromkeys(fp.SCALED_FORMS, 0)
+    for got in seen:
+        z = np.broadcast_to(got["z prior"], (2,))
+        nz = z != 0.0
+        for raw, scaled in fp.SCALED_FORMS.items():
+            if raw not in got:
+                continue          # another filter's sample
+            a = np.broadcast_to(got[raw], (2,))
+            b = np.broadcast_to(got[scaled], (2,))
+            assert np.allclose(z[nz] * b[nz], a[nz], rtol=1e-12, atol=0.0), raw
+            assert np.all(b[~nz] == 0.0)
+            checked[raw] += int(nz.sum())
+        if "H[u.sigma0] / z" in got:
+            # sigma0's output sensitivity is z times z's own: both are
+            # sigma0 (l - s l sigma1 e / g) (model.output_dz, output_du)
+            b = np.broadcast_to(got["H[u.sigma0] / z"], (2,))
+            hz = np.broadcast_to(got["H[z]"], (2,))
+            assert np.allclose(b[nz], hz[nz], rtol=1e-12, atol=1e-15)
+    # sigma0's (filter 1) and f1's (filter 2), each on many samples inside the tissue
+    assert all(n > 20 for n in checked.values()), checked
+
+
+def test_sensitivities_held_scaled_fit(small_set):
+    """f1's raw sensitivities miss 12 significant bits near the surface; over z they keep them,
+    and the table reports the raw ones as held in the scaled form, not as misfits."""
+    lines, misfits, _ = fp.format_table(small_set, 12)
+    rows = {ln.split(" | ")[0][2:]: ln for ln in lines[2:]}
+    for raw in ("rk3 dz/du.f1", "H[u.f1]"):
+        assert not fp.q_format(small_set[raw], 12)[2], raw
+    for raw, scaled in fp.SCALED_FORMS.items():
+        assert fp.q_format(small_set[scaled], 12)[2], scaled
+        if fp.q_format(small_set[raw], 12)[2]:
+            assert rows[raw].endswith(" | yes |"), raw
+        else:
+            assert rows[raw].endswith(f"as `{scaled}` (times z) |"), raw
+        assert raw not in misfits and scaled not in misfits
+    # a scaled form that does not fit either leaves the raw variable a misfit
+    spoiled = dict(small_set)
+    spoiled["H[u.f1] / z"] = _range([1e-9, 5.0] * 60)
+    _, spoiled_misfits, _ = fp.format_table(spoiled, 12)
+    assert "H[u.f1]" in spoiled_misfits and "H[u.f1] / z" in spoiled_misfits
+
+
+def test_log_parameters_are_judged_by_their_step():
+    """u's error is theta's relative error: a log-parameter fits when its format's step is at
+    most 2^-sig_bits, however close to 0 it wanders; a format with fewer fraction bits does
+    not."""
+    wanders = _range([2.39, -1.3] + [3e-7] * 50 + list(np.linspace(-1.0, 1.0, 40)))
+    assert not fp.q_format(wanders, 12)[2]          # judged by its small values it would not
+    assert fp.log_parameter_format(wanders, 12) == (2, 29, True)
+    assert fp.log_parameter_format(wanders, 29)[2] and not fp.log_parameter_format(wanders, 30)[2]
+    lines, misfits, _ = fp.format_table({"u.f1": wanders}, 12)
+    assert lines[2].endswith("yes (as θ's relative error) |") and misfits == []
