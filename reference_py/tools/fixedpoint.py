@@ -22,7 +22,10 @@ of the non-zero |x| (exact zeros are representable) keeps at least SIG significa
 (``--sig-bits``, default 12), i.e. I + SIG - floor(log2(p1)) <= 31.  Values below the 1st
 percentile (crossings through zero) are not counted against the format.
 
-Scaled forms (SCALED_FORMS).  f1's two sensitivities (the transition's dz/du and the
+Log-parameters (log_parameter_format).  theta = nominal e^u, so an error in u is theta's
+relative error: u is judged by its format's step (at most 2^-SIG), not by its small values.
+
+Scaled forms (SCALED_FORMS).  sigma0's and f1's sensitivities (the transition's dz/du and the
 measurement row's H[u]) carry the factor z: at the surface, where z starts from 0, their small
 values are z's.  They are recorded again over z as well; a variable whose scaled form fits is
 reported as held in that form (times z, whose own format resolves it) instead of as a misfit.
@@ -281,12 +284,22 @@ SCALED_FORMS = {f"{kind}{name}{end}": f"{kind}{name}{end} / z"
                 for name in ("sigma0", "f1")
                 for kind, end in (("rk3 dz/du.", ""), ("H[u.", "]"))}
 
+
+def held_scaled(ranges: dict[str, Range], name: str, sig_bits: int) -> str | None:
+    """The scaled form ``name`` is held in (SCALED_FORMS), or None: when ``name`` does not fit
+    as it is and its scaled form does."""
+    scaled = SCALED_FORMS.get(name)
+    if scaled is None or scaled not in ranges or q_format(ranges[name], sig_bits)[2]:
+        return None
+    return scaled if q_format(ranges[scaled], sig_bits)[2] else None
+
+
 def log_parameter_format(r: Range, sig_bits: int) -> tuple[int, int, bool]:
     """(I, F, fits) of a log-parameter u (theta = nominal e^u): the format holding max|u|, which
     fits when its step 2^-F is at most 2^-sig_bits.  An error in u is theta's relative error
     (e^(u + du) = e^u (1 + du)), so u needs absolute resolution; its values near 0 (theta near
     its nominal value) need no more than the others.  Judged by its small values instead, u.f1,
-    which wanders through 0, needed 35 bits."""
+    which wanders through 0, needed 33 bits (README, the larger set)."""
     I, F, _ = q_format(r, sig_bits)
     return I, F, F >= sig_bits
 
@@ -317,8 +330,8 @@ def format_table(ranges: dict[str, Range], sig_bits: int
         else:
             I, F, fits = q_format(r, sig_bits)
             verdict = "yes" if fits else "**no**"
-        scaled = SCALED_FORMS.get(name)
-        if not fits and scaled in ranges and q_format(ranges[scaled], sig_bits)[2]:
+        scaled = held_scaled(ranges, name, sig_bits)
+        if not fits and scaled is not None:
             verdict = f"as `{scaled}` (times z)"
         elif not fits and name.startswith(PUBLISHED_ONLY):
             published.append(name)
@@ -365,8 +378,8 @@ def run(a: argparse.Namespace) -> int:
         print(f"## Model {'I' if model == 1 else 'II'}: {len(scen)} scenarios "
               f"({len(PRESETS)} paper, {a.random} random), {a.sig_bits} significant bits")
         print("\n".join(lines))
-        held = [f"{n} as {sc}" for n, sc in SCALED_FORMS.items() if n in ranges
-                and not q_format(ranges[n], a.sig_bits)[2] and q_format(ranges[sc], a.sig_bits)[2]]
+        held = [f"{n} as {held_scaled(ranges, n, a.sig_bits)}" for n in SCALED_FORMS
+                if n in ranges and held_scaled(ranges, n, a.sig_bits) is not None]
         print(f"held in a scaled form ({len(held)}): " + (", ".join(held) or "none"))
         print(f"on the update path, do not fit 32 bits ({len(misfits)}): "
               + (", ".join(misfits) or "none"))
