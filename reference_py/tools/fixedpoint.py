@@ -378,8 +378,8 @@ def run(a: argparse.Namespace) -> int:
         print(f"## Model {'I' if model == 1 else 'II'}: {len(scen)} scenarios "
               f"({len(PRESETS)} paper, {a.random} random), {a.sig_bits} significant bits")
         print("\n".join(lines))
-        held = [f"{n} as {held_scaled(ranges, n, a.sig_bits)}" for n in SCALED_FORMS
-                if n in ranges and held_scaled(ranges, n, a.sig_bits) is not None]
+        held = [f"{n} as {sc}" for n in SCALED_FORMS if n in ranges
+                and (sc := held_scaled(ranges, n, a.sig_bits)) is not None]
         print(f"held in a scaled form ({len(held)}): " + (", ".join(held) or "none"))
         print(f"on the update path, do not fit 32 bits ({len(misfits)}): "
               + (", ".join(misfits) or "none"))

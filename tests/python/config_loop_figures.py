@@ -224,6 +224,22 @@ def print_phase_rows(label: str, rows: dict[int, list[list[float]]]) -> None:
         print(f"   {label:15s} Model {'I' * model:3s}: {cells}")
 
 
+def measured_like_record(d: Path, seed: int, scale: float = 1.0, **form: object
+                         ) -> tuple[Path, np.ndarray, float]:
+    """The measured-like record of ``seed`` (make_trial's ``form`` options) written to a file,
+    its force (tare and noise with it) times ``scale``: the file, each sample's phase as
+    `nte-ref plot` draws it from the motion (insertion and dwell only where the true force is
+    above twice the noise: the air gap is no phase) and the noise sd (N, times ``scale``)."""
+    from discrepancy_measured_like import make_trial
+    tr, force_true, sigma, _ = make_trial(seed, **form)  # type: ignore[arg-type]
+    f = d / f"ml{seed}.csv"
+    write_record(f, tr.t_s, tr.depth_mm, tr.force_n * scale)
+    phase = phase_of(tr.t_s, spans_from_motion(read_input(str(f))))
+    in_air = force_true - force_true[0] <= 2.0 * sigma
+    phase[in_air & (phase != "retraction")] = ""
+    return f, phase, float(sigma) * scale
+
+
 def innovation_by_phase(d: Path, presets: list[str]) -> None:
     """Part 4.  The phases as `nte-ref plot` draws them: the phantom's from its truth file's
     cycles, the measured-like records' from their motion (insertion and dwell only where the
@@ -246,12 +262,7 @@ def innovation_by_phase(d: Path, presets: list[str]) -> None:
     print_phase_rows("all phantom", pooled)
     rows = {2: [], 3: []}
     for seed in FIGURE_MEASURED_LIKE:
-        tr, force_true, sigma, _ = make_trial(seed)
-        f = d / f"mlp{seed}.csv"
-        write_record(f, tr.t_s, tr.depth_mm, tr.force_n)
-        phase = phase_of(tr.t_s, spans_from_motion(read_input(str(f))))
-        in_air = force_true - force_true[0] <= 2.0 * sigma
-        phase[in_air & (phase != "retraction")] = ""
+        f, phase, sigma = measured_like_record(d, seed)
         for model, row in phase_rms_by_model(d, f, phase, sigma).items():
             rows[model].append(row)
     print_phase_rows("measured-like", rows)
@@ -336,19 +347,13 @@ def innovation_by_scale(d: Path) -> None:
     its noise and tare) multiplied by each of FORCE_SCALES.  Model III's tuning has absolute
     numbers in it (R = (2 mN)^2, the front end's noise floor sqrt(R) and its 10 mN threshold
     floor, the nominal starts), so its figures are not the same at every scale."""
-    from discrepancy_measured_like import make_trial
     print(f"7. part 4 with force and noise scaled together, measured-like seeds "
           f"{FIGURE_MEASURED_LIKE[0]}-{FIGURE_MEASURED_LIKE[-1]}")
     for scale in FORCE_SCALES:
         rows: dict[int, list[list[float]]] = {2: [], 3: []}
         for seed in FIGURE_MEASURED_LIKE:
-            tr, force_true, sigma, _ = make_trial(seed)
-            f = d / f"mls{seed}.csv"
-            write_record(f, tr.t_s, tr.depth_mm, tr.force_n * scale)
-            phase = phase_of(tr.t_s, spans_from_motion(read_input(str(f))))
-            in_air = force_true - force_true[0] <= 2.0 * sigma
-            phase[in_air & (phase != "retraction")] = ""
-            for model, row in phase_rms_by_model(d, f, phase, sigma * scale).items():
+            f, phase, sigma = measured_like_record(d, seed, scale)
+            for model, row in phase_rms_by_model(d, f, phase, sigma).items():
                 rows[model].append(row)
         print_phase_rows(f"x{scale:g}", rows)
 

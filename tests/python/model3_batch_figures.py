@@ -41,8 +41,7 @@ from reference_py.fmath import real_for
 from reference_py.layers import STATUS_TEAR
 from reference_py.params import PRESETS
 from reference_py.tools.csvio import read_trial, time_us
-from reference_py.tools.plotting import (PHASES, phase_of, read_input, read_truth,
-                                         spans_from_motion)
+from reference_py.tools.plotting import PHASES, phase_of, read_truth
 
 PRESET_NAMES = ("skin-incision", "skin-on-muscle", "muscle", "skin", "artery-filled", "lab")
 SETS = {
@@ -61,13 +60,7 @@ def record(d: Path, kind: str, seed: int, **form: object) -> tuple[Path, np.ndar
     """The record's file, each sample's phase (plotting.PHASES or "") and the sensor noise;
     ``form``: the measured-like generator's options (make_trial's keywords)."""
     if kind == "measured-like":
-        from discrepancy_measured_like import make_trial
-        tr, force_true, sigma, _ = make_trial(seed, **form)  # type: ignore[arg-type]
-        f = d / f"ml{seed}.csv"
-        clf.write_record(f, tr.t_s, tr.depth_mm, tr.force_n)
-        phase = phase_of(tr.t_s, spans_from_motion(read_input(str(f))))
-        phase[(force_true - force_true[0] <= 2.0 * sigma) & (phase != "retraction")] = ""
-        return f, phase, float(sigma)
+        return clf.measured_like_record(d, seed, **form)
     f = clf.phantom(d, kind, seed)
     truth = read_truth(str(f.with_suffix(".truth.json")))
     return f, phase_of(clf.column(f, "t_s"), truth.spans), float(truth.noise_n)
