@@ -33,6 +33,7 @@ from .layers import (STATUS_DROP, STATUS_RUPTURE, LayerSets, RuptureDetector, te
 from .model import (BatchScaled, DepthTerms, Theta, clamp_depth, depth_terms, exact_sign,
                     output, output_du, output_dz, smooth_sign, steady_state_z)
 from .params import ALL_NAMES, IDX, PARAM_NAMES, RELAX_NAMES, RELAX_NOMINAL
+from .relax import relax_fractions, relax_odds, relax_output, relax_terms
 from .rk3 import Rk3Result, rk3_step
 
 # Status bits of one sample (the C library uses the same values)
@@ -119,11 +120,16 @@ class FilterBank:
         cols = list(zip(*nominal))
         self.scaled = BatchScaled(R, cols, self.batch)
         if self.n_relax:
-            self._relax_nominal(R)
+            idx = [IDX[nm] for nm in RELAX_NAMES[:self.n_relax]]
+            for j, Gk in zip(idx, relax_odds(R, [self.scaled.nominal[j] for j in idx])):
+                self.scaled.nominal[j] = Gk
         self._nominal0 = ([x.copy() for x in self.scaled.nominal], self.scaled.ex_nominal.copy())
         self.c = _Constants(R, cfg)
         # the surface and tare front end, at the start of every sample's processing
-        self.contact = (ContactFrontEnd(R, cfg.contact, cfg.r_n2, cfg.v_still_mm_s, self.batch)
+        # Model III's works in units of the sensor's own noise (contact.NOISE_REF_N), and so
+        # does the bank (_scale_to_sensor)
+        self.contact = (ContactFrontEnd(R, cfg.contact, cfg.r_n2, cfg.v_still_mm_s, self.batch,
+                                        sensor_units=self.m3)
                         if cfg.contact.enabled else None)
         # Model III's layer index: a rupture detector on filter 1's innovations
         self.layers = (RuptureDetector(R, self.batch, cfg.v_still_mm_s)
@@ -133,6 +139,7 @@ class FilterBank:
         self.layer_sets = LayerSets(R, self.batch, cfg.layer_sets, layer_values, layer_starts,
                                     self._nominal0, self.scaled.kappa)
         self.frozen = False     # set_frozen: the parameters held (kept by reset)
+        self.scale_to_sensor = self.m3 and self.contact is not None
         self.reset()
         self.initial_theta = self.th
 
@@ -162,6 +169,7 @@ class FilterBank:
         # the largest |force| accepted in this insertion (0 out of tissue), N: DATA_BOUND's base
         self.y_max = R.full(B, 0.0)
         self.k = np.zeros(B, dtype=np.int64)   # accepted samples since reset (rotation index)
+        self.kf = R.full(B, 1.0)   # the bank's force unit, units per N (contact.unit())
         self.rejects = np.zeros((3, B), dtype=np.int64)
         self.gated_run = [np.zeros(B, dtype=np.int64) for _ in self.subsets]
         if self.contact is not None:
@@ -251,6 +259,9 @@ class FilterBank:
             if self.contact is not None:
                 # stage and raw force -> tissue depth and tare-free force (valid samples only)
                 l_in, y = self.contact.step(valid, l_in, v, y)
+                if self.scale_to_sensor:
+                    self._scale_to_sensor()
+                    y = y * self.kf
             # invalid samples are computed on harmless stand-ins, then discarded
             l_in = np.where(valid, l_in, self.l_prev)
             v = np.where(valid, v, R.c(0.0))
@@ -264,6 +275,8 @@ class FilterBank:
             status = status | np.uint32(STATUS_PREDICT_ONLY)
         if self.frozen:
             status = status | np.uint32(STATUS_FROZEN)
+        if self.scale_to_sensor:
+            out = self._unscaled(out)
         held = ("force_hat", "z", "innovation", "nis", "params", "params_sd")  # when rejected
         out = StepOutput(**{n: np.where(valid, getattr(out, n), getattr(self.last, n))
                             for n in held}, status=status,
@@ -285,6 +298,37 @@ class FilterBank:
         self.k = self.k + run
         self.last = out
         return out
+
+    def _scale_to_sensor(self) -> None:
+        """In contact, the bank's force unit is the front end's (contact.unit(), from the noise
+        learned in the air); where it changes (the first sample of an insertion) z, the
+        relaxation memories and the data's bound carry over to the new unit (times the ratio;
+        z and the memories are 0 at the surface).  The nominal values are not converted: the
+        paper's starts are tuned relative to forces measured in units of an 8-50 mN sensor's
+        noise, and converted (a start at the data's scale) they brought the reversal's tail
+        back (phantom x0.03, select set: reversal peak 4.6 -> 7.6, 90th percentile 6 -> 23).
+        C twin: nte_bank.c nte_bank_set_unit."""
+        k = np.where(self.contact.contact, self.contact.unit(), self.kf)
+        change = k != self.kf
+        if not np.any(change):
+            return
+        r = k / self.kf
+        self.z = np.where(change, self.z * r, self.z)
+        self.mrel = [np.where(change, m * r, m) for m in self.mrel]
+        self.y_max = np.where(change, self.y_max * r, self.y_max)
+        self.kf = k
+
+    def _unscaled(self, out: StepOutput) -> StepOutput:
+        """``out`` in newtons (and z, beta, sigma2 in their units per N): divided by kf."""
+        kf = self.kf
+        params, sds = out.params.copy(), out.params_sd.copy()
+        for nm in ("beta", "sigma2"):
+            if nm in self.identified:
+                j = self.identified.index(nm)
+                params[j] = params[j] / kf
+                sds[j] = sds[j] / kf
+        return replace(out, force_hat=out.force_hat / kf, z=out.z / kf,
+                       innovation=out.innovation / kf, params=params, params_sd=sds)
 
     # ------------------------------------------------------------------------------------
     def _advance(self, first: Array, run: Array, dt: Array, l_in: Array, v: Array,
@@ -339,7 +383,7 @@ class FilterBank:
             if i == 0 and self.layers is not None:
                 z_prior0, innovation_raw0 = x[0], innovation    # for tear_rescale, below
                 # the innovation in units of the sensor noise: the front end's, or sqrt(r_n2)
-                sigma = (self.contact.noise_sigma() if self.contact is not None
+                sigma = (self.contact.noise_sigma(in_unit=True) if self.contact is not None
                          else np.sqrt(R.full(B, 0.0) + c.r))
                 found = self.layers.watch(first, run, l, v, innovation, in_range, sigma,
                                           cfg.predict_only)   # STATUS_RUPTURE, _DROP or 0
@@ -378,9 +422,9 @@ class FilterBank:
         force = o.h
         fe = o.h   # Model III: the elastic force the relaxation memories follow
         if self.n_relax:
-            force = fe - self._relax_terms(fe)[2]
+            force = fe - relax_terms(R, self.G, self._a_rel, self.mrel, fe)[2]
         fed = run | first
-        limit = c.force_max
+        limit = c.force_max * self.kf
         if not cfg.predict_only:
             # the data's bound (DATA_BOUND): the largest |force| of this insertion so far,
             # this sample's included; after a sample out of tissue it starts again
@@ -389,7 +433,7 @@ class FilterBank:
             self.y_max = np.where(fed, np.where(surface, R.c(0.0), y_max), self.y_max)
             base = np.where(y_max > c.noise_sd, y_max, c.noise_sd)
             bound = c.data_bound * base
-            limit = np.where(bound < c.force_max, bound, c.force_max)
+            limit = np.where(bound < limit, bound, limit)
         bad = fed & ~(self._in_range(d, self.z, force) & (np.abs(force) <= limit))
         if np.any(bad):
             # never publish a force or z outside their range (nor beyond the data's bound): z
@@ -403,7 +447,7 @@ class FilterBank:
             h = o_fix.h
             if self.n_relax:
                 fe = np.where(bad, o_fix.h, fe)
-                h = o_fix.h - self._relax_terms(o_fix.h)[2]
+                h = o_fix.h - relax_terms(R, self.G, self._a_rel, self.mrel, o_fix.h)[2]
             h = np.where(np.abs(h) <= fmax, h,
                          np.where(h > fmax, fmax, np.where(h < -fmax, -fmax, R.c(0.0))))
             force = np.where(bad, h, force)
@@ -411,7 +455,7 @@ class FilterBank:
         if self.n_relax:
             # commit the memories with the posterior elastic force (0 out of tissue and at the
             # first sample, like z)
-            mp = self._relax_terms(fe)[1]
+            mp = relax_terms(R, self.G, self._a_rel, self.mrel, fe)[1]
             self.mrel = [np.where(run & ~surface, mp[k],
                                   np.where(run | first, R.c(0.0), self.mrel[k]))
                          for k in range(self.n_relax)]
@@ -462,7 +506,7 @@ class FilterBank:
             hrow.append((d.l * o.fr) * s_du)
         h = o.h
         if self.n_relax:
-            h, hrow = self._relax_output(names, o.h, hrow)
+            h, hrow = relax_output(self.R, self.G, self._a_rel, self.mrel, names, o.h, hrow)
         r_eff = c.r
         # Model III's direction state is known from the depth: no sign to be wrong about
         if cfg.sign_inflation and not (self.m3 and cfg.direction_memory):
@@ -475,56 +519,6 @@ class FilterBank:
                                np.uint32(0))
         innovation = y - h
         return innovation, hrow, r_eff, self._in_range(d, zp, h), status
-
-    # ------------------------------------------------------------------------------------
-    # Model III (MODEL.md §3b, JACOBIANS.md §7)
-    def _relax_nominal(self, R: Real) -> None:
-        """The configured strengths g (fractions, sum < 1) as the odds G the filters scale,
-        G_i = g_i / (1 - sum g), so that g_i = G_i / (1 + sum G) stays in (0, 1) with a sum
-        below 1 for every u."""
-        idx = [IDX[nm] for nm in RELAX_NAMES[:self.n_relax]]
-        g = [self.scaled.nominal[j] for j in idx]
-        total = g[0] if len(g) == 1 else g[0] + g[1]
-        den = R.c(1.0) - total
-        if not (all(np.all(gk > R.c(0.0)) for gk in g) and np.all(den > R.c(0.0))):
-            raise ValueError("nominal relaxation strengths g_fast, g_slow must be > 0 with a "
-                             "sum < 1")
-        for j, gk in zip(idx, g):
-            self.scaled.nominal[j] = gk / den
-
-    def _relax_fractions(self) -> list[Array]:
-        """g_i = G_i / (1 + sum G): the strengths, each in (0, 1), their sum below 1."""
-        G = self.G
-        den = self.R.c(1.0) + (G[0] if len(G) == 1 else G[0] + G[1])
-        return [Gk / den for Gk in G]
-
-    def _relax_terms(self, fe: Array) -> tuple[list[Array], list[Array], Array]:
-        """The strengths g, each branch's memory after this sample for the elastic force fe,
-        m_i' = a_i m_i + (1 - a_i) fe, and what the branches take off, M = sum g_i m_i'."""
-        one = self.R.c(1.0)
-        a = self._a_rel
-        g = self._relax_fractions()
-        mp = [a[k] * self.mrel[k] + (one - a[k]) * fe for k in range(self.n_relax)]
-        M = g[0] * mp[0] if self.n_relax == 1 else g[0] * mp[0] + g[1] * mp[1]
-        return g, mp, M
-
-    def _relax_output(self, names: tuple[str, ...], fe: Array, hrow: list[Array]
-                      ) -> tuple[Array, list[Array]]:
-        """h = fe - M and its Jacobian row: the elastic row times the fraction a change of fe
-        keeps, 1 - sum g_i (1 - a_i) (the memories' past is known, not a state), then
-        dh/du_gk = -g_k (m_k' - M) for the strengths in names."""
-        one = self.R.c(1.0)
-        a = self._a_rel
-        g, mp, M = self._relax_terms(fe)
-        lost = g[0] * (one - a[0])
-        if self.n_relax == 2:
-            lost = lost + g[1] * (one - a[1])
-        keep = one - lost
-        row = [hj * keep for hj in hrow]
-        for k, nm in enumerate(RELAX_NAMES[:self.n_relax]):
-            if nm in names:
-                row.append(-(g[k] * (mp[k] - M)))
-        return fe - M, row
 
     def _direction(self, l: Array, l_prev: Array, restart: Array
                    ) -> tuple[Array, Array, Array]:
@@ -562,7 +556,7 @@ class FilterBank:
         """The physical range of a predicted force h = sigma0 z l + ... and of z: both |h| and
         the elastic part |sigma0 z l| within force_max_n (|z| <= force_max_n / (sigma0 l)).
         NaN is out of range."""
-        fmax = self.c.force_max
+        fmax = self.c.force_max * self.kf
         return (np.abs(h) <= fmax) & (np.abs((self.th.sigma0 * z) * d.l) <= fmax)
 
     def _update_and_guard(self, i: int, names: tuple[str, ...], x: list[Array], P_pred: Matrix,
@@ -653,7 +647,7 @@ class FilterBank:
         """Physical estimates and standard deviations (delta method on u) of the identified set."""
         th = self.th
         vals, sds = [], []
-        g = self._relax_fractions() if self.n_relax else []
+        g = relax_fractions(self.R, self.G) if self.n_relax else []
         for name in self.identified:
             i, a = self.owner(name)
             sd_u = np.sqrt(self.P[i][a][a])

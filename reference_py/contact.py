@@ -44,6 +44,12 @@ In predict-only mode (the bank's predict_only: the force is not read) nothing he
 force: the tare and the noise are held, no contact is looked for (unless the surface is known),
 and a contact ends when the stage is back at the surface, whatever the force.
 
+Model III works in units of its sensor's own noise (unit(); sensor_units): with u =
+max(1, NOISE_REF_N / sqrt(ms)), at most UNIT_MAX, the noise floor is r_n2 in units of u
+(sigma = sqrt(max(ms u^2, r_n2)) / u) and the threshold's floor floor_n / u, and the bank takes
+the force times u (FilterBank._scale_to_sensor): a sensor quieter than NOISE_REF_N is read as if
+it were that noisy, where the defaults were chosen.  Models I and II: u = 1, as before.
+
 Limits: a record must start in the air (what is learned first is the tare), contact is looked
 for only while the stage moves inward, and a record whose stage never returns to the surface
 stays in contact.
@@ -65,12 +71,28 @@ CONTACT_AIR, CONTACT_TISSUE = 0, 1
 SEG_MAX = 1 << 30
 
 
+#: Model III's front end and bank work in units of the sensor's own noise (unit()): where the
+#: noise learned in the air is below NOISE_REF_N (N), the force is taken in units of that noise
+#: times 1 / NOISE_REF_N.  The defaults (R = (2 mN)^2 and this front end's floors, z's noises,
+#: the paper's starts) were chosen on sensors of 8-50 mN; on a quieter one R exceeded the noise
+#: itself, the floors hid it, and the filters lagged (config_loop_figures.py --scaled).
+NOISE_REF_N = 0.008
+#: the largest unit: a sensor whose noise reads below NOISE_REF_N / UNIT_MAX (8 uN) is taken
+#: as that quiet
+UNIT_MAX = 1000.0
+
+
 class ContactFrontEnd:
     """The front end for a batch of runs (see the module docstring)."""
 
     def __init__(self, R: Real, cfg: ContactConfig, r_n2: float, v_still_mm_s: float,
-                 batch: int) -> None:
+                 batch: int, sensor_units: bool = False) -> None:
+        """``sensor_units`` (Model III): the floors work in the unit of the sensor's own noise
+        (unit(); the module docstring)."""
         self.R, self.cfg, self.batch = R, cfg, batch
+        self.sensor_units = sensor_units
+        self.unit_ref = R.c(NOISE_REF_N)
+        self.unit_floor = R.c(NOISE_REF_N / UNIT_MAX)
         self.known = math.isfinite(cfg.surface_mm)
         self.k_sigma = R.c(cfg.k_sigma)
         self.floor = R.c(cfg.floor_n)
@@ -99,14 +121,32 @@ class ContactFrontEnd:
         self.she = R.full(B, 0.0)
         self.surface = R.full(B, math.nan)        # NaN until a surface is found
 
-    def noise_sigma(self) -> Array:
-        """The force noise's standard deviation learned in the air, N (never below the bank's
-        sqrt(r_n2); held in contact)."""
-        return np.sqrt(np.where(self.ms > self.r, self.ms, self.r))
+    def unit(self) -> Array:
+        """The force unit the bank works in, units per N: 1, or with ``sensor_units``
+        NOISE_REF_N over the noise learned so far (its rms about the tare; held in contact),
+        where that is below NOISE_REF_N, at most UNIT_MAX; 1 in predict-only mode and before
+        any sample was learned."""
+        R = self.R
+        if not self.sensor_units or self.predict_only:
+            return R.full(self.batch, 1.0)     # predict-only: no force read, no noise learned
+        lo = self.unit_floor * self.unit_floor
+        k = self.unit_ref / np.sqrt(np.where(self.ms > lo, self.ms, lo))
+        # nothing learned yet (a record that starts in the tissue): unit 1
+        return np.where((k > R.c(1.0)) & (self.n > 0), k, R.c(1.0))
+
+    def noise_sigma(self, in_unit: bool = False) -> Array:
+        """The force noise's standard deviation learned in the air (held in contact), N, or
+        with ``in_unit`` in the bank's unit (unit()); never below the bank's sqrt(r_n2) in the
+        bank's unit."""
+        u = self.unit()
+        ms = self.ms * (u * u)
+        sigma = np.sqrt(np.where(ms > self.r, ms, self.r))
+        return sigma if in_unit else sigma / u
 
     def _threshold(self, sigma: Array) -> Array:
         thr = self.k_sigma * sigma
-        return np.where(thr > self.floor, thr, self.floor)
+        floor = self.floor / self.unit()
+        return np.where(thr > floor, thr, floor)
 
     def step(self, mask: Array, x: Array, v: Array, f: Array) -> tuple[Array, Array]:
         """One sample where ``mask`` (elsewhere nothing changes): stage x mm, velocity v mm/s,

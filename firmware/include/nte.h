@@ -56,9 +56,9 @@
  *                       and dispatch              RobustEstimator.step
  *   src/nte_bank.c/.h   the bank of three EKFs:   bank.py FilterBank (_advance; _predict,
  *                       predict, measure,         _measure, _update_and_guard, _guard;
- *                       update_and_guard, guard;  Model III: _direction, _relax_terms,
- *                       Model III's direction     _relax_output, _relax_fractions,
- *                       state, relaxation, tear   _relax_nominal; layers.py
+ *                       update_and_guard, guard;  Model III: _direction; relax.py
+ *                       Model III's direction     (relax_terms, relax_output,
+ *                       state, relaxation, tear   relax_fractions, relax_odds); layers.py
  *                                                 RuptureDetector.watch, tear_prior,
  *                                                 tear_rescale, LayerSets; identified.py
  *                                                 the subsets)
@@ -81,9 +81,9 @@
  *
  * MEMORY MODEL
  *   The caller owns every instance (static, stack or pool).  sizeof(nte_t) on x86-64 (gcc):
- *   912 bytes (float) / 1704 (double) with NTE_ROBUST_BUFFER_LEN = 0 (the bank and the
+ *   920 bytes (float) / 1712 (double) with NTE_ROBUST_BUFFER_LEN = 0 (the bank and the
  *   contact front end: its state 52 / 88 bytes, its configuration 36 / 64); with the default
- *   96: 3232 (float, +2320) / 6272 (double, +4568), of which the buffer of
+ *   96: 3232 (float, +2312) / 6280 (double, +4568), of which the buffer of
  *   96 x 4 reals is 1536 / 3072, the LM workspace (J^T J and J^T r at the current and the
  *   trial point, both parameter vectors) 384 / 768 and the sliced refinement's state 192 /
  *   344 (the simulation's model, kept from its start, 48 / 96 of it).  The refinement's
@@ -193,6 +193,13 @@
  *   (a new tare learned in the air, a new surface found at the next insertion).
  *   A known surface (cfg.contact.surface_mm finite) replaces the detection: contact while
  *   the stage is beyond it.  Published in nte_output_t: surface_mm, tare_n, contact.
+ *   Model III works in units of its sensor's noise: where the noise learned in the air is
+ *   below NTE_K_CON_UNIT_REF (8 mN, the quietest sensor the defaults were chosen on), the
+ *   bank takes the force times unit = 8 mN / noise (at most 1000 per N; 1 otherwise, in
+ *   predict-only mode and before anything was learned), its floors (r_n2, floor_n) and the
+ *   rupture detector's noise are in that unit, and every published force, z, innovation and
+ *   beta, sigma2 (with their sd) is divided back to N.  The nominal values are not converted.
+ *   A sensor of 8 mN or more and Models I and II run bit for bit as without it.
  *   Limits: a record must start in the air with at least learn_samples samples before the
  *   tissue (what it learns first is taken as the tare); contact is looked for only while the
  *   stage moves inward; a record whose stage never comes back to the surface stays in
@@ -830,6 +837,10 @@ typedef struct nte_t {
     /* the largest |force| accepted in this insertion (0 out of tissue), N: the base of the
      * data's bound on the published force (THE DATA'S BOUND) */
     nte_real_t y_max;
+    /* Model III with the contact front end: the bank's force unit, units per N (nte_contact.c
+     * nte_contact_unit; 1 otherwise): y, z, the memories and y_max are in it, the outputs
+     * are divided back */
+    nte_real_t unit;
     bool initialised;
     uint8_t k_mod3;
     bool frozen; /* nte_set_frozen: the parameters held (HELD PARAMETERS) */

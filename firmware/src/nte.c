@@ -110,7 +110,18 @@ nte_err_t nte_step(nte_t* self, const nte_sample_t* sample, nte_output_t* out)
             /* stage and raw force -> tissue depth and tare-free force */
             nte_contact_step(self, l_in, v, y, &fed.depth_mm, &fed.force_n);
         }
+        /* Model III works in units of its sensor's noise (THE CONTACT FRONT END) */
+        const bool in_unit = cfg->contact.enabled && (cfg->model == 3);
+        if (in_unit) {
+            if (self->contact.in_contact) {
+                nte_bank_set_unit(self, nte_contact_unit(self));
+            }
+            fed.force_n = fed.force_n * self->unit;
+        }
         nte_bank_advance(self, first, dt, fed.depth_mm, v, fed.force_n, &self->last);
+        if (in_unit) {
+            nte_bank_unscale(self, &self->last);
+        }
         /* the bank ran the rupture detector (nte_layers.c) on this sample before its updates */
         if ((cfg->model == 3) && cfg->predict_only && (cfg->layer_sets > 0U)) {
             self->last.layer = self->set_layer; /* the layer of the set in use */

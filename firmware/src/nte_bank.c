@@ -152,7 +152,7 @@ static void set_nominal(nte_t* self)
     self->ex_nominal = configured_ex(self);
     const size_t nr = relax_count(self);
     if (nr > 0U) {
-        /* bank._relax_nominal: the strengths g (fractions) as the odds G the filters scale,
+        /* relax.relax_odds: the strengths g (fractions) as the odds G the filters scale,
          * G_i = g_i / (1 - sum g), so that g_i = G_i / (1 + sum G) */
         const nte_real_t g0 = cfg->nominal[nte_param_g_fast];
         const nte_real_t g1 = cfg->nominal[nte_param_g_slow];
@@ -205,6 +205,7 @@ void nte_bank_start(nte_t* self)
     self->t_prev_us = 0;
     self->l_prev = NTE_C(0.0);
     self->y_max = NTE_C(0.0);
+    self->unit = NTE_C(1.0);
     self->set_layer = 0U;
     self->k_mod3 = 0U;
     /* every output and counter 0 (all bits zero is +0.0 in IEEE 754, which C99's Annex F
@@ -262,7 +263,7 @@ static uint32_t guard(nte_t* self, const size_t n, nte_real_t* x, nte_mat3_t P,
 static bool in_range(const nte_t* self, const nte_depth_terms_t* d, const nte_real_t z,
                      const nte_real_t h)
 {
-    const nte_real_t fmax = self->cfg.force_max_n;
+    const nte_real_t fmax = self->cfg.force_max_n * self->unit;
     return (nte_abs(h) <= fmax) && (nte_abs((self->th.v[nte_param_sigma0] * z) * d->l) <= fmax);
 }
 
@@ -291,7 +292,7 @@ typedef struct step_ctx_t {
 
 /* ---- Model III (reference_py/MODEL.md §3b, JACOBIANS.md §7) ---- */
 
-/* bank._relax_fractions: g_i = G_i / (1 + sum G), each in (0, 1), their sum below 1. */
+/* relax.relax_fractions: g_i = G_i / (1 + sum G), each in (0, 1), their sum below 1. */
 static void relax_fractions(const nte_t* self, const size_t nr, nte_real_t g[2])
 {
     const nte_real_t G0 = self->th.v[nte_param_g_fast];
@@ -301,7 +302,7 @@ static void relax_fractions(const nte_t* self, const size_t nr, nte_real_t g[2])
     g[1] = (nr == 2U) ? (G1 / den) : NTE_C(0.0);
 }
 
-/* bank._relax_terms: the strengths g, each branch's memory after this sample for the elastic
+/* relax.relax_terms: the strengths g, each branch's memory after this sample for the elastic
  * force fe, m_i' = a_i m_i + (1 - a_i) fe, and what the branches take off, sum g_i m_i'. */
 static nte_real_t relax_terms(const nte_t* self, const step_ctx_t* c, const size_t nr,
                               const nte_real_t fe, nte_real_t g[2], nte_real_t mp[2])
@@ -428,7 +429,7 @@ static uint32_t measure(const nte_t* self, const step_ctx_t* c, const nte_depth_
     nte_real_t h = o.h;
     const size_t nr = relax_count(self);
     if (nr > 0U) {
-        /* bank._relax_output: h = fe - sum g_i m_i'; the elastic row times the fraction a
+        /* relax.relax_output: h = fe - sum g_i m_i'; the elastic row times the fraction a
          * change of fe keeps, 1 - sum g_i (1 - a_i) (the memories' past is known, not a
          * state); dh/du_gk = -g_k (m_k' - sum g_i m_i') */
         nte_real_t g[2];
@@ -806,7 +807,7 @@ void nte_bank_advance(nte_t* self, const bool first, const nte_real_t dt, const 
     if (nr > 0U) {
         force = o.h - relax_terms(self, &c, nr, o.h, g, mp);
     }
-    nte_real_t limit = self->cfg.force_max_n;
+    nte_real_t limit = self->cfg.force_max_n * self->unit;
     if (!self->cfg.predict_only) {
         /* the data's bound (bank.py DATA_BOUND): the largest |force| of this insertion so far,
          * this sample's included; after a sample out of tissue it starts again */
@@ -816,7 +817,7 @@ void nte_bank_advance(nte_t* self, const bool first, const nte_real_t dt, const 
         const nte_real_t noise_sd = nte_sqrt(self->cfg.r_n2);
         const nte_real_t base = (y_max > noise_sd) ? y_max : noise_sd;
         const nte_real_t bound = NTE_K_BANK_DATA_BOUND * base;
-        limit = (bound < self->cfg.force_max_n) ? bound : self->cfg.force_max_n;
+        limit = (bound < limit) ? bound : limit;
     }
     if (!(in_range(self, &d, self->z, force) && (nte_abs(force) <= limit))) {
         /* never publish a force or z outside their range (nor beyond the data's bound): z to
@@ -893,9 +894,36 @@ size_t nte_bank_params(const nte_t* self, nte_param_estimate_t* out, const size_
                                                                          : self->th.v[id];
                     out[j].value = self->th.v[id];
                     out[j].sd = nte_abs(dth) * sd_u;
+                    if ((id == (uint8_t)nte_param_beta) || (id == (uint8_t)nte_param_sigma2)) {
+                        /* force scales: from the bank's unit back to N (nte_bank_set_unit) */
+                        out[j].value = out[j].value / self->unit;
+                        out[j].sd = out[j].sd / self->unit;
+                    }
                 }
             }
         }
     }
     return count;
+}
+
+void nte_bank_set_unit(nte_t* self, const nte_real_t unit)
+{
+    if (!((unit < self->unit) || (unit > self->unit))) {
+        return; /* unchanged (bank.py: k != kf; never NaN) */
+    }
+    /* z, beta and sigma2 scaled by r scale the whole model (nte_bank.c tear_rescale); the
+     * nominal beta and sigma2 are left as configured (bank.py _scale_to_sensor says why) */
+    const nte_real_t r = unit / self->unit;
+    self->z = self->z * r;
+    self->mrel[0] = self->mrel[0] * r;
+    self->mrel[1] = self->mrel[1] * r;
+    self->y_max = self->y_max * r;
+    self->unit = unit;
+}
+
+void nte_bank_unscale(const nte_t* self, nte_output_t* out)
+{
+    out->force_hat_n = out->force_hat_n / self->unit;
+    out->z = out->z / self->unit;
+    out->innovation_n = out->innovation_n / self->unit;
 }

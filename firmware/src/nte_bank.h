@@ -28,6 +28,15 @@ size_t nte_bank_identified(const nte_t* self, const uint8_t** ids);
  *  on.  Cost: 7 exp. */
 void nte_bank_restart_from(nte_t* self, const nte_real_t theta[NTE_PARAM_COUNT], nte_real_t p0_u);
 
+/** FilterBank._scale_to_sensor for one run: the bank's force unit becomes `unit` (units per
+ *  N); z, the relaxation memories and the data's bound carry over (times the ratio), the
+ *  nominal values are not converted.  Nothing happens when the unit is unchanged. */
+void nte_bank_set_unit(nte_t* self, nte_real_t unit);
+
+/** FilterBank._unscaled for one run: the output's force, z and innovation from the bank's
+ *  unit back to N (divided by the unit). */
+void nte_bank_unscale(const nte_t* self, nte_output_t* out);
+
 /** FilterBank.parameter_estimates: up to `capacity` identified parameters with their
  *  standard deviations (delta method on u); returns the count (see nte_get_params). */
 size_t nte_bank_params(const nte_t* self, nte_param_estimate_t* out, size_t capacity);

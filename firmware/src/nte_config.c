@@ -309,7 +309,7 @@ nte_err_t nte_config_check(const nte_config_t* cfg)
         }
     }
     if ((cfg->model == 3) && cfg->relaxation) {
-        /* bank._relax_nominal: the strengths in use > 0 with a sum < 1 */
+        /* relax.relax_odds: the strengths in use > 0 with a sum < 1 */
         const nte_real_t g0 = cfg->nominal[nte_param_g_fast];
         const nte_real_t g1 = cfg->nominal[nte_param_g_slow];
         const bool two = cfg->relax_branches == 2;

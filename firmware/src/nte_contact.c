@@ -48,11 +48,27 @@ static nte_real_t extrapolate(const nte_contact_t* c, const nte_real_t x)
     return nte_isfinite(s) ? s : c->x0;
 }
 
-nte_real_t nte_contact_noise_sigma(const nte_t* self)
+nte_real_t nte_contact_unit(const nte_t* self)
 {
-    /* the noise is never taken below the bank's own measurement noise */
+    if ((self->cfg.model != 3) || self->cfg.predict_only) {
+        return NTE_C(1.0); /* predict-only: no force read, no noise learned */
+    }
+    /* Model III works in units of the sensor's own noise (contact.py NOISE_REF_N): a sensor
+     * quieter than the 8 mN the defaults were chosen on is read as that noisy */
+    const nte_real_t lo = NTE_K_CON_UNIT_FLOOR * NTE_K_CON_UNIT_FLOOR;
     const nte_real_t ms = self->contact.ms;
-    return nte_sqrt((ms > self->cfg.r_n2) ? ms : self->cfg.r_n2);
+    const nte_real_t k = NTE_K_CON_UNIT_REF / nte_sqrt((ms > lo) ? ms : lo);
+    /* nothing learned yet (a record that starts in the tissue): unit 1 */
+    return ((k > NTE_C(1.0)) && (self->contact.n > 0)) ? k : NTE_C(1.0);
+}
+
+nte_real_t nte_contact_noise_sigma(const nte_t* self, const bool in_unit)
+{
+    /* the noise is never taken below the bank's own measurement noise, in the bank's unit */
+    const nte_real_t u = nte_contact_unit(self);
+    const nte_real_t ms = self->contact.ms * (u * u);
+    const nte_real_t sigma = nte_sqrt((ms > self->cfg.r_n2) ? ms : self->cfg.r_n2);
+    return in_unit ? sigma : (sigma / u);
 }
 
 void nte_contact_step(nte_t* self, const nte_real_t x, const nte_real_t v, const nte_real_t f,
@@ -61,9 +77,11 @@ void nte_contact_step(nte_t* self, const nte_real_t x, const nte_real_t v, const
     const nte_contact_config_t* cc = &self->cfg.contact;
     nte_contact_t* c = &self->contact;
     const nte_real_t zero = NTE_C(0.0);
-    const nte_real_t sigma = nte_contact_noise_sigma(self);
+    const nte_real_t sigma = nte_contact_noise_sigma(self, false);
     const nte_real_t kt = cc->k_sigma * sigma;
-    const nte_real_t thr = (kt > cc->floor_n) ? kt : cc->floor_n;
+    /* the threshold's floor is in the bank's unit too */
+    const nte_real_t floor = cc->floor_n / nte_contact_unit(self);
+    const nte_real_t thr = (kt > floor) ? kt : floor;
     const nte_real_t e = f - c->tare;
     /* predict-only: the force is not looked at (nte.h THE PREDICT-ONLY MODE): nothing is
      * learned or detected in the air */

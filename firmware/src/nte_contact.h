@@ -20,9 +20,15 @@ void nte_contact_start(nte_t* self);
 void nte_contact_step(nte_t* self, nte_real_t x, nte_real_t v, nte_real_t f, nte_real_t* depth,
                       nte_real_t* force);
 
-/** ContactFrontEnd.noise_sigma: the force noise's standard deviation learned in the air, N
- *  (never below sqrt(r_n2); held in contact).  Cost: 1 sqrt. */
-nte_real_t nte_contact_noise_sigma(const nte_t* self);
+/** ContactFrontEnd.unit: the force unit Model III's bank works in, units per N: 1, or for
+ *  Model III NTE_K_CON_UNIT_REF over the noise learned so far (held in contact) where that is
+ *  below it, at most NTE_K_CON_UNIT_REF / NTE_K_CON_UNIT_FLOOR.  Cost: 1 sqrt, 1 division. */
+nte_real_t nte_contact_unit(const nte_t* self);
+
+/** ContactFrontEnd.noise_sigma: the force noise's standard deviation learned in the air (held
+ *  in contact), N, or with in_unit in the bank's unit (nte_contact_unit); never below
+ *  sqrt(r_n2) in the bank's unit.  Cost: 2 sqrt, 2 divisions. */
+nte_real_t nte_contact_noise_sigma(const nte_t* self, bool in_unit);
 
 /** The published surface_mm, tare_n and contact state into *out (ContactFrontEnd.published). */
 void nte_contact_publish(const nte_t* self, nte_output_t* out);

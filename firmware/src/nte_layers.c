@@ -24,7 +24,7 @@ uint32_t nte_layers_watch(nte_t* self, nte_real_t depth_mm, nte_real_t velocity_
     const bool beyond = (depth_mm - st->last_mm) > NTE_K_LAYER_HOLDOFF_MM;
     const bool may = moving_in && beyond;
     /* the innovation in units of the sensor noise (the front end's, or sqrt(r_n2)) */
-    const nte_real_t sigma = self->cfg.contact.enabled ? nte_contact_noise_sigma(self)
+    const nte_real_t sigma = self->cfg.contact.enabled ? nte_contact_noise_sigma(self, true)
                                                        : nte_sqrt(self->cfg.r_n2);
     const nte_real_t nu = innovation_n / sigma;
     nte_real_t g = (st->g - nu) - NTE_K_LAYER_DRIFT_SIGMA;

@@ -30,7 +30,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
-from reference_py import bank, config, layers, params, rk3, robust  # noqa: E402
+from reference_py import bank, config, contact, layers, params, rk3, robust  # noqa: E402
 from reference_py.fmath import F32, F64  # noqa: E402
 from reference_py.tools import csvio, units_check, verdict  # noqa: E402
 
@@ -124,6 +124,10 @@ def lib_header() -> str:
         rows.append(pair("NTE_K_CON_" + f.upper(), v, v))
     for f, hi in {**config.CONTACT_POSITIVE_BOUNDS, **config.CONTACT_NONNEGATIVE_BOUNDS}.items():
         rows.append(pair("NTE_K_RANGE_CON_" + f.upper() + "_MAX", hi, hi))
+    # Model III's force unit, in units of the sensor's noise (reference_py/contact.py unit())
+    rows.append(pair("NTE_K_CON_UNIT_REF", contact.NOISE_REF_N, contact.NOISE_REF_N))
+    lo = contact.NOISE_REF_N / contact.UNIT_MAX
+    rows.append(pair("NTE_K_CON_UNIT_FLOOR", lo, lo))
     # Model III's rupture detector (reference_py/layers.py)
     for name in ("DRIFT_SIGMA", "THRESHOLD_SIGMA", "HOLDOFF_MM", "TEAR_RATIO_MIN"):
         v = float(getattr(layers, name))

@@ -26,6 +26,7 @@ About 20 s per variant and set on one core (forms: about 2 min).
 from __future__ import annotations
 
 import json
+import math
 import sys
 import tempfile
 import time
@@ -56,14 +57,22 @@ COLUMNS = ("insertion", "dwell", "retraction", "reversal peak", "insertion witho
            "reversal away from gaps")
 
 
-def record(d: Path, kind: str, seed: int, **form: object) -> tuple[Path, np.ndarray, float]:
+def record(d: Path, kind: str, seed: int, scale: float = 1.0, **form: object
+           ) -> tuple[Path, np.ndarray, float]:
     """The record's file, each sample's phase (plotting.PHASES or "") and the sensor noise;
-    ``form``: the measured-like generator's options (make_trial's keywords)."""
+    ``form``: the measured-like generator's options (make_trial's keywords); ``scale``: the
+    force (tare and noise with it) multiplied by it (config_loop_figures.FORCE_SCALES)."""
     if kind == "measured-like":
-        return clf.measured_like_record(d, seed, **form)
+        return clf.measured_like_record(d, seed, scale, **form)
     f = clf.phantom(d, kind, seed)
     truth = read_truth(str(f.with_suffix(".truth.json")))
-    return f, phase_of(clf.column(f, "t_s"), truth.spans), float(truth.noise_n)
+    phase = phase_of(clf.column(f, "t_s"), truth.spans)
+    if scale != 1.0:
+        g = d / f"{kind}_{seed}_x{scale:g}.csv"
+        clf.write_record(g, clf.column(f, "t_s"), clf.column(f, "depth_mm"),
+                         clf.column(f, "force_n") * scale)
+        f = g
+    return f, phase, float(truth.noise_n) * scale
 
 
 def run_batch(recs: list[tuple[Path, np.ndarray, float]], fields: dict[str, object]
@@ -123,9 +132,19 @@ def by_form(variants: dict[str, dict[str, object]]) -> int:
 
 
 def main(argv: list[str]) -> int:
-    set_name = "select"
+    set_name, scale = "select", 1.0
     if argv[:1] == ["--set"] and len(argv) > 1:
         set_name, argv = argv[1], argv[2:]
+    if argv[:1] == ["--scale"] and len(argv) > 1:
+        try:
+            scale = float(argv[1])
+        except ValueError:
+            scale = math.nan
+        if not (math.isfinite(scale) and 1e-4 <= scale <= 1e4):
+            print(f"model3_batch_figures.py: --scale must be a number in [1e-4, 1e4] "
+                  f"(got {argv[1]!r})", file=sys.stderr)
+            return 2
+        argv = argv[2:]
     variants: dict[str, dict[str, object]] = {}
     for a in argv:
         name, sep, text = a.partition("=")
@@ -149,8 +168,9 @@ def main(argv: list[str]) -> int:
     names = SETS[set_name]
     kinds = list(dict.fromkeys(kind for kind, _ in names))
     with tempfile.TemporaryDirectory() as tmp:
-        recs = [record(Path(tmp), kind, seed) for kind, seed in names]
-        print(f"Model III, files as recorded, set {set_name} ({len(recs)} records): one-step "
+        recs = [record(Path(tmp), kind, seed, scale) for kind, seed in names]
+        print(f"Model III, files as recorded, set {set_name} ({len(recs)} records, force and "
+              f"noise x{scale:g}): one-step "
               f"innovation RMS / noise, median (90th percentile; the largest for ten or fewer)")
         print(f"{'':22s}" + "  ".join(f"{c[:13]:>13s}" for c in COLUMNS))
         for label, fields in variants.items():

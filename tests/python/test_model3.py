@@ -16,6 +16,7 @@ from reference_py.config import default_config
 from reference_py.fmath import F64
 from reference_py.model import clamp_depth, depth_terms, output, output_du, output_dz
 from reference_py.params import MODEL_PARAMS, PARAM_NAMES, PRESETS, RELAX_NAMES, get_preset
+from reference_py.relax import relax_fractions, relax_output, relax_terms
 from reference_py.tools.csvio import time_us
 
 N_POINTS = 240
@@ -62,7 +63,7 @@ def _h_and_row(bank: FilterBank, z, u, l, sq, m, a):
     dyn = [nm for nm in NAMES3 if nm in PARAM_NAMES]
     row = [output_dz(bank.th, d, o)] + [output_du(bank.th, d, zz, o, nm) for nm in dyn]
     row.append((d.l * o.fr) * R.arr(q))      # bank._measure's delta row
-    h, row = bank._relax_output(NAMES3, o.h, row)
+    h, row = relax_output(R, bank.G, bank._a_rel, bank.mrel, NAMES3, o.h, row)
     # the order of the row: z, the dynamic parameters, delta, then the strengths
     return h, row[:1 + len(dyn)] + row[2 + len(dyn):] + [row[1 + len(dyn)]]
 
@@ -182,12 +183,12 @@ def test_relaxation_memory_both_directions():
     R = F64
     dt = 0.01
     bank._a_rel = [R.exp(-(R.arr([dt]) / t)) for t in bank.c.tau]
-    g_sum = float(sum(bank._relax_fractions())[0])
+    g_sum = float(sum(relax_fractions(R, bank.G))[0])
     F = 2.0
     f = []
     for k in range(3000):
         fe = R.arr([F if k < 2000 else -F])
-        _, mp, M = bank._relax_terms(fe)
+        _, mp, M = relax_terms(R, bank.G, bank._a_rel, bank.mrel, fe)
         f.append(float((fe - M)[0]))
         bank.mrel = mp
     f = np.array(f)
@@ -212,7 +213,7 @@ def test_strengths_stay_physical_for_every_u(precision):
     for u0 in grid:
         bank.G = [bank.scaled.nominal[7 + k] * R.exp(R.arr([u0, -u0, u0, 0.0, 10.0 * (1 - 2 * k)]))
                   for k in range(2)]
-        g = bank._relax_fractions()
+        g = relax_fractions(R, bank.G)
         assert np.all(g[0] >= 0) and np.all(g[1] >= 0) and np.all(g[0] + g[1] < 1), u0
 
 
