@@ -30,6 +30,18 @@ PERIODIC_GAP_TOL = 0.15
 PERIODIC_GAP_MAX = 3
 
 
+def stretches(t_s: Array, r: Array, noise_n: float) -> tuple[Array, int, list[tuple[int, int]]]:
+    """The residual ``r`` smoothed over UNEXPLAINED_WINDOW_S (a window of ``w`` samples) and the
+    stretches [a, b) where it stays above UNEXPLAINED_X times the noise for at least that long."""
+    dt = float(np.median(np.diff(t_s)))
+    w = max(int(round(UNEXPLAINED_WINDOW_S / dt)), 1)
+    rs = evmod.smooth(r, w)
+    hot = np.abs(rs) > UNEXPLAINED_X * noise_n
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], hot.astype(int), [0]])))
+    return rs, w, [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2])
+                   if t_s[b - 1] - t_s[a] >= UNEXPLAINED_WINDOW_S]
+
+
 def unexplained(preps: list[Prepared], pred: list[Array]) -> list[dict[str, float | str]]:
     """Stretches where the final residual, smoothed over UNEXPLAINED_WINDOW_S, stays above
     UNEXPLAINED_X noise standard deviations: phase, time and depth span, size, and for the
@@ -38,16 +50,8 @@ def unexplained(preps: list[Prepared], pred: list[Array]) -> list[dict[str, floa
     spans: list[tuple[Prepared, Array, int, int]] = []
     for p, pr in zip(preps, pred):
         r = p.force_n + p.tare_n - pr
-        dt = float(np.median(np.diff(p.t_s)))
-        w = max(int(round(UNEXPLAINED_WINDOW_S / dt)), 1)
-        rs = evmod.smooth(r, w)
-        hot = np.abs(rs) > UNEXPLAINED_X * p.noise_n
-        if not hot.any():
-            continue
-        edges = np.flatnonzero(np.diff(np.concatenate([[0], hot.astype(int), [0]])))
-        for a, b in zip(edges[::2], edges[1::2]):
-            if p.t_s[b - 1] - p.t_s[a] < UNEXPLAINED_WINDOW_S:
-                continue
+        rs, w, hot_spans = stretches(p.t_s, r, p.noise_n)
+        for a, b in hot_spans:
             ph = np.bincount(p.phase[a:b], minlength=len(PHASES))
             l = p.stage_mm[a:b] - p.surface_mm
             out.append({"trial": p.name, "phase": PHASES[int(np.argmax(ph))],
@@ -119,4 +123,4 @@ def periodic_drops(preps: list[Prepared], ruptures: list[list[dict[str, float]]]
 
 __all__ = ["PERIODIC_DROPS_MIN", "PERIODIC_GAP_MAX", "PERIODIC_GAP_TOL", "PERIODIC_SIZE_RATIO",
            "UNEXPLAINED_SHAPES", "UNEXPLAINED_WINDOW_S", "UNEXPLAINED_X", "periodic_drops",
-           "unexplained"]
+           "stretches", "unexplained"]

@@ -911,7 +911,8 @@ def run_case(job: tuple[str, int]) -> dict:
         rep = build(res, [t.name for t in case.trials])
     except Exception as exc:                      # graded as a miss, with its message
         dt = _time.perf_counter() - t0
-        row.update(named=["error"], first="error", unexplained=None, violations=[],
+        row.update(named=["error"], first="error", unexplained=None, left_structure=None,
+                   violations=[],
                    error=f"{type(exc).__name__}: {exc}", runtime_s=dt,
                    runtime_per_trial_s=dt / len(case.trials), support_before=float("nan"),
                    support_after=float("nan"), overall_before=float("nan"),
@@ -938,6 +939,9 @@ def run_case(job: tuple[str, int]) -> dict:
     row["refused"] = [{"round": j, "name": c.get("name"), "reason": c.get("rejected")}
                       for j, cands in enumerate(rounds) for c in cands if c.get("rejected")]
     row.update(named=named, first=named[0], unexplained=unexpl,
+               left_structure=left_structure(res.predictions[-1], [case.truth[i] for i in idx],
+                                             [case.trials[i].t_s for i in idx],
+                                             float(case.info["noise_n"])),
                violations=bound_check(rep, depth_max, peak), error=None,
                runtime_s=dt, runtime_per_trial_s=dt / len(case.trials),
                support_before=rmse(res.predictions[0], True),
@@ -945,6 +949,19 @@ def run_case(job: tuple[str, int]) -> dict:
                overall_before=rmse(res.predictions[0], False),
                overall_after=rmse(res.predictions[-1], False))
     return row
+
+
+def left_structure(preds: list[np.ndarray], truths: list[np.ndarray], times: list[np.ndarray],
+                   noise_n: float) -> bool:
+    """Whether the final model leaves structure the "unexplained" verdict is there to report,
+    judged on the noise-free truth with the verdict's own rule (unexplained.stretches): the
+    model's departure from the truth, averaged over 0.5 s, above 3 times the sensor noise for at
+    least 0.5 s in some trial.  The verdict sees the noisy record, its
+    tare and its own noise estimate; this sees what the record would have been without noise."""
+    from reference_py.discrepancy.unexplained import stretches
+
+    return any(stretches(t, pred - truth, noise_n)[2]
+               for pred, truth, t in zip(preds, truths, times))
 
 
 def jobs_for(cases: int, kinds_: list[str] | None = None, first: int = 0
