@@ -111,10 +111,7 @@ def summarise(results: list[dict]) -> str:
         fired = sum(1 for r in oov if r["unexplained"])
         silent = sum(1 for r in vocab if r["unexplained"] is False)
         # what the final model leaves, judged on the noise-free truth with the verdict's rule
-        graded = [r for r in vocab if r["unexplained"] is not None
-                  and r.get("left_structure") is not None]
-        left = [r for r in graded if r["left_structure"]]
-        fits = [r for r in graded if not r["left_structure"]]
+        left, fits = discrepancy_generator.verdict_against_truth(vocab)
         L += [f"'unexplained' verdict: fires on stick-slip {fired}/{len(oov)}; silent on the "
               f"vocabulary's own cases {silent}/{len(vocab)}",
               f"  against the truth (the final model leaves a stretch over the verdict's "

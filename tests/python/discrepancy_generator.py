@@ -956,12 +956,21 @@ def left_structure(preds: list[np.ndarray], truths: list[np.ndarray], times: lis
     """Whether the final model leaves structure the "unexplained" verdict is there to report,
     judged on the noise-free truth with the verdict's own rule (unexplained.stretches): the
     model's departure from the truth, averaged over 0.5 s, above 3 times the sensor noise for at
-    least 0.5 s in some trial.  The verdict sees the noisy record, its
-    tare and its own noise estimate; this sees what the record would have been without noise."""
+    least 0.5 s in some trial.  The verdict sees the noisy record, its tare and its own noise
+    estimate; this sees what the record would have been without noise."""
     from reference_py.discrepancy.unexplained import stretches
 
     return any(stretches(t, pred - truth, noise_n)[2]
                for pred, truth, t in zip(preds, truths, times))
+
+
+def verdict_against_truth(rows: list[dict]) -> tuple[list[dict], list[dict]]:
+    """The graded rows (a verdict and left_structure both known) parted by what the final
+    model leaves: (those that leave a stretch the verdict should report, those that do not)."""
+    graded = [r for r in rows if r["unexplained"] is not None
+              and r.get("left_structure") is not None]
+    return ([r for r in graded if r["left_structure"]],
+            [r for r in graded if not r["left_structure"]])
 
 
 def jobs_for(cases: int, kinds_: list[str] | None = None, first: int = 0
