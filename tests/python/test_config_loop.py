@@ -6,7 +6,9 @@
   ``nte-discrepancy`` here), C = reference at 0 ULP with it, Models II and III;
 * a table of bad files: exit 2, one line naming the file and the key, the same text from both
   readers (reference_py/tools/estconfig.py and firmware/config_json/nte_config_file.c), nothing written;
-* export -> re-read round trip; --predict-only holds the parameters, C = reference at 0 ULP;
+* export -> re-read round trip; --predict-only holds the parameters, C = reference at 0 ULP
+  (the exports here come from the C twin, seconds where the reference's fit takes minutes;
+  test_export_twins.py holds the two exports to the same bytes);
 * the loop figure: innovation RMS with the workflow's config <= half of Model II's default
   on a third record (seed 3, not given to the workflow).
 
@@ -272,11 +274,11 @@ def test_export_reread_and_predict_only(loop, model):
     double and float."""
     d = loop["dir"]
     exported = d / f"x{model}.json"
-    r = ref(str(loop["p3"]), "--model", model, "--contact", "on", "--out",
-            str(d / f"id{model}.csv"), "--export-config", str(exported))
+    r = crun(str(loop["p3"]), "--model", model, "--contact", "on", "--out",
+             str(d / f"id{model}.csv"), "--export-config", str(exported))
     assert r.returncode == 0, r.stderr
     cfg = json.loads(exported.read_text())
-    assert cfg["source"] == "nte-ref estimate" and cfg["model"] == int(model)
+    assert cfg["source"] == "nte-run" and cfg["model"] == int(model)
     assert isinstance(cfg["surface_mm"], float)
     for precision in ("float64", "float32"):
         r_out, c_out = d / f"rp{model}{precision}.csv", d / f"cp{model}{precision}.csv"
@@ -327,8 +329,8 @@ def test_predict_only_on_depths_alone(loop):
     out, said on stderr."""
     d = loop["dir"]
     exported = d / "x_alone.json"
-    r = ref(str(loop["p3"]), "--model", "3", "--contact", "on", "--out", str(d / "id_a.csv"),
-            "--export-config", str(exported))
+    r = crun(str(loop["p3"]), "--model", "3", "--contact", "on", "--out", str(d / "id_a.csv"),
+             "--export-config", str(exported))
     assert r.returncode == 0, r.stderr
     lines = loop["p1"].read_text().splitlines()
     header = lines[0].split(",")
@@ -420,8 +422,8 @@ def test_export_keeps_the_snapshot_that_replays_best_and_fits_it(loop, model):
     d = loop["dir"]
     exported = d / f"sel{model}.json"
     # the single set (Model III's layer sets and their shifted replays: test_layer_sets.py)
-    r = ref(str(loop["p2"]), "--model", model, "--contact", "on", "--no-layer-sets", "--out",
-            str(d / f"sel{model}.csv"), "--export-config", str(exported))
+    r = crun(str(loop["p2"]), "--model", model, "--contact", "on", "--no-layer-sets", "--out",
+             str(d / f"sel{model}.csv"), "--export-config", str(exported))
     assert r.returncode == 0, r.stderr
     cfg = json.loads(exported.read_text())
     rep = cfg["replay"]

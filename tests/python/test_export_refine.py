@@ -7,8 +7,8 @@
   equations with known values, not the phantom the export was developed on) the fit started
   from values 30-40 % off brings the replay down to the noise.
 
-C ≡ reference for the whole export (fit included) is test_config_loop.py::
-test_export_same_bytes_from_both_twins; the export's choice and figures there too.
+C ≡ reference for the whole export (fit included) is test_export_twins.py; the export's choice
+and figures are test_config_loop.py::test_export_keeps_the_snapshot_that_replays_best_and_fits_it.
 """
 from __future__ import annotations
 

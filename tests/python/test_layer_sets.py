@@ -135,7 +135,7 @@ def test_the_configuration_refuses_sets_it_cannot_run():
 @pytest.fixture(scope="module")
 def exported(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """A short skin-on-muscle phantom insertion (two tears) identified by nte-run-double (the
-    reference's bytes: test_config_loop's twins test) with --export-config."""
+    reference's bytes: test_export_twins.py) with --export-config."""
     d = tmp_path_factory.mktemp("export")
     rec = d / "som.csv"
     subprocess.run([str(VENV_BIN / "nte-ref"), "phantom", "skin-on-muscle", "--seed", "207",
