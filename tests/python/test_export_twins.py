@@ -3,8 +3,9 @@ nte-run-double write the same export, but for "source", on a phantom record in f
 configurations, and both run a poor fit again from the first strengths.
 
 The only tests that run the reference's export: it fits the replay in numpy (export_refine.py),
-minutes per export on a slow machine, so the records here are sampled at 50 and 30 Hz (a third
-and a half of their samples; the export's operations are the same at any rate).  Every other
+minutes per export on a slow machine, so the records here are sampled at 50 and 30 Hz (half the
+samples of the 100 Hz phantom records and the 50 Hz measured-like one they replaced; the export's
+operations are the same at any rate).  Every other
 test of the export (test_config_loop.py, test_layer_sets.py) runs it with the C twin, which these
 tests hold to the reference's bytes.
 """
