@@ -47,17 +47,24 @@ def crun(*args: str, precision: str = "float64") -> subprocess.CompletedProcess[
     return subprocess.run([str(_c(precision)), *args], capture_output=True, text=True)
 
 
+def loop_records(d: Path, seeds: tuple[int, ...], *flags: str) -> dict[str, Path]:
+    """The loop's phantom records in d: skin-on-muscle, one per seed (files as recorded: air gap
+    and tare; seed 3 tears twice), as "p<seed>"; flags go to nte-ref phantom (--rate)."""
+    files = {}
+    for seed in seeds:
+        f = d / f"p{seed}.csv"
+        subprocess.run([str(VENV_BIN / "nte-ref"), "phantom", "skin-on-muscle", "--seed",
+                        str(seed), *flags, "--out", str(f)], check=True, capture_output=True)
+        files[f"p{seed}"] = f
+    return files
+
+
 @pytest.fixture(scope="module")
 def loop(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """Three phantom records (skin-on-muscle, seeds 1-3, files as recorded: air gap and
     tare) and the workflow's estimator_config.json from the first two."""
     d = tmp_path_factory.mktemp("loop")
-    files = {}
-    for seed in (1, 2, 3):
-        f = d / f"p{seed}.csv"
-        subprocess.run([str(VENV_BIN / "nte-ref"), "phantom", "skin-on-muscle", "--seed",
-                        str(seed), "--out", str(f)], check=True, capture_output=True)
-        files[f"p{seed}"] = f
+    files = loop_records(d, (1, 2, 3))
     subprocess.run([str(VENV_BIN / "nte-discrepancy"), str(files["p1"]), str(files["p2"]),
                     "--out", str(d / "disc"), "--no-figures"], check=True, capture_output=True)
     files["cfg"] = d / "disc" / "estimator_config.json"

@@ -12,13 +12,12 @@ tests hold to the reference's bytes.
 from __future__ import annotations
 
 import json
-import subprocess
 import sys
 from pathlib import Path
 
 import pytest
 
-from test_config_loop import VENV_BIN, _c, crun, ref
+from test_config_loop import _c, crun, loop_records, ref
 
 #: the records' sample rate, Hz (the skin-on-muscle preset records at 100 Hz)
 RATE_HZ = "50"
@@ -29,14 +28,7 @@ def records(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """The loop's phantom records (skin-on-muscle, seeds 1 and 3, files as recorded: air gap
     and tare; seed 3 tears twice) at 50 Hz."""
     d = tmp_path_factory.mktemp("twins")
-    files = {"dir": d}
-    for seed in (1, 3):
-        f = d / f"p{seed}.csv"
-        subprocess.run([str(VENV_BIN / "nte-ref"), "phantom", "skin-on-muscle", "--seed",
-                        str(seed), "--rate", RATE_HZ, "--out", str(f)], check=True,
-                       capture_output=True)
-        files[f"p{seed}"] = f
-    return files
+    return {"dir": d, **loop_records(d, (1, 3), "--rate", RATE_HZ)}
 
 
 @pytest.mark.parametrize("args", [["--model", "2", "--contact", "on"],
