@@ -86,7 +86,7 @@ demo: venv build
 
 test: venv build board products clang
 	cd $(BUILD) && ctest --output-on-failure
-	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q -n 2 --dist loadfile tests
+	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q -n 2 --dist loadfile --no-loadscope-reorder tests
 
 clean:
 	rm -rf build out
