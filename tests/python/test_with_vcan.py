@@ -44,7 +44,8 @@ def _check_probe(out: Path, n: int) -> dict:
     assert res["pycan"] == {"id": 0x321, "data": "010203fa", "dlc": 4, "ext": False}
     # every request answered; the round-trip times are figures, not gates (under QEMU's TCG
     # code runs several times slower than natively)
-    assert res["answered"] == res["n"] == n
+    assert res["answered"] == res["n"] == n, \
+        f"{res['answered']} of {n} requests answered; first lost: request {res.get('first_lost')}"
     return res
 
 
