@@ -16,8 +16,7 @@ import pytest
 
 from reference_py.discrepancy.effects import EFFECT_NL
 from reference_py.discrepancy.report import AT_BOUND_FRAC, build, check_parameter, render_md
-
-VENV_BIN = Path(sys.executable).parent
+from test_config_loop import loop_records
 
 
 _RUN = """
@@ -38,12 +37,7 @@ def phantom(tmp_path_factory):
     """Three phantom insertions (skin on muscle: two layers, dwell, reversal), one report.  The
     workflow runs in a child with one BLAS thread, as the command does (many small solves)."""
     d = tmp_path_factory.mktemp("report")
-    files = []
-    for seed in (1, 2, 3):
-        f = d / f"p{seed}.csv"
-        subprocess.run([str(VENV_BIN / "nte-ref"), "phantom", "skin-on-muscle", "--seed",
-                        str(seed), "--out", str(f)], check=True, capture_output=True)
-        files.append(str(f))
+    files = [str(f) for f in loop_records(d, (1, 2, 3)).values()]
     out = d / "out"
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")
     subprocess.run([sys.executable, "-c", _RUN, str(out)] + files, check=True, env=env,
