@@ -10,8 +10,9 @@ bank batched over the records (one FilterBank, one element per record; a shorter
 padded with repeats of its last sample, which the bank rejects as not later: its figures end
 with it).  Per record: the one-step innovation RMS over the sensor noise in the insertion, the
 dwell and the retraction, the reversal peak (config_loop_figures.py's phases and windows) and
-the insertion without the samples the rupture detector flagged as tears, and the reversal peak
-without the first samples after a gap (config_loop_figures.reversal_peaks); printed as the median
+the insertion without the samples the rupture detector flagged as tears, the reversal peak
+without the first samples after a gap (config_loop_figures.reversal_peaks), and the signed mean
+innovation over the noise in each phase (the part of the RMS that is a bias); printed as the median
 (90th percentile, or the largest for a group of ten or fewer) per group and over all records.
 
 Sets (seeds nothing else in the repository chose anything on):
@@ -54,7 +55,7 @@ SETS = {
 #: the step bound's choices (config.U_STEP_MAX; README "Model III's step bound")
 DEFAULT_VARIANTS = {f"u_step_max {v:g}": {"u_step_max": v} for v in (0.0, 0.1, 0.3, 1.0)}
 COLUMNS = ("insertion", "dwell", "retraction", "reversal peak", "insertion without tears",
-           "reversal away from gaps")
+           "reversal away from gaps", "ins. mean", "dwell mean", "retr. mean")
 
 
 def record(d: Path, kind: str, seed: int, scale: float = 1.0, **form: object
@@ -107,6 +108,9 @@ def run_batch(recs: list[tuple[Path, np.ndarray, float]], fields: dict[str, obje
         kept = (phase == "insertion") & ((st & STATUS_TEAR) == 0)
         row.append(float(np.sqrt(np.mean(inn[kept] ** 2))) / noise)
         row.append(away / noise)
+        # the signed mean per phase: how much of the RMS is a one-step bias (the prediction
+        # short of a rising force, beyond a falling one), not noise
+        row += [float(np.mean(inn[phase == name])) / noise for name in PHASES]
         rows.append(row)
     return np.asarray(rows)
 
