@@ -21,20 +21,21 @@ def pytest_unconfigure(config: pytest.Config) -> None:
         vcan_session.shutdown()
 
 
-#: The files that take longest, longest first, with their seconds in the CI run of 10a4567
-#: (2-core AMD EPYC, `--durations`).  `make test` runs the files two at a time
+#: The files that take longest, longest first, with their seconds (setup included) in the CI
+#: run of 36cde50 on a 2-core AMD EPYC (`--junitxml`).  `make test` runs the files two at a time
 #: (`--dist loadfile`), each file whole on one worker; xdist's default order puts the files
 #: with most tests first, which started test_export_twins.py (5 tests, 18.5 min) last, and the
-#: other worker stood idle for most of those minutes.  Started first, a long file runs beside
-#: all the short ones.  A file missing here only starts later; nothing depends on the order.
+#: other worker stood idle for most of those minutes (pytest 3 026 s on 10a4567).  Started
+#: first, a long file runs beside all the short ones: 2 758 s for 5 485 s of tests on two
+#: workers.  A file missing here only starts later; nothing depends on the order.
 LONGEST_FIRST = (
-    "test_export_twins.py",      # 1109 s
-    "test_run_units.py",         # ~500 s
-    "test_robust.py",            # 340 s
-    "test_config_loop.py",       # ~300 s
+    "test_export_twins.py",      # 1 110 s
+    "test_run_units.py",         # 404 s
+    "test_robust.py",            # 368 s
+    "test_config_loop.py",       # 357 s
     "test_node_vcan.py",         # 282 s
-    "test_cli.py",               # ~250 s
-    "test_c_bitidentity.py",     # ~200 s
+    "test_cli.py",               # 211 s
+    "test_c_bitidentity.py",     # 153 s
 )
 
 
