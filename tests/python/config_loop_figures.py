@@ -35,7 +35,9 @@
    x0.85-1.15, a new clock, tare and noise; held-out seeds 320-339): identify on the record,
    predict trial 1 from its depth alone, once with `--surface` (its true surface, a robot
    registered to the tissue) and once with the surface the config carries;
-   `config_loop_figures.py --trials` prints this part alone.
+   `config_loop_figures.py --trials` prints this part alone; `--trials HZ MM_S FIRST LAST`
+   at one sampling rate and stage speed (the generator draws both per seed: 76-100 Hz,
+   1-3 mm/s) on seeds FIRST..LAST.
 7. Part 4's measured-like figures with force and noise scaled together by 0.1, 0.03 and 0.01
    (the same insertions on a smaller force range and a quieter sensor, down to the 0.05-0.5 N
    and 0.3 mN of relaxation-test rigs): `config_loop_figures.py --scaled` prints this part
@@ -47,6 +49,7 @@ speed.  Tuning seeds 1-5, held-out seeds 101-110.
 from __future__ import annotations
 
 import json
+import math
 import subprocess
 import sys
 import tempfile
@@ -304,25 +307,29 @@ def atlas_by_form(d: Path) -> None:
 TRIAL_SEEDS = range(320, 340)
 
 
-def atlas_other_trial(d: Path) -> None:
+def atlas_other_trial(d: Path, seeds: range = TRIAL_SEEDS, rate_hz: float | None = None,
+                      speed: float | None = None) -> None:
     """Part 6 (``--trials``): identify on a measured-like record, predict another trial of
     its condition with its true surface and with the config's, and (part 3's case, for
-    comparison) the same record's truth under a fresh noise draw; RMSE / peak, median (worst)."""
+    comparison) the same record's truth under a fresh noise draw; RMSE / peak, median (worst).
+    ``rate_hz``, ``speed`` (mm/s): the condition's, in place of the generator's draw."""
     from discrepancy_measured_like import make_trial, surface_of
+    fixed = "" if rate_hz is None else f", {rate_hz:g} Hz, {speed:g} mm/s"
     print(f"6. atlas on another trial of the same condition (measured-like, seeds "
-          f"{TRIAL_SEEDS[0]}-{TRIAL_SEEDS[-1]}): RMSE / peak, median (worst)")
+          f"{seeds[0]}-{seeds[-1]}{fixed}): RMSE / peak, median (worst)")
     cases = ("another trial, its true surface (--surface)", "another trial, the config surface",
              "the same record again (part 3)")
     rel: dict[tuple[int, str], list[float]] = {(m, c): [] for m in (2, 3) for c in cases}
-    for seed in TRIAL_SEEDS:
-        first, truth0, sigma, _ = make_trial(seed)
-        other, truth1, _, _ = make_trial(seed, trial=1)
+    for seed in seeds:
+        first, truth0, sigma, _ = make_trial(seed, rate_hz=rate_hz, speed=speed)
+        other, truth1, _, _ = make_trial(seed, trial=1, rate_hz=rate_hz, speed=speed)
         a = d / "trial_a.csv"
         write_record(a, first.t_s, first.depth_mm, first.force_n)
         rng = np.random.default_rng(1000 + seed)
         again = (first.t_s, first.depth_mm, truth0 + rng.normal(0.0, sigma, len(truth0)))
         second = (other.t_s, other.depth_mm, other.force_n)
-        targets = {cases[0]: (second, truth1, ("--surface", str(surface_of(seed, 1)))),
+        targets = {cases[0]: (second, truth1,
+                              ("--surface", str(surface_of(seed, 1, rate_hz, speed)))),
                    cases[1]: (second, truth1, ()), cases[2]: (again, truth0, ())}
         for model in (2, 3):
             cfg = identify(d, a, model, d / "trial.json")
@@ -358,6 +365,26 @@ def innovation_by_scale(d: Path) -> None:
         print_phase_rows(f"x{scale:g}", rows)
 
 
+def trials_condition(args: list[str]) -> tuple[range, float | None, float | None]:
+    """``--trials``' seeds, rate (Hz) and speed (mm/s) from ``[HZ MM_S FIRST LAST]``; exits
+    with status 2 and the reason on anything else."""
+    if not args:
+        return TRIAL_SEEDS, None, None
+    try:
+        if len(args) != 4:
+            raise ValueError("four values")
+        rate, speed, first, last = float(args[0]), float(args[1]), int(args[2]), int(args[3])
+    except ValueError:
+        rate = speed = math.nan
+        first = last = 0
+    if not (10.0 <= rate <= 2000.0 and 0.1 <= speed <= 20.0 and 0 <= first <= last):
+        print(f"usage: config_loop_figures.py --trials [HZ MM_S FIRST LAST] (a rate of 10-2000 "
+              f"Hz, a stage speed of 0.1-20 mm/s, seeds FIRST <= LAST, both >= 0); "
+              f"got {' '.join(args)!r}", file=sys.stderr)
+        raise SystemExit(2)
+    return range(first, last + 1), rate, speed
+
+
 def main(presets: list[str]) -> None:
     if not C.exists():
         raise SystemExit(f"{C} missing: make build")
@@ -371,7 +398,7 @@ def main(presets: list[str]) -> None:
             atlas_by_form(d)     # part 5 alone
             return
         if presets[:1] == ["--trials"]:
-            atlas_other_trial(d)     # part 6 alone
+            atlas_other_trial(d, *trials_condition(presets[1:]))     # part 6 alone
             return
         if presets[:1] == ["--scaled"]:
             innovation_by_scale(d)   # part 7 alone
@@ -426,8 +453,10 @@ def main(presets: list[str]) -> None:
 if __name__ == "__main__":
     args = sys.argv[1:] or ["skin-on-muscle"]
     from reference_py.sim.calibration import PRESETS as TISSUES
-    unknown = [a for a in args if a not in ("--phases", "--forms", "--trials", "--workflow",
-                                            "--scaled")
+    if args[0] == "--trials":
+        trials_condition(args[1:])     # its own values, checked before anything runs
+    unknown = [a for a in (args[:1] if args[0] == "--trials" else args)
+               if a not in ("--phases", "--forms", "--trials", "--workflow", "--scaled")
                and a not in TISSUES]
     if unknown:
         print(f"usage: config_loop_figures.py [--workflow | --phases | --forms | --trials | "
